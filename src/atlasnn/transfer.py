@@ -1,0 +1,76 @@
+"""Transfer learning from a short source interval to a long target interval.
+
+The target model starts from the source's trained network θ and time scaling γ (same
+architecture, same z0 and t0). For ATLAS-NN, γ is then frozen (the paper's scheme); ``thaw=True``
+keeps it trainable instead (the paper's future work). The HNN baseline has no γ to freeze.
+As in the authors' release, the source run's Adam state can be carried over (the moments of the
+parameters that stay trainable).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import equinox as eqx
+import jax
+
+from atlasnn.errors import ConfigError
+from atlasnn.model import TrialSolution
+from atlasnn.systems import HamiltonianSystem
+from atlasnn.train import TrainConfig, TrainResult, train, trainable_filter
+
+
+def check_same_architecture(source: TrialSolution, architecture: dict[str, Any]) -> None:
+    """Raise a one-line error naming the first field where ``architecture`` differs from the source."""
+    have = source.architecture()
+    for key, want in architecture.items():
+        if key in have and have[key] != want:
+            raise ConfigError(
+                f"target architecture differs from the source: {key} = {want!r} but the source has {have[key]!r}"
+            )
+
+
+def restrict_opt_state(opt_state: Any, model: TrialSolution, freeze_gamma: bool) -> Any:
+    """Adam's state of a source run, keeping only the moments of the target's trainable leaves."""
+    spec = trainable_filter(model, freeze_gamma)
+    adam, *others = opt_state.inner_state
+    adam = adam._replace(mu=eqx.filter(adam.mu, spec), nu=eqx.filter(adam.nu, spec))
+    return opt_state._replace(inner_state=(adam, *others))
+
+
+def transfer(
+    source: TrainResult,
+    system: HamiltonianSystem,
+    T: float,
+    config: TrainConfig,
+    *,
+    thaw: bool = False,
+    carry_adam: bool = True,
+    architecture: dict[str, Any] | None = None,
+    desc: str = "target",
+) -> TrainResult:
+    """Train a target model on [t0, T] starting from a trained source run.
+
+    Args:
+        source: the source run (its returned ``model`` gives θ and γ; its Adam state is carried
+            when ``carry_adam``).
+        system: the Hamiltonian system (the same one the source was trained on).
+        T: the end of the target interval.
+        config: the target's training config; its ``freeze_gamma`` is overridden by ``thaw``.
+        thaw: keep γ trainable in the target task (default: frozen).
+        carry_adam: start from the source's Adam moments (the release does).
+        architecture: the target's intended architecture (width, depth, ...); a mismatch with the
+            source is an error.
+    """
+    model = source.model
+    if architecture:
+        check_same_architecture(model, architecture)
+    if model.state_dim != system.state_dim:
+        raise ConfigError(
+            f"source model has state dimension {model.state_dim}, system {system.name!r} has {system.state_dim}"
+        )
+    cfg = config.replace(freeze_gamma=not thaw)
+    opt_state = None
+    if carry_adam:
+        opt_state = restrict_opt_state(source.opt_state, model, cfg.freeze_gamma)
+    return train(model, system, T, cfg, opt_state=opt_state, desc=desc)
