@@ -198,8 +198,10 @@ def _one_line(msg: str) -> str:
 def _check_name(name: Any, what: str) -> str:
     if not isinstance(name, str):
         raise ExpressionError(f"{what} names must be strings, got {name!r}")
-    if not name.isidentifier() or keyword.iskeyword(name):
+    if not name.isidentifier():
         raise ExpressionError(f"{what} name {name!r} is not a valid identifier (use letters, digits and _)")
+    if keyword.iskeyword(name):
+        raise ExpressionError(f"{what} name {name!r} is a Python keyword; choose another name")
     if unicodedata.normalize("NFKC", name) != name:
         raise ExpressionError(
             f"{what} name {name!r} is not in Unicode NFKC form; Python reads it as "
@@ -235,8 +237,10 @@ def _check_names(variables: Any, params: Mapping[str, Any]) -> tuple[tuple[str, 
 
 
 def _param_value(name: str, value: Any) -> float:
-    bad = isinstance(value, (bool, np.bool_, str, bytes)) or not isinstance(
-        value, (numbers.Real, np.ndarray, np.generic)
+    bad = (
+        isinstance(value, (bool, np.bool_, str, bytes))
+        or not isinstance(value, (numbers.Real, np.ndarray, np.generic))
+        or (isinstance(value, np.ndarray) and value.ndim != 0)
     )
     try:
         out = None if bad else float(value)
@@ -271,7 +275,8 @@ def _parse(src: _Source) -> ast.Expression:
         raise ExpressionError(f"syntax error{where}{near}: {_one_line(exc.msg)}") from None
     except (RecursionError, MemoryError):
         raise ExpressionError(
-            "expression is too complex to parse (nested too deeply, or a chain of thousands of operations)"
+            "expression is too complex to parse (nested too deeply, or a chain of more than about "
+            "a thousand operations)"
         ) from None
     except ValueError as exc:  # e.g. over-long integer literals on some Python versions
         raise ExpressionError(f"expression cannot be parsed: {_one_line(str(exc))}") from None
@@ -503,7 +508,9 @@ class CompiledExpression:
             if not jnp.issubdtype(arr.dtype, jnp.inexact):
                 arr = arr.astype(jnp.result_type(float))
             env[key] = arr
-        return jnp.asarray(self._evaluator(env))
+        # Literals beyond the float range (e.g. 1e300 in float32) become inf, without warnings.
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            return jnp.asarray(self._evaluator(env))
 
     def __repr__(self) -> str:
         return f"CompiledExpression({self.text!r}, variables={list(self.variables)}, params={self.params})"
@@ -588,20 +595,24 @@ def is_syntactically_separable(
     ``(q + p)**2 - 2*q*p`` is separable but not recognised. Raises :class:`ExpressionError`
     if the text does not compile.
     """
-    qs, ps = _coerce_names(coordinates, "coordinates"), _coerce_names(momenta, "momenta")
-    compiled = compile_expression(text, qs + ps, params)
+    qs = _coerce_names(coordinates, "coordinates", "coordinate")
+    ps = _coerce_names(momenta, "momenta", "momentum")
+    return _separable(compile_expression(text, qs + ps, params), qs, ps)
+
+
+def _separable(compiled: CompiledExpression, qs: Sequence[str], ps: Sequence[str]) -> bool:
     try:
         return _splits(compiled.tree.body, frozenset(qs), frozenset(ps))
-    except RecursionError:  # pragma: no cover - the depth limit makes this unreachable
+    except RecursionError:  # pragma: no cover - the depth limits make this unreachable
         return False
 
 
-def _coerce_names(names: Any, what: str) -> tuple[str, ...]:
+def _coerce_names(names: Any, what: str, one: str) -> tuple[str, ...]:
     if isinstance(names, str):
         names = [n for n in re.split(r"[\s,]+", names) if n]
     if not isinstance(names, Sequence) or isinstance(names, (bytes, bytearray)):
         raise ExpressionError(f"{what} must be a list of names, got {names!r}")
-    return tuple(_check_name(n, what[:-1] if what.endswith("s") else what) for n in names)
+    return tuple(_check_name(n, one) for n in names)
 
 
 _SAFE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]{0,63}")
@@ -639,8 +650,8 @@ def expression_system(
     """
     from atlasnn.systems import HamiltonianSystem
 
-    qs = _coerce_names(coordinates, "coordinates")
-    ps = _coerce_names(momenta, "momenta")
+    qs = _coerce_names(coordinates, "coordinates", "coordinate")
+    ps = _coerce_names(momenta, "momenta", "momentum")
     if len(qs) < 1:
         raise ExpressionError("coordinates must name at least one coordinate")
     if len(qs) != len(ps):
@@ -657,7 +668,7 @@ def expression_system(
 
     compiled = compile_expression(hamiltonian, qs + ps, params)
     if auto:
-        sep = _splits(compiled.tree.body, frozenset(qs), frozenset(ps))
+        sep = _separable(compiled, qs, ps)
     else:
         sep = bool(separable)
     d = len(qs)

@@ -96,7 +96,8 @@ class Tanh(TimeScaling):
 
     def derivative(self, t):
         m = self.m
-        return m * (1 - jnp.tanh(m * t) ** 2)
+        e = jnp.exp(-2 * m * jnp.abs(t))  # sech² x = 4e^{-2|x|}/(1+e^{-2|x|})², no cancellation
+        return 4 * m * e / (1 + e) ** 2
 
     def gamma(self):
         return {"m": self.m}
