@@ -191,7 +191,7 @@ def test_history_and_meta_round_trip(tmp_path, runs):
     assert m["atlasnn_version"] == atlasnn.__version__ and m["jax_version"] == jax.__version__
     assert m["architecture"] == full.model.architecture()
     assert m["gamma"] == {k: float(v) for k, v in full.model.scaling.gamma().items()}
-    assert m["z0"] == [1.3, 1.0] and m["t0"] == 0.0 and m["dtype"] == "float32"
+    assert m["z0"] == np.asarray(full.model.z0, np.float64).tolist() and m["t0"] == 0.0 and m["dtype"] == "float32"
     assert m["system"] == json.loads(json.dumps(system.describe()))
     assert m["train_config"]["betas"] == [0.9, 0.99] and m["train_config"]["epochs"] == 600
     assert ck.train_config() == CFG

@@ -38,7 +38,7 @@ def _run_config(cfg, args, config_text: str, default_out: str) -> int:
         cfg, out, seeds=_seeds(args), jobs=args.jobs, progress=not args.no_progress,
         overwrite=args.overwrite, config_text=config_text, quick=args.quick,
     )
-    from atlasnn.report import summary_lines
+    from atlasnn.render import summary_lines
 
     for line in summary_lines(results):
         print(line)
@@ -82,7 +82,8 @@ def cmd_run(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from atlasnn.report import load_results, summary_lines, write_report
+    from atlasnn.render import summary_lines, write_report
+    from atlasnn.report import load_results
 
     paths = write_report(Path(args.dir))
     for line in summary_lines(load_results(Path(args.dir))):

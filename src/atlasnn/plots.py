@@ -209,7 +209,8 @@ class Series:
         if n < 2:
             raise ConfigError(f"Series {self.label!r} t needs at least 2 points, got {n}")
         if self.z.shape[0] != n or self.z.shape[1] % 2 or self.z.shape[1] == 0:
-            raise ConfigError(f"Series {self.label!r} z must have shape ({n}, 2d), got {self.z.shape}")
+            raise ConfigError(f"Series {self.label!r} z must have shape ({n}, 2d), "
+                              f"got {self.z.shape}")
         if self.z_ref.shape != self.z.shape:
             raise ConfigError(f"Series {self.label!r} z_ref must have shape {self.z.shape}, "
                               f"got {self.z_ref.shape}")
@@ -248,7 +249,8 @@ def _check_interval(source_interval: Any) -> tuple[float, float] | None:
     try:
         a, b = (float(v) for v in source_interval)
     except (TypeError, ValueError):
-        raise ConfigError(f"source_interval must be a pair (a, b), got {source_interval!r}") from None
+        raise ConfigError(
+            f"source_interval must be a pair (a, b), got {source_interval!r}") from None
     if not (math.isfinite(a) and math.isfinite(b) and a < b):
         raise ConfigError(f"source_interval must satisfy a < b, got ({a}, {b})")
     return a, b
@@ -289,6 +291,9 @@ def _save(fig: Figure, stem: str | Path) -> list[Path]:
     png = Path(f"{base}.png")
     pdf = Path(f"{base}.pdf")
     fig.savefig(png, dpi=DPI, format="png")
+    # The constrained layout was solved while drawing the PNG; the PDF has the same size in
+    # inches, so freeze those positions instead of solving the layout a second time.
+    fig.set_layout_engine("none")
     fig.savefig(pdf, format="pdf", metadata={"CreationDate": None})
     return [png, pdf]
 
@@ -519,7 +524,8 @@ def plot_gamma_evolution(stem: str | Path, gammas: Mapping[str, Mapping[str, Any
         ax.set_ylabel("value")
         ax.set_title(names_title[key])
         ax.grid(alpha=0.3)
-        ax.margins(x=0.08)
+        n_max = max(arr.size for _, _, arr in groups[key])
+        ax.set_xlim(0, max(n_max - 1, 1) * 1.13)  # room for the final-value notes
         ax.legend(fontsize="small")
     if title:
         fig.suptitle(title)
@@ -593,7 +599,8 @@ def plot_errors(stem: str | Path, series: Sequence[Series], state_names: Sequenc
     d = _check_series(series, state_names)
     interval = _check_interval(source_interval)
     if phase_error_scale not in ("linear", "symlog"):
-        raise ConfigError(f"phase_error_scale must be 'linear' or 'symlog', got {phase_error_scale!r}")
+        raise ConfigError(
+            f"phase_error_scale must be 'linear' or 'symlog', got {phase_error_scale!r}")
     names = list(state_names)
     n = 2 * d
     errs = {id(s): s.z - s.z_ref for s in series}

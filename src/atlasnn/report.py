@@ -78,7 +78,7 @@ _DEFINITIONS = {
     "epochs": "training epochs run (target task for transfer)",
 }
 
-_TABLE_TABLE_COLUMNS_ROLE = ("short", "target")
+_TABLE_ROLES = ("short", "target")
 
 
 # ============================================================================ loading
@@ -296,7 +296,7 @@ def summarize(results: Any) -> dict:
     labels = {c: (res.get("labels") or {}).get(c, DEFAULT_LABELS.get(c, c)) for c in cols}
 
     integ_cols = {e.get("column") for e in integ}
-    table_runs = {c: [r for r in runs if r.get("column") == c and r.get("role", "short") in _TABLE_TABLE_COLUMNS_ROLE]
+    table_runs = {c: [r for r in runs if r.get("column") == c and r.get("role", "short") in _TABLE_ROLES]
                   for c in cols}
     models = [c for c in cols if c != base_col and c not in integ_cols]
 
@@ -487,7 +487,7 @@ def _rows_spec(summary: dict) -> list[dict]:
             })
     rows.append({
         "key": "energy_drift", "metric": "energy_drift", "state": None,
-        "label": "Energy drift max|H−E0|/|E0|", "latex": "Energy drift",
+        "label": "Energy drift (max rel.)", "latex": "Energy drift",
         "paper_key": None, "definition": _DEFINITIONS["energy_drift"],
     })
     if summary["kind"] == "transfer":
@@ -600,7 +600,7 @@ def _range_text(st: dict | None, fmt, sep: str = "–") -> str:
     if st is None or st["median"] is None:
         return "n/a"
     s = fmt(st["median"])
-    if st["n"] > 1:
+    if st["n"] > 1 and fmt(st["min"]) != fmt(st["max"]):
         s += f" [{fmt(st['min'])}{sep}{fmt(st['max'])}]"
     if st.get("n_nonfinite"):
         s += f" ({st['n_nonfinite']} non-finite)"
@@ -633,8 +633,10 @@ def _tex_range(st: dict | None, fmt, tex) -> str:
     if st is None or st["median"] is None:
         return "--"
     s = tex(fmt(st["median"]))
-    if st["n"] > 1:
+    if st["n"] > 1 and fmt(st["min"]) != fmt(st["max"]):
         s += f" {{\\tiny[{tex(fmt(st['min']))}, {tex(fmt(st['max']))}]}}"
+    if st.get("n_nonfinite"):
+        s += f" {{\\tiny({st['n_nonfinite']} non-finite)}}"
     return s
 
 
@@ -669,8 +671,14 @@ def _gamma_text(gamma: dict, fmt_range: bool = True) -> str:
     return ", ".join(parts) if parts else "–"
 
 
+def _format_paper_param(v: Any) -> str:
+    """A paper γ as printed (up to 6 significant digits: 0.26074, 1.1375)."""
+    x = _f(v)
+    return "n/a" if x is None else f"{x:.6g}"
+
+
 def _paper_gamma_text(pg: dict) -> str:
-    return ", ".join(f"{p}={_format_param(v)}" for p, v in pg.items()) if pg else "–"
+    return ", ".join(f"{p}={_format_paper_param(v)}" for p, v in pg.items()) if pg else "–"
 
 
 def _tol_text(t: dict) -> str:
@@ -688,11 +696,11 @@ def _header_lines(summary: dict, paper: dict | None) -> list[str]:
     lines = [
         f"Experiment {summary['experiment']} ({summary['kind']})"
         + (f", compared with the paper's table {paper.get('table')} (one training run per model)" if paper else "")
-        + ".",
+        + ("." if paper else ". No paper values (not one of the paper's experiments, or left out)."),
         f"Seeds: {len(seeds)} ({', '.join(str(s) for s in seeds)}). Each network cell: median [min–max] across seeds; "
         "integrators (SE) are deterministic: one value.",
         "Rows 'L2(·)': the release's discrete form sqrt(Σ_i err(t_i)²), not scaled by Δt — the form the paper's "
-        "tables contain (paper values beside ours). Rows 'L2∫(·)': the paper's written definition "
+        "tables contain" + (" (paper values beside ours)" if paper else "") + ". Rows 'L2∫(·)': the paper's written definition "
         "(∫|err|² dt)^½, trapezoid rule — no paper value. MSE = mean_i err(t_i)². "
         "Energy drift = max_i |H(t_i) − E0|/|E0|.",
         f"Improvement = signed (E_base − E_model)/E_base·100 against {base_label}, computed per seed against the same "
@@ -712,6 +720,36 @@ def _header_lines(summary: dict, paper: dict | None) -> list[str]:
     return lines
 
 
+def _latex_caption(summary: dict, paper: dict | None) -> str:
+    """The header lines of :func:`_header_lines`, written in LaTeX (ASCII only)."""
+    esc = _latex_escape
+    seeds = summary["seeds"]
+    base_label = esc(summary["labels"][summary["baseline"]])
+    parts = [
+        f"Experiment {esc(summary['experiment'])} ({summary['kind']})"
+        + (f", compared with the paper's table {esc(str(paper.get('table')))} (one training run per model, "
+           "values in parentheses)." if paper else "; no paper values."),
+        f"{len(seeds)} seeds ({esc(', '.join(str(s) for s in seeds))}): each network cell is the median "
+        "[min, max] across seeds; integrators are deterministic (one value).",
+        "$L^2$ rows: the release's discrete form $(\\sum_i \\mathrm{err}(t_i)^2)^{1/2}$, not scaled by "
+        "$\\Delta t$, the form the paper's tables contain; $L^2_{\\int}$ rows: the paper's definition "
+        "$(\\int |\\mathrm{err}|^2\\,dt)^{1/2}$ (trapezoid rule), no paper value; "
+        "$\\mathrm{MSE} = \\mathrm{mean}_i\\, \\mathrm{err}(t_i)^2$; energy drift $= \\max_i |H(t_i)-E_0|/|E_0|$.",
+        f"Improvement: signed $(E_\\mathrm{{base}}-E_\\mathrm{{model}})/E_\\mathrm{{base}}\\cdot 100$ against "
+        f"{base_label}, per seed against the same seed's baseline, then median [min, max]; $k/n$: seeds where the "
+        "model beats the baseline; negative means worse.",
+    ]
+    tol = summary.get("tolerance")
+    parts.append(f"Loss tolerance {_latex_number(format_number(tol))}." if isinstance(tol, (int, float)) else "No loss tolerance (epoch budget only).")
+    for e in summary["integrators"]:
+        parts.append(f"{esc(summary['labels'].get(e['column'], e['column']))}: {esc(str(e.get('method')))}, "
+                     f"{esc(str(e.get('steps')))} steps.")
+    if summary["kind"] == "transfer":
+        parts.append("Epochs: target task; improvement $(\\mathrm{epochs}_\\mathrm{base}-\\mathrm{epochs}_\\mathrm{model})"
+                     "/\\mathrm{epochs}_\\mathrm{base}\\cdot 100$.")
+    return " ".join(parts)
+
+
 def _table_columns(summary: dict) -> list[tuple[str, str, str]]:
     """(kind, column, header) for the main table: value columns, each model followed by its improvement."""
     out = []
@@ -723,12 +761,17 @@ def _table_columns(summary: dict) -> list[tuple[str, str, str]]:
 
 
 # ============================================================================ renderers
+def _md(s: str) -> str:
+    """A Markdown table cell: no raw pipes."""
+    return str(s).replace("|", "\\|")
+
+
 def _markdown(summary, paper, rows, training) -> str:
     lines = [f"# {summary['experiment']}: errors against the reference", ""]
     lines += [f"- {h}" for h in _header_lines(summary, paper)]
     lines.append("")
     tcols = _table_columns(summary)
-    lines.append("| Error | " + " | ".join(h for _, _, h in tcols) + " |")
+    lines.append("| Error | " + " | ".join(_md(h) for _, _, h in tcols) + " |")
     lines.append("|---|" + "|".join("---" for _ in tcols) + "|")
     for r in rows:
         cells = []
@@ -739,7 +782,7 @@ def _markdown(summary, paper, rows, training) -> str:
                              else _md_value_cell(r, cell))
             else:
                 cells.append(_md_imp_cell(cell))
-        lines.append(f"| {r['label']} | " + " | ".join(cells) + " |")
+        lines.append(f"| {_md(r['label'])} | " + " | ".join(_md(c) for c in cells) + " |")
     lines += ["", f"## {summary['experiment']}: training", ""]
     transfer = summary["kind"] == "transfer"
     head = ["Model", "γ (ours)", "γ (paper)", "Epochs", "Tolerance met", "Stop", "Wall time [s]",
@@ -764,7 +807,7 @@ def _markdown(summary, paper, rows, training) -> str:
             cells += ([_range_text(s["epochs"], _format_count), _tol_text(s["tolerance_met"]),
                        _range_text(s["wall_time"], _format_seconds), _range_text(s["final_loss"], format_number)]
                       if s else ["–"] * 4)
-        lines.append("| " + " | ".join(cells) + " |")
+        lines.append("| " + " | ".join(_md(c) for c in cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -836,8 +879,7 @@ def _csv(summary, paper, rows, training) -> str:
 def _latex(summary, paper, rows, training) -> str:
     tcols = _table_columns(summary)
     exp = summary["experiment"]
-    cap = " ".join(_header_lines(summary, paper))
-    cap = _latex_escape(cap)
+    cap = _latex_caption(summary, paper)
     out = [
         f"% generated by atlasnn.report from results.json of {exp}; needs \\usepackage{{booktabs}}",
         "\\begin{table}[ht]",
@@ -890,7 +932,7 @@ def _latex(summary, paper, rows, training) -> str:
         g = ", ".join(f"${greek.get(p, _latex_escape(p))}={_range_text(st, _format_param, sep='$--$')}$"
                       for p, st in t["gamma"].items() if st is not None and st.get("median") is not None) or "--"
         g = g.replace("[", "\\,[").replace("]", "]")
-        pg = ", ".join(f"${greek.get(p, _latex_escape(p))}={_format_param(v)}$" for p, v in t["paper_gamma"].items()) or "--"
+        pg = ", ".join(f"${greek.get(p, _latex_escape(p))}={_format_paper_param(v)}$" for p, v in t["paper_gamma"].items()) or "--"
         ep = _tex_range(t["epochs"], _format_count, lambda s: s if s != "n/a" else "--")
         if t["paper_epochs"] is not None:
             ep += f" {{\\tiny(paper {_format_count(t['paper_epochs'])})}}"

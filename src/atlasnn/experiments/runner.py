@@ -159,7 +159,7 @@ def run_task(cfg: ExperimentConfig, task: Task, run_dir: str, grids: dict[str, n
         )
 
     def save(result, column: str, role: str, stage: Stage) -> str:
-        rel = f"models/{column}_seed{task.seed}.npz"
+        rel = f"models/{column}{'_source' if role == 'source' else ''}_seed{task.seed}.npz"
         tc = dataclasses.asdict(result.config)
         save_checkpoint(
             run_dir / rel, result.model, system, history=result.history, train_config=tc,
@@ -193,7 +193,7 @@ def run_task(cfg: ExperimentConfig, task: Task, run_dir: str, grids: dict[str, n
         res_src = train(new_model(task.model, src), system, src.T,
                         src.train.to_train_config(src.T, task.seed, progress),
                         desc=f"{MODEL_LABELS[task.model]} source seed {task.seed}")
-        finish(res_src, f"{task.model}_source", "source", src, "source")
+        finish(res_src, task.model, "source", src, "source")
         res_tgt = transfer(res_src, system, tgt.T,
                            tgt.train.to_train_config(tgt.T, task.seed, progress),
                            thaw=cfg.thaw, carry_adam=cfg.carry_adam, desc=label)
@@ -345,10 +345,9 @@ def run_experiment(
     write_json(out / "meta.json", meta)
     log(f"{cfg.name}: trainings done in {results['wall_time_total']:.1f} s; results in {out}")
     if report:
-        from atlasnn.report import write_report
+        from atlasnn.render import write_report
 
-        for path in write_report(out):
-            pass
+        write_report(out)
         log(f"{cfg.name}: tables and figures written to {out}")
     return results
 
