@@ -235,12 +235,14 @@ class ExperimentConfig:
         cols = ["se"] + (["hnn_baseline"] if self.baseline else [])
         return cols + [f"{m}_transfer" for m in self.models]
 
-    def baseline_column(self) -> str | None:
+    def baseline_column(self) -> str:
+        """The column improvements are measured against: the (baseline) HNN when there is one,
+        else the first network column."""
         if self.kind == "short":
-            return "hnn" if "hnn" in self.models else None
+            return "hnn" if "hnn" in self.models else self.models[0]
         if self.baseline:
             return "hnn_baseline"
-        return "hnn_transfer" if "hnn" in self.models else None
+        return "hnn_transfer" if "hnn" in self.models else f"{self.models[0]}_transfer"
 
 
 _TRAIN_KEYS = {f.name for f in dataclasses.fields(TrainSettings)}
