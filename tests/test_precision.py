@@ -25,7 +25,7 @@ from atlasnn.precision import default_float
 def test_float32_is_the_default():
     assert not atlasnn.x64_enabled()
     assert default_float() == jnp.float32
-    model = make_model((1.0, 0.0), scaling="rational_exp", width=4, depth=1)
+    model = make_model((1.0, 0.0), scaling="rational_exp", width=16, depth=2)
     leaves = jax.tree_util.tree_leaves(model)
     assert leaves and all(x.dtype == jnp.float32 for x in leaves)
 

@@ -246,7 +246,7 @@ def test_user_defined_pendulum_needs_no_package_change():
         np.testing.assert_allclose(field, np.stack([Z[:, 1], -np.sin(Z[:, 0])], axis=-1), rtol=1e-13, atol=1e-14)
         assert float(en(sys, jnp.asarray(sys.z0))) == pytest.approx(-np.cos(1.0), abs=1e-15)
     # the rest of the package takes it as it is: the physics loss evaluates to a finite number
-    model = make_model(sys.z0, scaling="rational_exp", width=8, depth=1, seed=0)
+    model = make_model(sys.z0, scaling="rational_exp", width=16, depth=2, seed=0)
     t = jnp.linspace(0.0, 2.0, 9)
     loss, (res, pen) = jax.jit(physics_loss, static_argnums=1)(model, sys, t, en(sys, model.z0), 1.0)
     assert np.isfinite(float(loss)) and float(loss) > 0

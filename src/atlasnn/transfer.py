@@ -9,7 +9,7 @@ parameters that stay trainable).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import equinox as eqx
 import jax
@@ -17,7 +17,7 @@ import jax
 from atlasnn.errors import ConfigError
 from atlasnn.model import TrialSolution
 from atlasnn.systems import HamiltonianSystem
-from atlasnn.train import TrainConfig, TrainResult, train, trainable_filter
+from atlasnn.train import TrainConfig, TrainResult, TrainState, train, trainable_filter
 
 
 def check_same_architecture(source: TrialSolution, architecture: dict[str, Any]) -> None:
@@ -48,6 +48,8 @@ def transfer(
     carry_adam: bool = True,
     architecture: dict[str, Any] | None = None,
     desc: str = "target",
+    resume: TrainState | None = None,
+    on_chunk: Callable[[TrainState], None] | None = None,
 ) -> TrainResult:
     """Train a target model on [t0, T] starting from a trained source run.
 
@@ -61,8 +63,37 @@ def transfer(
         carry_adam: start from the source's Adam moments (the release does).
         architecture: the target's intended architecture (width, depth, ...); a mismatch with the
             source is an error.
+        resume, on_chunk: passed to :func:`~atlasnn.train.train` (continue an interrupted target
+            run from its saved :class:`~atlasnn.train.TrainState`; a per-chunk callback).
     """
-    model = source.model
+    return transfer_from(
+        source.model, source.opt_state, system, T, config, thaw=thaw, carry_adam=carry_adam,
+        architecture=architecture, desc=desc, resume=resume, on_chunk=on_chunk,
+    )
+
+
+def transfer_from(
+    model: TrialSolution,
+    opt_state: Any,
+    system: HamiltonianSystem,
+    T: float,
+    config: TrainConfig,
+    *,
+    thaw: bool = False,
+    carry_adam: bool = True,
+    architecture: dict[str, Any] | None = None,
+    desc: str = "target",
+    resume: TrainState | None = None,
+    on_chunk: Callable[[TrainState], None] | None = None,
+) -> TrainResult:
+    """:func:`transfer` from a source model and its final Adam state instead of a TrainResult.
+
+    This is what a resumed run uses: the source's returned model comes from its checkpoint
+    (:func:`~atlasnn.checkpoint.load_checkpoint`) and its Adam state from its saved final
+    :class:`~atlasnn.train.TrainState` (:func:`~atlasnn.checkpoint.load_state`); the target then
+    starts exactly as it would have in the uninterrupted run. ``opt_state`` may be ``None`` when
+    ``carry_adam`` is false or ``resume`` is given.
+    """
     if architecture:
         check_same_architecture(model, architecture)
     if model.state_dim != system.state_dim:
@@ -70,7 +101,9 @@ def transfer(
             f"source model has state dimension {model.state_dim}, system {system.name!r} has {system.state_dim}"
         )
     cfg = config.replace(freeze_gamma=not thaw)
-    opt_state = None
-    if carry_adam:
-        opt_state = restrict_opt_state(source.opt_state, model, cfg.freeze_gamma)
-    return train(model, system, T, cfg, opt_state=opt_state, desc=desc)
+    start = None
+    if carry_adam and resume is None:
+        if opt_state is None:
+            raise ConfigError("carry_adam needs the source run's Adam state (opt_state is None)")
+        start = restrict_opt_state(opt_state, model, cfg.freeze_gamma)
+    return train(model, system, T, cfg, opt_state=start, desc=desc, resume=resume, on_chunk=on_chunk)
