@@ -25,7 +25,8 @@ def section(run: Path, docs: Path) -> str:
     fig_dir = docs / "figures" / name
     fig_dir.mkdir(parents=True, exist_ok=True)
     lines = [f"## {name}", ""]
-    cmd = meta.get("command", "").split("/")[-1]
+    argv = meta.get("command", "").split()
+    cmd = " ".join(["atlasnn"] + [a.replace(str(run.parent) + "/", "runs/") for a in argv[1:]])
     lines.append(f"Command: `{cmd}` — seeds {meta['seeds']}, jobs {meta['jobs']}, "
                  f"wall time {meta.get('wall_time_total', float('nan')) / 60:.1f} min on this machine "
                  f"(atlasnn {meta['versions']['atlasnn']}, JAX {meta['versions']['jax']}, {meta['versions']['backend']}).")

@@ -18,6 +18,17 @@ from atlasnn.experiments.config import MODEL_LABELS
 from atlasnn.report import load_paper, load_results, summarize, write_tables
 
 
+def _paper_name(results: dict) -> str:
+    """The paper experiment a run is compared with (a config may name one; default: its own name)."""
+    return results.get("paper_experiment") or results["experiment"]
+
+
+def _tolerance(results: dict) -> float | None:
+    """The target tolerance for loss plots (None when there is none or it is 0, i.e. disabled)."""
+    tol = results.get("tolerance")
+    return tol if tol else None
+
+
 def _histories(run_dir: Path, runs: list[dict]) -> dict[str, dict]:
     """Loss and γ histories per (column, seed) from the checkpoints (read as plain arrays)."""
     from atlasnn.checkpoint import load_checkpoint
@@ -70,15 +81,15 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
 
         histories = {f"{MODEL_LABELS.get(c, c)} (source)": _src_loss(c) for c in src_cols if _src_loss(c)}
         if histories:
-            written += plots.plot_loss_curves(fig_dir / "loss_source", histories, tolerance=results.get("tolerance"),
+            written += plots.plot_loss_curves(fig_dir / "loss_source", histories, tolerance=_tolerance(results),
                                               title=f"{results['experiment']}: source-task loss")
         target = {labels[c]: loss_runs(c) for c in table_cols if loss_runs(c)}
-        written += plots.plot_loss_curves(fig_dir / "loss", target, tolerance=results.get("tolerance"),
+        written += plots.plot_loss_curves(fig_dir / "loss", target, tolerance=_tolerance(results),
                                           title=f"{results['experiment']}: target-task loss")
-        if results.get("tolerance") is not None:
+        if _tolerance(results) is not None:
             first = {labels[c]: hist[(c, seed0)]["loss"] for c in table_cols if (c, seed0) in hist}
             written += plots.plot_target_loss_comparison(
-                fig_dir / "target_loss_comparison", first, results["tolerance"],
+                fig_dir / "target_loss_comparison", first, _tolerance(results),
                 title=f"{results['experiment']}: target-task loss, seed {seed0}")
         gam = {f"{MODEL_LABELS.get(c, c)} (source)": hist[(c + ":source", seed0)]["gamma"]
                for c in src_cols if (c + ":source", seed0) in hist and hist[(c + ":source", seed0)]["gamma"]}
@@ -105,7 +116,7 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
 
     # ---- per-seed spread of the headline metric, paper value beside it
     try:
-        paper_rows = load_paper(results["experiment"])["rows"]
+        paper_rows = load_paper(_paper_name(results))["rows"]
     except AtlasError:
         paper_rows = {}
     first = names[0]
@@ -130,7 +141,7 @@ def summary_lines(results: dict) -> list[str]:
     s = summarize(results)
     first = results["state_names"][0]
     try:
-        paper_rows = load_paper(results["experiment"])["rows"].get(f"l2_{first}", {})
+        paper_rows = load_paper(_paper_name(results))["rows"].get(f"l2_{first}", {})
     except AtlasError:
         paper_rows = {}
     n = len(results["seeds"])

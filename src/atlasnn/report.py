@@ -124,7 +124,7 @@ def _resolve_paper(results: dict, paper: Any) -> dict | None:
     if paper is False:
         return None
     if paper is None:
-        name = results.get("experiment")
+        name = results.get("paper_experiment") or results.get("experiment")
         data = load_paper()
         return data["experiments"].get(name) if isinstance(name, str) else None
     if isinstance(paper, str):
