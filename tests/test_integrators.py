@@ -336,3 +336,14 @@ def test_bad_z0():
     with pytest.raises(SystemError_) as ei:
         yoshida4(henon_heiles(), [1.0, 2.0], 0.0, 1.0, 4)
     _one_line(ei)
+
+
+def test_reference_stops_with_one_line_error_when_the_field_becomes_non_finite():
+    """sqrt(q) has no gradient once q < 0: the solver must stop, not shrink its step for ever."""
+    from atlasnn.errors import AtlasError
+    from atlasnn.expression import expression_system
+
+    system = expression_system("p**2/2 + sqrt(q)", coordinates=["q"], momenta=["p"], z0=[1.0, -1.0])
+    with pytest.raises(AtlasError) as info:
+        reference_solution(system, system.z0, np.linspace(0.0, 10.0, 50))
+    assert "not finite" in str(info.value) and "\n" not in str(info.value)

@@ -4,16 +4,22 @@
     atlasnn experiments                  list the paper's experiments (built-in configs)
     atlasnn reproduce NAME [--quick] [--seeds K] [--jobs J] [--out DIR]
     atlasnn run CONFIG.toml [...]        a user's own experiment
+    atlasnn run|reproduce --resume DIR   continue an interrupted run
     atlasnn report DIR                   re-render tables and figures of a finished run
     atlasnn integrate [--system NAME]    reference vs classical integrators, an error table
 
-Errors caused by input are printed as one line and exit with status 2.
+Errors caused by input are printed as one line and exit with status 2. SIGINT (Ctrl-C) or
+SIGTERM during training saves the training state and exits with status 130, printing the command
+that resumes the run.
 """
 
 from __future__ import annotations
 
 import argparse
+import shlex
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -29,21 +35,74 @@ def _seeds(args) -> tuple[int, ...] | None:
     return tuple(range(args.seeds))
 
 
-def _run_config(cfg, args, config_text: str, default_out: str) -> int:
-    from atlasnn.experiments.runner import run_experiment
+def _jobs(args) -> int:
+    if args.jobs < 1:
+        raise AtlasError(f"--jobs must be >= 1, got {args.jobs}")
+    return args.jobs
 
-    out = Path(args.out or default_out)
-    start = time.perf_counter()
-    results = run_experiment(
-        cfg, out, seeds=_seeds(args), jobs=args.jobs, progress=not args.no_progress,
-        overwrite=args.overwrite, config_text=config_text, quick=args.quick,
-    )
+
+def _print_summary(results, out: Path, start: float) -> int:
     from atlasnn.render import summary_lines
 
     for line in summary_lines(results):
         print(line)
     print(f"done in {time.perf_counter() - start:.1f} s; see {out}/tables.md and {out}/figures/")
     return 0
+
+
+def _run_config(cfg, args, config_text: str, default_out: str, config_source: str | None = None) -> int:
+    from atlasnn.experiments.runner import run_experiment
+
+    seeds, jobs = _seeds(args), _jobs(args)
+    out = Path(args.out or default_out)
+    args.run_dir = out
+    start = time.perf_counter()
+    results = run_experiment(
+        cfg, out, seeds=seeds, jobs=jobs, progress=not args.no_progress,
+        overwrite=args.overwrite, config_text=config_text, quick=args.quick, config_source=config_source,
+    )
+    return _print_summary(results, out, start)
+
+
+def _resume(args, check) -> int:
+    """``--resume DIR``: the config, seeds and quick flag come from DIR; options given again must
+    agree with them. ``check(cfg, meta, out)`` compares the command's NAME or CONFIG."""
+    from atlasnn.experiments.runner import load_run_config, run_experiment
+
+    out = Path(args.resume)
+    args.run_dir = out
+    jobs = _jobs(args)
+    if args.overwrite:
+        raise AtlasError("--resume and --overwrite cannot be combined: --resume continues the run in DIR, "
+                         "--overwrite starts it again")
+    if args.out is not None and Path(args.out).resolve() != out.resolve():
+        raise AtlasError(f"--out {args.out} differs from --resume {args.resume}; the run continues in its own directory")
+    cfg, meta = load_run_config(out)
+    seeds = tuple(meta["seeds"])
+    if args.seeds is not None and tuple(range(args.seeds)) != seeds:
+        raise AtlasError(f"--seeds {args.seeds} differs from the run's seeds {list(seeds)} (recorded in {out}/meta.json)")
+    if args.quick and not meta.get("quick"):
+        raise AtlasError(f"--quick given, but the run in {out} was started without --quick")
+    check(cfg, meta, out)
+    start = time.perf_counter()
+    results = run_experiment(
+        cfg, out, seeds=seeds, jobs=jobs, progress=not args.no_progress, quick=bool(meta.get("quick")),
+        resume=True,
+    )
+    return _print_summary(results, out, start)
+
+
+def _resume_command(args, run_dir) -> str:
+    parts = ["atlasnn", args.command]
+    positional = getattr(args, "name", None) or getattr(args, "config", None)
+    if positional:
+        parts.append(positional)
+    parts += ["--resume", str(run_dir)]
+    if getattr(args, "jobs", 1) != 1:
+        parts += ["--jobs", str(args.jobs)]
+    if getattr(args, "no_progress", False):
+        parts.append("--no-progress")
+    return " ".join(shlex.quote(p) for p in parts)
 
 
 def cmd_systems(args) -> int:
@@ -67,18 +126,43 @@ def cmd_experiments(args) -> int:
 def cmd_reproduce(args) -> int:
     from atlasnn.experiments.config import builtin_config_path, load_config
 
+    if args.resume is not None:
+        def check(cfg, meta, out):
+            if args.name is not None and args.name != meta.get("experiment"):
+                raise AtlasError(f"--resume {out} holds experiment {meta.get('experiment')!r}, not {args.name!r}")
+
+        return _resume(args, check)
+    if args.name is None:
+        raise AtlasError("reproduce needs the NAME of an experiment (see `atlasnn experiments`), or --resume DIR")
     path = builtin_config_path(args.name)
     cfg = load_config(path, quick=args.quick)
     suffix = "-quick" if args.quick else ""
-    return _run_config(cfg, args, path.read_text(encoding="utf-8"), f"runs/{cfg.name}{suffix}")
+    return _run_config(cfg, args, path.read_text(encoding="utf-8"), f"runs/{cfg.name}{suffix}", f"{args.name}.toml")
 
 
 def cmd_run(args) -> int:
     from atlasnn.experiments.config import load_config
 
+    if args.resume is not None:
+        def check(cfg, meta, out):
+            if args.config is None:
+                return
+            given, kept = Path(args.config), Path(out) / "config.toml"
+            try:
+                same = given.read_bytes() == kept.read_bytes()
+            except OSError:
+                same = False
+            if not same:
+                raise AtlasError(f"{args.config} is not the config the run in {out} was started with "
+                                 f"({kept}); omit CONFIG to resume with the run's own copy")
+
+        return _resume(args, check)
+    if args.config is None:
+        raise AtlasError("run needs a CONFIG.toml, or --resume DIR")
     cfg = load_config(args.config, quick=args.quick)
     suffix = "-quick" if args.quick else ""
-    return _run_config(cfg, args, Path(args.config).read_text(encoding="utf-8"), f"runs/{cfg.name}{suffix}")
+    return _run_config(cfg, args, Path(args.config).read_text(encoding="utf-8"), f"runs/{cfg.name}{suffix}",
+                       str(args.config))
 
 
 def cmd_report(args) -> int:
@@ -133,15 +217,17 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--jobs", type=int, default=1, metavar="J", help="independent trainings in J processes")
         s.add_argument("--out", default=None, metavar="DIR", help="run directory (default runs/NAME[-quick])")
         s.add_argument("--overwrite", action="store_true", help="reuse a non-empty run directory")
+        s.add_argument("--resume", default=None, metavar="DIR",
+                       help="continue an interrupted run in DIR (its config, seeds and --quick are read from DIR)")
         s.add_argument("--no-progress", action="store_true", help="no progress bars")
 
     s = sub.add_parser("reproduce", help="reproduce one of the paper's experiments")
-    s.add_argument("name", help="oscillator-short, oscillator-transfer, henon-heiles-short or henon-heiles-transfer")
+    s.add_argument("name", nargs="?", help="oscillator-short, oscillator-transfer, henon-heiles-short or henon-heiles-transfer")
     add_run_options(s)
     s.set_defaults(func=cmd_reproduce)
 
     s = sub.add_parser("run", help="run an experiment from your own TOML config")
-    s.add_argument("config", help="path to a TOML experiment file")
+    s.add_argument("config", nargs="?", help="path to a TOML experiment file")
     add_run_options(s)
     s.set_defaults(func=cmd_run)
 
@@ -157,20 +243,41 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "command", None):
         parser.print_help()
         return 0
+    # SIGTERM (kill, a batch system's time limit) is handled like Ctrl-C: the training state is
+    # saved and the run can be resumed
+    old_term = None
+    if threading.current_thread() is threading.main_thread():
+        old = signal.getsignal(signal.SIGTERM)
+        if old is not signal.SIG_IGN and old is not None:
+            old_term = old
+            signal.signal(signal.SIGTERM, _raise_interrupt)
     try:
         return int(args.func(args) or 0)
     except AtlasError as exc:
-        print(f"atlasnn: error: {exc}", file=sys.stderr)
+        message = " ".join(str(exc).splitlines()) or type(exc).__name__  # one line, always
+        print(f"atlasnn: error: {message}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("atlasnn: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        runner = sys.modules.get("atlasnn.experiments.runner")  # loaded if a run was interrupted
+        if runner is not None and isinstance(exc, runner.RunInterrupted):
+            print(f"atlasnn: interrupted: {exc.finished} of {exc.total} trainings finished; resume with: "
+                  f"{_resume_command(args, exc.run_dir)}", file=sys.stderr)
+        else:
+            print("atlasnn: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
 
 
 if __name__ == "__main__":

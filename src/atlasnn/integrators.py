@@ -237,9 +237,19 @@ def reference_rhs(system: HamiltonianSystem) -> Callable[[float, np.ndarray], np
 
     def rhs(t: float, z: np.ndarray) -> np.ndarray:
         with jax.enable_x64(True):
-            return np.asarray(vf(jnp.asarray(z, dtype=jnp.float64)), dtype=np.float64)
+            out = np.asarray(vf(jnp.asarray(z, dtype=jnp.float64)), dtype=np.float64)
+        if not np.all(np.isfinite(out)):
+            # a NaN/inf slope makes DOP853's step control shrink the step for ever: stop here
+            raise _NonFiniteField(t, z)
+        return out
 
     return rhs
+
+
+class _NonFiniteField(Exception):
+    def __init__(self, t: float, z: np.ndarray):
+        super().__init__(t, z)
+        self.t, self.z = float(t), np.asarray(z, dtype=np.float64).tolist()
 
 
 def _check_t_eval(t_eval: Any) -> np.ndarray:
@@ -302,11 +312,17 @@ def reference_solution(
     if t.size == 1:
         return z_init[None, :].copy()
     rhs = reference_rhs(system)
-    with jax.enable_x64(True):
-        sol = solve_ivp(
-            rhs, (float(t[0]), float(t[-1])), z_init, method="DOP853", t_eval=t,
-            rtol=float(rtol), atol=float(atol),
-        )
+    try:
+        with jax.enable_x64(True):
+            sol = solve_ivp(
+                rhs, (float(t[0]), float(t[-1])), z_init, method="DOP853", t_eval=t,
+                rtol=float(rtol), atol=float(atol),
+            )
+    except _NonFiniteField as exc:
+        raise AtlasError(
+            f"reference solver DOP853 stopped for system {system.name!r}: J∇H is not finite at "
+            f"t = {exc.t:.6g}, z = {[float(f'{v:.6g}') for v in exc.z]}"
+        ) from None
     if not sol.success:
         msg = " ".join(str(sol.message).split())
         raise AtlasError(f"reference solver DOP853 failed for system {system.name!r}: {msg}")

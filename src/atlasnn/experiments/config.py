@@ -47,7 +47,19 @@ def _fmt(value: Any) -> str:
 
 
 def _fail(path: str, value: Any, why: str) -> None:
-    raise ConfigError(f"{path} = {_fmt(value)}: {why}")
+    raise ConfigError(_one_line(f"{path} = {_fmt(value)}: {why}"))
+
+
+def _one_line(text: str) -> str:
+    """Messages are one line, whatever they quote."""
+    return re.sub(r"\s*[\r\n\v\f\x1c-\x1e\x85\u2028\u2029]+\s*", " ", text)
+
+
+def _key(path: str, key: Any) -> str:
+    """``path.key``, or ``path['odd key']`` when the key is not a plain name."""
+    if isinstance(key, str) and re.fullmatch(r"[A-Za-z0-9_-]+", key):
+        return f"{path}.{key}" if path else key
+    return f"{path}[{_fmt(key)}]" if path else f"[{_fmt(key)}]"
 
 
 def _is_num(v: Any) -> bool:
@@ -77,14 +89,29 @@ def _number(path: str, v: Any, *, low: float | None = None, high: float | None =
     return v
 
 
-def _integer(path: str, v: Any, low: int) -> int:
-    if isinstance(v, float) and v.is_integer() and math.isfinite(v):
+def _integer(path: str, v: Any, low: int, high: int | None = None) -> int:
+    if isinstance(v, float) and math.isfinite(v) and v.is_integer():
         v = int(v)
     if not isinstance(v, int) or isinstance(v, bool):
         _fail(path, v, "expected an integer")
     if v < low:
         _fail(path, v, f"must be >= {low}")
+    if high is not None and v > high:
+        _fail(path, v, f"must be <= {high}")
     return v
+
+
+# Upper limits: far beyond any sensible experiment, low enough that a typo (an extra digit, a
+# float such as 1e20 where an integer belongs) fails here, as one line, and not as an overflow or
+# an out-of-memory error halfway through a run.
+MAX_EPOCHS = 1_000_000_000  # the trainer counts epochs in int32
+MAX_POINTS = 1_000_000  # collocation points K, evaluation points
+MAX_WIDTH = 10_000
+MAX_DEPTH = 100
+MAX_SEED = 2**32 - 1  # jax.random.PRNGKey takes a uint32 seed (larger ones wrap around silently)
+MAX_SEEDS = 10_000
+MAX_TIME = 1e6  # |t0|, |T|
+MAX_STEPS = 100_000_000  # classical integrator steps (se_steps × fine_factor)
 
 
 def _boolean(path: str, v: Any) -> bool:
@@ -107,7 +134,7 @@ def _table(path: str, v: Any, allowed: set[str]) -> dict[str, Any]:
     unknown = sorted(set(v) - allowed)
     if unknown:
         key = unknown[0]
-        _fail(f"{path}.{key}" if path else key, v[key], f"unknown key (known: {sorted(allowed)})")
+        _fail(_key(path, key), v[key], f"unknown key (known: {sorted(allowed)})")
     return v
 
 
@@ -258,11 +285,11 @@ def _parse_train(path: str, d: dict[str, Any], base: TrainSettings | None = None
     for key, v in d.items():
         p = f"{path}.{key}"
         if key == "epochs":
-            kw[key] = _integer(p, v, 1)
+            kw[key] = _integer(p, v, 1, MAX_EPOCHS)
         elif key == "n_points":
-            kw[key] = _integer(p, v, 2)
+            kw[key] = _integer(p, v, 2, MAX_POINTS)
         elif key == "chunk":
-            kw[key] = _integer(p, v, 1)
+            kw[key] = _integer(p, v, 1, MAX_EPOCHS)
         elif key == "lr":
             kw[key] = _number(p, v, low=0, low_open=True)
         elif key == "betas":
@@ -292,11 +319,17 @@ def _parse_stage(path: str, d: Any, base_train: TrainSettings) -> Stage:
     d = _table(path, d, {"t0", "T", "train"})
     if "T" not in d:
         _fail(f"{path}.T", None, "missing (the end of the interval)")
-    t0 = _number(f"{path}.t0", d.get("t0", 0.0), allow_pi=True)
-    T = _number(f"{path}.T", d["T"], allow_pi=True)
+    t0 = _number(f"{path}.t0", d.get("t0", 0.0), low=-MAX_TIME, high=MAX_TIME, allow_pi=True)
+    T = _number(f"{path}.T", d["T"], low=-MAX_TIME, high=MAX_TIME, allow_pi=True)
     if T <= t0:
         _fail(f"{path}.T", d["T"], f"must be greater than t0 = {t0:g}")
     train = _parse_train(f"{path}.train", d.get("train", {}), base_train)
+    import numpy as np
+
+    dt = (T - t0) / (train.n_points - 1)
+    if dt <= 4 * float(np.spacing(np.float32(max(abs(t0), abs(T))))):
+        _fail(f"{path}.T", d["T"], f"[{t0:g}, {T:g}] is too short for {train.n_points} distinct collocation "
+              f"times in float32 (spacing {dt:.3g}); lengthen the interval or lower n_points")
     return Stage(t0, T, train)
 
 
@@ -324,6 +357,9 @@ def _parse_system(d: Any) -> SystemConfig:
     params_d = d.get("params", {})
     if not isinstance(params_d, dict):
         _fail("system.params", params_d, "expected a table of numbers")
+    for k in params_d:
+        if not isinstance(k, str) or not k.isidentifier():
+            _fail(_key("system.params", k), params_d[k], "parameter names must be identifiers")
     params = {k: _number(f"system.params.{k}", v) for k, v in params_d.items()}
     z0 = None
     if "z0" in d:
@@ -357,8 +393,8 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     system = _parse_system(data.get("system"))
 
     net = _table("network", data.get("network", {}), {"width", "depth", "activation"})
-    width = _integer("network.width", net.get("width", 50), 1)
-    depth = _integer("network.depth", net.get("depth", 2), 1)
+    width = _integer("network.width", net.get("width", 50), 1, MAX_WIDTH)
+    depth = _integer("network.depth", net.get("depth", 2), 1, MAX_DEPTH)
     activation = _string("network.activation", net.get("activation", "sin"), tuple(sorted(ACTIVATIONS)))
 
     base_train = _parse_train("train", data.get("train", {}))
@@ -415,20 +451,30 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     for i, m in enumerate(integ):
         _string(f"evaluation.integrators[{i}]", m, tuple(sorted(INTEGRATORS)))
     evaluation = EvaluationConfig(
-        eval_points=_integer("evaluation.eval_points", ev["eval_points"], 2) if "eval_points" in ev else None,
-        se_steps=_integer("evaluation.se_steps", ev["se_steps"], 1) if "se_steps" in ev else None,
-        fine_factor=_integer("evaluation.fine_factor", ev.get("fine_factor", 100), 1),
+        eval_points=_integer("evaluation.eval_points", ev["eval_points"], 2, MAX_POINTS) if "eval_points" in ev else None,
+        se_steps=_integer("evaluation.se_steps", ev["se_steps"], 1, MAX_STEPS) if "se_steps" in ev else None,
+        fine_factor=_integer("evaluation.fine_factor", ev.get("fine_factor", 100), 1, MAX_STEPS),
         integrators=tuple(integ),
         reference_rtol=_number("evaluation.reference_rtol", ev.get("reference_rtol", 1e-12), low=0, low_open=True, high=1e-6),
         reference_atol=_number("evaluation.reference_atol", ev.get("reference_atol", 1e-12), low=0, low_open=True, high=1e-6),
     )
 
+    eval_stage = stage if kind == "short" else target_stage
+    n_steps = (evaluation.se_steps or eval_stage.train.n_points - 1) * evaluation.fine_factor
+    if n_steps > MAX_STEPS:
+        _fail("evaluation.fine_factor", evaluation.fine_factor,
+              f"the fine symplectic-Euler run would take {n_steps} steps (se_steps x fine_factor must be <= {MAX_STEPS})")
+
     seeds_v = data.get("seeds", [0])
     if isinstance(seeds_v, int) and not isinstance(seeds_v, bool):
-        seeds_v = list(range(_integer("seeds", seeds_v, 1)))
+        seeds_v = list(range(_integer("seeds", seeds_v, 1, MAX_SEEDS)))
     if not isinstance(seeds_v, list) or not seeds_v:
         _fail("seeds", seeds_v, "expected a list of integer seeds or a count")
-    seeds = tuple(_integer(f"seeds[{i}]", s, 0) for i, s in enumerate(seeds_v))
+    if len(seeds_v) > MAX_SEEDS:
+        _fail("seeds", f"{len(seeds_v)} seeds", f"at most {MAX_SEEDS} seeds")
+    seeds = tuple(_integer(f"seeds[{i}]", s, 0, MAX_SEED) for i, s in enumerate(seeds_v))
+    if len(set(seeds)) != len(seeds):
+        _fail("seeds", seeds_v, "seeds must not repeat")
 
     follows = data.get("follows", {})
     if not isinstance(follows, dict) or not all(isinstance(v, str) for v in follows.values()):
@@ -443,16 +489,61 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     )
     try:  # build the system now so that a bad expression or z0 fails before any training
         sysm = system.build()
-        sysm.initial_state()
+        z0 = sysm.initial_state()
     except ConfigError:
         raise
     except Exception as exc:  # AtlasError subclasses carry one-line messages
         from atlasnn.errors import AtlasError
 
         if isinstance(exc, AtlasError):
-            raise ConfigError(f"system: {exc}") from None
+            raise ConfigError(_one_line(f"system: {exc}")) from None
         raise
+    _check_finite_at_z0(sysm, z0, system)
     return cfg
+
+
+def _check_finite_at_z0(sysm, z0, system: SystemConfig) -> None:
+    """H and J∇H must be finite at z0 (in float64): a singular or overflowing start would give
+    non-finite losses from the first epoch and a reference solver that cannot start."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    with jax.enable_x64(True):
+        z = jnp.asarray(z0, jnp.float64)
+        energy = float(sysm.energy(z))
+        field = np.asarray(sysm.vector_field(z), dtype=np.float64)
+    if math.isfinite(energy) and np.all(np.isfinite(field)):
+        if system.hamiltonian is not None and system.separable:
+            _check_separable(sysm, np.asarray(z0, np.float64))
+        return
+    where = "system.z0" if system.z0 is not None else ("system.hamiltonian" if system.hamiltonian else "system.params")
+    value = list(system.z0) if system.z0 is not None else (system.hamiltonian or dict(system.params))
+    at = "there" if where == "system.z0" else f"at z0 = {[float(x) for x in z0]}"
+    _fail(where, value, f"the Hamiltonian or its gradient is not finite {at} "
+          f"(H = {energy:g}, J∇H = {[float(x) for x in field]})")
+
+
+def _check_separable(sysm, z0) -> None:
+    """``separable = true`` lets the symplectic integrators run (they need H = T(p) + V(q)): the
+    mixed second derivatives ∂²H/∂q∂p must vanish (checked at z0 and three nearby states)."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    d = sysm.dim
+    shifts = [np.zeros_like(z0), np.full_like(z0, 0.1), np.resize([0.3, -0.2], z0.shape), np.full_like(z0, -0.25)]
+    with jax.enable_x64(True):
+        hess = jax.hessian(lambda z: sysm.energy(z))
+        for shift in shifts:
+            h = np.asarray(hess(jnp.asarray(z0 + shift, jnp.float64)), dtype=np.float64)
+            cross = np.abs(h[:d, d:])
+            if not np.all(np.isfinite(h)):
+                continue
+            if cross.max() > 1e-9 * (1.0 + np.abs(h).max()):
+                at = [round(float(x), 6) for x in z0 + shift]
+                _fail("system.separable", True, f"the Hamiltonian is not separable (d²H/dq dp = "
+                      f"{float(h[:d, d:].flat[int(np.argmax(cross))]):g} at {at}); set separable = false")
 
 
 def load_config(path: str | Path, *, quick: bool = False) -> ExperimentConfig:

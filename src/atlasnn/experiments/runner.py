@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from atlasnn.errors import AtlasError, ConfigError
+from atlasnn.errors import ConfigError
 from atlasnn.experiments.config import MODEL_LABELS, ExperimentConfig, Stage
 
 RESULT_FILES = ("config.toml", "config.json", "meta.json", "results.json", "arrays.npz")
