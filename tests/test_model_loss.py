@@ -237,3 +237,18 @@ def test_bad_model_config(kwargs):
     with pytest.raises(ConfigError) as exc:
         make_model(z0, **kwargs)
     assert "\n" not in str(exc.value)
+
+
+def test_float32_sin_cos_matches_numpy_and_differentiates_as_sin_cos():
+    """The network's fused sin/cos (own polynomial fit, shared range reduction) is float32-exact enough."""
+    from atlasnn.model import SINCOS_FAST_LIMIT, sin_cos
+
+    x = jnp.linspace(-200.0, 200.0, 400_001, dtype=jnp.float32)
+    s, c = sin_cos(x)
+    xs = np.asarray(x, np.float64)
+    assert np.abs(np.asarray(s, np.float64) - np.sin(xs)).max() < 6e-8
+    assert np.abs(np.asarray(c, np.float64) - np.cos(xs)).max() < 6e-8
+    ds = jax.vmap(jax.grad(lambda v: sin_cos(v)[0]))(x[:1000])
+    np.testing.assert_array_equal(np.asarray(ds), np.asarray(sin_cos(x[:1000])[1]))
+    big = jnp.asarray([SINCOS_FAST_LIMIT * 4, 1e6], jnp.float32)  # falls back to XLA's sin/cos
+    np.testing.assert_allclose(np.asarray(sin_cos(big)[0]), np.sin(np.asarray(big, np.float64)), atol=1e-6)

@@ -38,6 +38,7 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from atlasnn.errors import ConfigError
+from atlasnn.labels import MODEL_LABELS
 
 __all__ = [
     "load_results",
@@ -53,16 +54,7 @@ __all__ = [
 
 PAPER_FILE = "paper_results.json"
 
-DEFAULT_LABELS = {
-    "se": "SE",
-    "hnn": "HNN",
-    "atlas_tanh": "ATLAS-NN (tanh)",
-    "atlas_exp": "ATLAS-NN (exp)",
-    "hnn_baseline": "HNN (baseline)",
-    "hnn_transfer": "HNN (transfer)",
-    "atlas_tanh_transfer": "ATLAS-NN (tanh, transfer)",
-    "atlas_exp_transfer": "ATLAS-NN (exp, transfer)",
-}
+DEFAULT_LABELS = MODEL_LABELS
 
 #: the per-state metrics a run may carry (metric name in results.json -> short row prefix)
 STATE_METRICS = ("l2_discrete", "mse", "l2_integral", "max_abs")

@@ -23,19 +23,10 @@ from pathlib import Path
 from typing import Any
 
 from atlasnn.errors import ConfigError
+from atlasnn.labels import MODEL_LABELS  # noqa: F401  (re-exported for the runner)
 from atlasnn.model import ACTIVATIONS, MODEL_SCALINGS
 from atlasnn.train import BEST_RULES, TrainConfig
 
-MODEL_LABELS = {
-    "se": "SE",
-    "hnn": "HNN",
-    "atlas_tanh": "ATLAS-NN (tanh)",
-    "atlas_exp": "ATLAS-NN (exp)",
-    "hnn_baseline": "HNN (baseline)",
-    "hnn_transfer": "HNN (transfer)",
-    "atlas_tanh_transfer": "ATLAS-NN (tanh, transfer)",
-    "atlas_exp_transfer": "ATLAS-NN (exp, transfer)",
-}
 
 _PI_RE = re.compile(r"^\s*(?P<num>[0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)?\s*\*?\s*pi\s*(?:/\s*(?P<den>[0-9]*\.?[0-9]+))?\s*$")
 
