@@ -5,12 +5,13 @@ XLA:CPU thunks (one per fused kernel or library call) by kind:
 
 - ``matmul``: dense products (``dot`` and YNNPACK fusions);
 - ``sin/cos``: the float32 sin/cos kernel of the activation (the ``conditional`` that holds it);
+  XLA's own sin/cos (float64, or the package before this kernel) are fused into elementwise kernels;
 - ``elementwise``: other fused kernels taking ≥ 6 µs per epoch;
 - ``small ops``: all kernels under 6 µs per epoch (scalars, short vectors, Adam, bookkeeping).
 
 Thunk durations are wall times under tracing (which adds overhead per thunk) and may overlap
 when XLA runs kernels on two threads; read them as shares, not as exact times. Also prints the
-number of thunks per epoch and the optimised HLO's instruction count inside the loop body.
+number of thunks (kernel launches) per epoch and some instruction counts of the optimised HLO.
 
 Usage::
 
@@ -33,10 +34,64 @@ SKIP = ("ThunkExecutor", "$", "PjitFunction", "SlinkyThreadPool", "ThreadpoolLis
         "DevicePut", "CommonPjRt", "while")
 
 
-def kind(name: str) -> str:
+def conditionals(hlo: str) -> tuple[set[str], set[str], set[str]]:
+    """(sin/cos conditionals, other conditionals, kernels inside the sin/cos ones) of an HLO text.
+
+    atlasnn's sin/cos kernel is a ``conditional`` returning two arrays of one shape; any other
+    conditional (the original trainer's per-epoch ``lax.cond``) only contains other kernels.
+    """
+    comps = dict(re.findall(r"\n%?([\w.\-]+) \(.*?\) -> .*? \{\n(.*?)\n\}", hlo, re.S))
+    sincos, other, inner = set(), set(), set()
+    for m in re.finditer(r"%([\w.\-]+) = \((\S+)\{[^}]*\}, (\S+)\{[^}]*\}\) conditional\(.*?branch_computations=\{([^}]*)\}", hlo):
+        name, a, b, branches = m.groups()
+        if a == b and a.startswith("f"):
+            sincos.add(name)
+            for br in re.findall(r"%?([\w.\-]+)", branches):
+                inner.update(re.findall(r"%([\w.\-]+) = ", comps.get(br, "")))
+    for m in re.finditer(r"%([\w.\-]+) = .*? conditional\(", hlo):
+        if m.group(1) not in sincos:
+            other.add(m.group(1))
+    return sincos, other, inner
+
+
+def kind(name: str, sincos: set[str]) -> str:
     if name.startswith(("dot", "ynn_fusion", "custom-call")):
         return "matmul"
-    if name.startswith(("cond", "conditional")):
+    if name in sincos:
+        return "sin/cos"
+    return "other"
+
+
+def hlo_op_counts(hlo: str) -> dict[str, int]:
+    """How many of some instructions the optimised HLO holds (fused computations included)."""
+    ops = ("sine", "cosine", "dot", "fusion", "conditional", "while", "copy")
+    return {op: len(re.findall(rf" {op}\(", hlo)) for op in ops}
+
+
+def conditionals(hlo: str) -> tuple[set[str], set[str], set[str]]:
+    """(sin/cos conditionals, other conditionals, kernels inside the sin/cos ones) of an HLO text.
+
+    atlasnn's sin/cos kernel is a ``conditional`` returning two arrays of one shape; any other
+    conditional (the original trainer's per-epoch ``lax.cond``) only contains other kernels.
+    """
+    comps = dict(re.findall(r"\n%?([\w.\-]+) \(.*?\) -> .*? \{\n(.*?)\n\}", hlo, re.S))
+    sincos, other, inner = set(), set(), set()
+    for m in re.finditer(r"%([\w.\-]+) = \((\S+)\{[^}]*\}, (\S+)\{[^}]*\}\) conditional\(.*?branch_computations=\{([^}]*)\}", hlo):
+        name, a, b, branches = m.groups()
+        if a == b and a.startswith("f"):
+            sincos.add(name)
+            for br in re.findall(r"%?([\w.\-]+)", branches):
+                inner.update(re.findall(r"%([\w.\-]+) = ", comps.get(br, "")))
+    for m in re.finditer(r"%([\w.\-]+) = .*? conditional\(", hlo):
+        if m.group(1) not in sincos:
+            other.add(m.group(1))
+    return sincos, other, inner
+
+
+def kind(name: str, sincos: set[str]) -> str:
+    if name.startswith(("dot", "ynn_fusion", "custom-call")):
+        return "matmul"
+    if name in sincos:
         return "sin/cos"
     return "other"
 
@@ -79,22 +134,24 @@ def main(argv: list[str] | None = None) -> int:
         if e.get("ph") == "X" and not e["name"].startswith(SKIP):
             dur[e["name"]] += e.get("dur", 0)
             cnt[e["name"]] += 1
-    # kernels inside a conditional are counted in the conditional's own duration
-    inner = {k for k in dur if k.startswith("negate_select_fusion")}
+    hlo = next(iter(tr._CHUNK_CACHE.values()))[1].as_text()
+    sincos, containers, inside = conditionals(hlo)
+    # kernels inside a sin/cos conditional are counted in the conditional's own duration; other
+    # conditionals (a per-epoch lax.cond) only contain kernels that are counted themselves
+    inner = {k for k in dur if k in inside or k in containers}
     groups: collections.Counter = collections.Counter()
     for name, us in dur.items():
         if name in inner:
             continue
-        g = kind(name)
+        g = kind(name, sincos)
         if g == "other":
             g = "elementwise" if us / n >= 6 else "small ops"
         groups[g] += us
     total = sum(groups.values())
-    hlo = next(iter(tr._CHUNK_CACHE.values()))[1].as_text()
     print(f"{args.config}: {cfg.describes}")
     print(f"untraced {plain.wall_time / n * 1e3:.3f} ms/epoch, traced {traced.wall_time / n * 1e3:.3f} ms/epoch; "
-          f"{sum(cnt[k] for k in dur if k not in inner) / n:.0f} thunks per epoch; "
-          f"{loop_body_size(hlo)} HLO instructions in the loop body")
+          f"{sum(cnt[k] for k in dur if k not in inner) / n:.0f} thunks per epoch")
+    print("optimised HLO holds: " + ", ".join(f"{v} {k}" for k, v in hlo_op_counts(hlo).items()))
     print("kind | us/epoch (traced) | share")
     print("--- | --- | ---")
     for g, us in groups.most_common():
