@@ -61,11 +61,9 @@ def torch_system(name: str):
 
 
 def have_torch() -> bool:
-    try:
-        import torch  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    import importlib.util
+
+    return importlib.util.find_spec("torch") is not None
 
 
 def _version(dist: str) -> str | None:

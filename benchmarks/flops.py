@@ -54,7 +54,6 @@ def _best_time(fn, reps: int) -> float:
 def matmul_rates(shapes, loops: int = 300, reps: int = 5) -> list[dict]:
     """GFLOP/s of [K, n] @ [n, m] products in float32, XLA (jit loop) and NumPy."""
     import jax
-    import jax.numpy as jnp
 
     rows = []
     rng = np.random.default_rng(0)

@@ -68,41 +68,6 @@ def hlo_op_counts(hlo: str) -> dict[str, int]:
     return {op: len(re.findall(rf" {op}\(", hlo)) for op in ops}
 
 
-def conditionals(hlo: str) -> tuple[set[str], set[str], set[str]]:
-    """(sin/cos conditionals, other conditionals, kernels inside the sin/cos ones) of an HLO text.
-
-    atlasnn's sin/cos kernel is a ``conditional`` returning two arrays of one shape; any other
-    conditional (the original trainer's per-epoch ``lax.cond``) only contains other kernels.
-    """
-    comps = dict(re.findall(r"\n%?([\w.\-]+) \(.*?\) -> .*? \{\n(.*?)\n\}", hlo, re.S))
-    sincos, other, inner = set(), set(), set()
-    for m in re.finditer(r"%([\w.\-]+) = \((\S+)\{[^}]*\}, (\S+)\{[^}]*\}\) conditional\(.*?branch_computations=\{([^}]*)\}", hlo):
-        name, a, b, branches = m.groups()
-        if a == b and a.startswith("f"):
-            sincos.add(name)
-            for br in re.findall(r"%?([\w.\-]+)", branches):
-                inner.update(re.findall(r"%([\w.\-]+) = ", comps.get(br, "")))
-    for m in re.finditer(r"%([\w.\-]+) = .*? conditional\(", hlo):
-        if m.group(1) not in sincos:
-            other.add(m.group(1))
-    return sincos, other, inner
-
-
-def kind(name: str, sincos: set[str]) -> str:
-    if name.startswith(("dot", "ynn_fusion", "custom-call")):
-        return "matmul"
-    if name in sincos:
-        return "sin/cos"
-    return "other"
-
-
-def loop_body_size(hlo: str) -> int:
-    """Instructions in the main while loop's body computation (the biggest one)."""
-    comps = dict(re.findall(r"\n(%?[\w.\-]+) \(.*?\) -> .*? \{\n(.*?)\n\}", hlo, re.S))
-    bodies = re.findall(r"while\(.*?body=%?([\w.\-]+)", hlo)
-    sizes = [sum(1 for ln in comps.get(b, comps.get("%" + b, "")).splitlines() if " = " in ln) for b in bodies]
-    return max(sizes) if sizes else -1
-
 
 def main(argv: list[str] | None = None) -> int:
     import jax

@@ -135,9 +135,7 @@ def _memory_child(which: str, config: str, epochs: int) -> None:
     cfg = CONFIGS[config]
     rec = {"which": which, "config": config, "epochs": epochs}
     if which == "atlasnn":
-        import jax  # noqa: F401
-
-        system = atlas_system(cfg.system)
+        system = atlas_system(cfg.system)  # imports atlasnn and JAX
         rec["rss_after_import_kb"] = _rss_now_kb()
         start = time.perf_counter()
         res = _atlas_run(cfg, system, epochs)

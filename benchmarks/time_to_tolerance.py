@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import time
 
 from benchmarks.common import BETAS, have_torch, machine_info
@@ -128,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
             r = result.get(side, {}).get(stage)
             if r:
                 print(f"{stage} | {side} | {r['epochs']} | {r['tolerance_met']} | {r['wall_s']:.1f}")
-    result["machine"]["load_average_end"] = info["load_average"] and list(__import__("os").getloadavg())
+    result["machine"]["load_average_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     if args.out:
         with open(args.out, "w") as fh:
             json.dump(result, fh, indent=2)

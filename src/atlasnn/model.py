@@ -9,11 +9,13 @@ is computed in forward mode in one pass through the batched network: every layer
 values and their time derivatives together (h, dh/dt), so dN/dt costs one extra matrix product
 per layer, not one reverse pass per output component; ḟ is the scaling's closed form.
 
-Speed notes (see docs/PERFORMANCE.md): XLA's CPU sine and cosine are scalar library calls, and
-the sin network needs sin and cos of every pre-activation in the forward, tangent and backward
-passes. In float32, :func:`sin_cos` evaluates both with one shared range reduction and
-polynomials (error ≤ 1 ulp, absolute error ≤ 5e-8, for |x| ≤ 8192; XLA's sin/cos are used for
-larger arguments and in float64), about 6× faster than the two XLA calls.
+Speed notes (see docs/PERFORMANCE.md): on CPU, XLA's sine and cosine are slow (about 2.7 ns
+per element on the reference machine, against 0.5 ns for exp) and XLA recomputes them inside
+every fused kernel that uses them, while the sin network needs sin and cos of every
+pre-activation in the forward, tangent and backward passes. In float32, :func:`sin_cos` evaluates both with one shared range reduction and
+polynomials (absolute error ≤ 5e-8 for |x| ≤ 8192, ≤ 0.8 ulp for |x| ≤ 100; XLA's sin/cos are
+used for larger arguments and in float64), 3–4× faster than XLA's pair on a [500, 80] array;
+through its custom JVP the tangent and backward passes reuse the same sin and cos.
 """
 
 from __future__ import annotations
@@ -96,8 +98,11 @@ def sin_cos(x: jax.Array) -> tuple[jax.Array, jax.Array]:
     """(sin x, cos x) elementwise, differentiable to any order (d sin = cos, d cos = −sin).
 
     float32 arguments with |x| ≤ ``SINCOS_FAST_LIMIT`` use a shared Cody–Waite reduction and
-    minimax polynomials (max error 0.8 ulp for |x| ≤ 4, absolute error ≤ 5e-8 throughout);
-    otherwise (larger arguments, NaN, float64) ``jnp.sin`` and ``jnp.cos``.
+    minimax polynomials: absolute error ≤ 5e-8 (XLA's: 3.3e-8), at most 0.8 ulp for |x| ≤ 100
+    (XLA's: 0.56), mean 0.25 ulp like XLA's; near the zeros of sin/cos at |x| ≳ 1000 the error in
+    ulps of the (tiny) result grows, the absolute error does not. Otherwise (a larger argument
+    anywhere in x, NaN, float64) ``jnp.sin`` and ``jnp.cos``; under ``vmap`` both paths are
+    evaluated (the branch becomes a select).
     """
     x = jnp.asarray(x)
     if x.dtype != jnp.float32:
@@ -175,8 +180,8 @@ class MLP(eqx.Module):
     def __call__(self, t: jax.Array) -> jax.Array:
         """N(t) for t of shape (K,); returns (K, out_size)."""
         act = ACTIVATIONS[self.activation]
-        h = t[:, None]
-        for w, b in zip(self.weights[:-1], self.biases[:-1]):
+        h = act(t[:, None] * self.weights[0][:, 0] + self.biases[0])  # fan-in 1: t Wᵀ is a product
+        for w, b in zip(self.weights[1:-1], self.biases[1:-1]):
             h = act(h @ w.T + b)
         return h @ self.weights[-1].T + self.biases[-1]
 
@@ -185,7 +190,7 @@ class MLP(eqx.Module):
 
         Forward mode by hand: layer by layer, a = h Wᵀ + b and da/dt = (dh/dt) Wᵀ, then
         h = σ(a) and dh/dt = σ'(a) da/dt (for sin, σ and σ' come from one :func:`sin_cos`).
-        The same values as ``jax.jvp(self, (t,), (ones,))``.
+        Equal to ``jax.jvp(self, (t,), (ones,))`` up to rounding.
         """
         w0 = self.weights[0][:, 0]
         a = t[:, None] * w0 + self.biases[0]  # = t[:, None] @ W0ᵀ + b0 (fan-in 1)

@@ -1,6 +1,6 @@
 """The training loop: Adam on the physics loss, many epochs per compiled call.
 
-One host call runs up to ``chunk`` epochs inside one compiled loop; inside it every epoch takes its
+One host call runs ``chunk`` epochs inside ``lax.scan``; inside it every epoch draws its
 jittered collocation times, evaluates the loss and its gradient, updates the parameters and
 keeps the running bookkeeping (best parameters, tolerance, divergence) on the device. The host
 looks at the result once per chunk (progress bar, stopping). Histories come back per chunk.
@@ -34,7 +34,6 @@ from typing import Any, Callable
 
 import equinox as eqx
 import jax
-import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 import optax
@@ -247,81 +246,58 @@ def _select(pred, a, b):
     return jax.tree_util.tree_map(lambda x, y: jnp.where(pred, x, y), a, b)
 
 
-def _flat_adam_state(opt_state, ravel):
-    """Adam's state with its moments raveled like the parameters (Adam is elementwise)."""
-    adam, *others = opt_state.inner_state
-    return opt_state._replace(inner_state=(adam._replace(mu=ravel(adam.mu), nu=ravel(adam.nu)), *others))
-
-
 def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, rule):
-    """Run the epochs in ``epochs`` (shape (chunk,)); a compiled unit (see ``_compiled_chunk``).
-
-    For speed the trainable parameters, Adam's moments and the tracked parameters travel through
-    the loop as single flat vectors (one elementwise op each instead of one per leaf), the
-    jittered times of the whole chunk are made up front (the same ``fold_in(key, epoch)`` draws),
-    and a ``while_loop`` stops at the first stopping epoch instead of skipping the rest.
-    """
+    """Run the epochs in ``epochs`` (shape (chunk,)); a compiled unit (see ``_compiled_chunk``)."""
     grid = settings["grid"]
     t0, T = settings["t0"], settings["T"]
-    dtype = grid.dtype
-    n_epochs = epochs.shape[0]
-    flat, unravel = jax.flatten_util.ravel_pytree(params)
 
-    def ravel(tree):
-        return jax.flatten_util.ravel_pytree(tree)[0]
-
-    def loss_fn(theta, t):
-        model = eqx.combine(unravel(theta), rest)
+    def loss_fn(p, t):
+        model = eqx.combine(p, rest)
         return physics_loss(model, system, t, settings["energy0"], settings["lam_reg"])
 
     grad_fn = jax.value_and_grad(loss_fn, has_aux=True)
     n_gamma = eqx.combine(params, rest).scaling.gamma_array().shape[0]
-    # every epoch's collocation times, made up front (bitwise the same as epoch by epoch)
-    times = jax.vmap(lambda e: jittered(grid, jax.random.fold_in(key, e), settings["sigma"], t0, T))(epochs)
+    dtype = grid.dtype
 
-    def body(carry):
-        i, theta, o, tr, hist = carry
-        epoch = epochs[i]
-        (loss, (res, en)), grads = grad_fn(theta, times[i])
-        gamma = eqx.combine(unravel(theta), rest).scaling.gamma_array()
+    def skipped(carry, epoch):
+        nan = jnp.asarray(jnp.nan, dtype)
+        return carry, (nan, nan, nan, jnp.full((n_gamma,), jnp.nan, dtype))
+
+    def one_epoch(carry, epoch):
+        p, o, tr = carry
+        t = jittered(grid, jax.random.fold_in(key, epoch), settings["sigma"], t0, T)
+        (loss, (res, en)), grads = grad_fn(p, t)
+        gamma = eqx.combine(p, rest).scaling.gamma_array()
         finite = jnp.isfinite(loss)
         # bookkeeping on the parameters that produced this loss (before the update)
         better_any = finite & (loss < tr["any_loss"])
         eligible = epoch >= settings["best_start"] if rule == "release" else True
         better = finite & eligible & (loss < tr["best_loss"])
         tr = dict(tr)
-        tr["any_params"] = jnp.where(better_any, theta, tr["any_params"])
+        tr["any_params"] = _select(better_any, p, tr["any_params"])
         tr["any_loss"] = jnp.where(better_any, loss, tr["any_loss"])
         tr["any_epoch"] = jnp.where(better_any, epoch, tr["any_epoch"])
-        tr["best_params"] = jnp.where(better, theta, tr["best_params"])
+        tr["best_params"] = _select(better, p, tr["best_params"])
         tr["best_loss"] = jnp.where(better, loss, tr["best_loss"])
         tr["best_epoch"] = jnp.where(better, epoch, tr["best_epoch"])
         met = finite & (loss <= settings["tolerance"])
         stop = jnp.where(~finite, 2, jnp.where(met, 1, 0)).astype(jnp.int32)
         tr["stop"] = stop
         tr["stop_epoch"] = jnp.where(stop > 0, epoch, tr["stop_epoch"])
-        updates, o_new = _ADAM.update(grads, o, theta)
+        updates, o_new = _ADAM.update(grads, o, p)
+        p_new = eqx.apply_updates(p, updates)
         # on a stop the parameters that produced the stopping loss stay as they are
-        theta = jnp.where(stop > 0, theta, theta + updates)
+        p = _select(stop > 0, p, p_new)
         o = _select(stop > 0, o, o_new)
-        row = (loss, res, en, gamma)
-        hist = tuple(h.at[i].set(v) for h, v in zip(hist, row))
-        return i + 1, theta, o, tr, hist
+        return (p, o, tr), (loss, res, en, gamma)
 
-    def running(carry):
-        i, _, _, tr, _ = carry
-        return (i < n_epochs) & (tr["stop"] == 0) & (epochs[jnp.minimum(i, n_epochs - 1)] < settings["budget"])
+    def body(carry, epoch):
+        running = (carry[2]["stop"] == 0) & (epoch < settings["budget"])
+        return jax.lax.cond(running, one_epoch, skipped, carry, epoch)
 
-    flat_track = dict(track, best_params=ravel(track["best_params"]), any_params=ravel(track["any_params"]))
-    nan = jnp.asarray(jnp.nan, dtype)
-    hist0 = (jnp.full((n_epochs,), nan), jnp.full((n_epochs,), nan), jnp.full((n_epochs,), nan),
-             jnp.full((n_epochs, n_gamma), nan))
-    carry = (jnp.asarray(0, jnp.int32), flat, _flat_adam_state(opt_state, ravel), flat_track, hist0)
-    _, flat, opt_flat, flat_track, (loss, res, en, gamma) = jax.lax.while_loop(running, body, carry)
-    params = unravel(flat)
-    opt_state = _flat_adam_state(opt_flat, unravel)
-    track = dict(flat_track, best_params=unravel(flat_track["best_params"]),
-                 any_params=unravel(flat_track["any_params"]))
+    (params, opt_state, track), (loss, res, en, gamma) = jax.lax.scan(
+        body, (params, opt_state, track), epochs
+    )
     return params, opt_state, track, {"loss": loss, "residual": res, "energy": en, "gamma": gamma}
 
 
