@@ -428,6 +428,17 @@ def plot_scaling_families(stem: str | Path, t_max: float = 10.0, *,
     return _save(fig, stem)
 
 
+def _loss_axes(ax: Axes, ylabel: str, title: str) -> None:
+    """Log-scale loss-against-epoch axes with grid, legend and title."""
+    ax.set_yscale("log")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel(ylabel)
+    ax.set_xlim(left=0)
+    ax.grid(alpha=0.3, which="major")
+    ax.legend(fontsize="small")
+    ax.set_title(title)
+
+
 def plot_loss_curves(stem: str | Path, histories: Mapping[str, Any],
                      tolerance: float | None = None, title: str = "") -> list[Path]:
     """Total training loss against epoch, log scale, one curve per model.
@@ -461,13 +472,7 @@ def plot_loss_curves(stem: str | Path, histories: Mapping[str, Any],
         if not tol > 0:
             raise ConfigError(f"tolerance must be positive, got {tolerance}")
         ax.axhline(tol, color="black", ls=":", lw=1.2, label=f"tolerance {tol:.0e}")
-    ax.set_yscale("log")
-    ax.set_xlabel("epoch")
-    ax.set_ylabel("total loss")
-    ax.set_xlim(left=0)
-    ax.grid(alpha=0.3, which="major")
-    ax.legend(fontsize="small")
-    ax.set_title(title or "Training loss")
+    _loss_axes(ax, "total loss", title or "Training loss")
     return _save(fig, stem)
 
 
@@ -718,13 +723,7 @@ def plot_target_loss_comparison(stem: str | Path, histories: Mapping[str, Any], 
                     ls="none", zorder=6)
             ax.axvline(met, color=style["color"], lw=0.8, ls=":", alpha=0.7, zorder=0)
     ax.axhline(tol, color="black", ls="--", lw=1.2, label=f"tolerance {tol:.0e}", zorder=3)
-    ax.set_yscale("log")
-    ax.set_xlabel("epoch")
-    ax.set_ylabel("target-task loss")
-    ax.set_xlim(left=0)
-    ax.grid(alpha=0.3, which="major")
-    ax.legend(fontsize="small")
-    ax.set_title(title)
+    _loss_axes(ax, "target-task loss", title)
     return _save(fig, stem)
 
 

@@ -396,33 +396,29 @@ def format_number(v: Any) -> str:
     return f"{mant}e{int(exp)}"
 
 
-def format_percent(v: Any) -> str:
-    """``63.32%`` (two decimals, signed when negative), ``n/a`` when missing."""
+def _finite_text(v: Any, render) -> str:
+    """``render(x)`` for a finite number, ``n/a`` for a missing or non-finite one."""
     x = _f(v)
     if x is None or not math.isfinite(x):
         return "n/a"
-    return f"{x:.2f}%"
+    return render(x)
+
+
+def format_percent(v: Any) -> str:
+    """``63.32%`` (two decimals, signed when negative), ``n/a`` when missing."""
+    return _finite_text(v, lambda x: f"{x:.2f}%")
 
 
 def _format_count(v: Any) -> str:
-    x = _f(v)
-    if x is None or not math.isfinite(x):
-        return "n/a"
-    return str(int(x)) if x == int(x) else f"{x:.1f}"
+    return _finite_text(v, lambda x: str(int(x)) if x == int(x) else f"{x:.1f}")
 
 
 def _format_param(v: Any) -> str:
-    x = _f(v)
-    if x is None or not math.isfinite(x):
-        return "n/a"
-    return f"{x:.4g}"
+    return _finite_text(v, lambda x: f"{x:.4g}")
 
 
 def _format_seconds(v: Any) -> str:
-    x = _f(v)
-    if x is None or not math.isfinite(x):
-        return "n/a"
-    return f"{x:.3g}" if x < 1000 else f"{x:.0f}"
+    return _finite_text(v, lambda x: f"{x:.3g}" if x < 1000 else f"{x:.0f}")
 
 
 def _latex_number(s: str) -> str:
