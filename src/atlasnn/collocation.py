@@ -39,3 +39,9 @@ def jittered(grid: jax.Array, key: jax.Array, sigma: float | jax.Array, t0: floa
     dt = (T - t0) / (grid.shape[0] - 1)
     noise = jax.random.normal(key, grid.shape, grid.dtype) * (dt * sigma)
     return reflect_into(grid + noise, t0, T)
+
+
+def with_release_fixed_point(t: jax.Array, t0: float, T: float) -> jax.Array:
+    """The authors' release's quirk: every epoch its third collocation time is set to t0 − 1
+    before the reflection, so one point always sits at t0 + 1 (when T − t0 ≥ 1)."""
+    return t.at[2].set(reflect_into(jnp.asarray(t0 - 1.0, t.dtype), t0, T))

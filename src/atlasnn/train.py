@@ -14,7 +14,20 @@ Which parameters are returned when the budget runs out (``best_rule``):
 - ``"release"`` (default, as in the authors' release): the lowest-loss parameters seen in the
   last 20% of the budget (epochs ≥ ``best_start_fraction`` × budget);
 - ``"lowest"``: the lowest-loss parameters seen in the whole run;
-- ``"last"``: the parameters after the final update.
+- ``"last"``: the parameters after the final update;
+- ``"release_exact"``: what the authors' release does, to the letter (SPEC §8 / docs/METHOD.md):
+  the parameters *after* the update of the epoch with the lowest loss (measured before that
+  update) among epochs e > ``best_start_fraction`` × budget, with a running threshold that starts
+  at 1 (if no loss in that window falls below 1, the initial parameters are returned); the
+  tolerance test is ``loss < tolerance`` (strict) and also returns the post-update parameters.
+
+Options that change what one epoch does (all off by default):
+
+- ``lr_schedule``: ``"constant"``, or ``"cosine"`` / ``"exponential"`` decay (Optax schedules) from
+  ``lr`` at epoch 0 to ``lr × lr_final_ratio`` at the end of the epoch budget;
+- ``causal_eps`` > 0: causal weighting of the per-point loss (:func:`atlasnn.loss.causal_physics_loss`);
+  the recorded loss, the tolerance and the best rule use the unweighted physics loss;
+- ``release_fixed_point``: one collocation time pinned at t0 + 1 every epoch, as in the release.
 
 Freezing γ uses Equinox partitioning: a frozen γ is not a trainable leaf at all, so it cannot
 change (bit-identical after training).
@@ -38,13 +51,14 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from atlasnn.collocation import check_interval, jittered, uniform_grid
+from atlasnn.collocation import check_interval, jittered, uniform_grid, with_release_fixed_point
 from atlasnn.errors import ConfigError
-from atlasnn.loss import physics_loss
+from atlasnn.loss import causal_physics_loss, physics_loss
 from atlasnn.model import TrialSolution
 from atlasnn.systems import HamiltonianSystem
 
-BEST_RULES = ("release", "lowest", "last")
+BEST_RULES = ("release", "lowest", "last", "release_exact")
+LR_SCHEDULES = ("constant", "cosine", "exponential")
 
 # One Adam transformation for every run; lr and betas live in its state (inject_hyperparams),
 # so runs with other hyperparameters reuse the same compiled step.
@@ -73,6 +87,10 @@ class TrainConfig:
     seed: int = 0
     chunk: int = 1000
     progress: bool = True
+    lr_schedule: str = "constant"
+    lr_final_ratio: float = 0.01
+    causal_eps: float = 0.0
+    release_fixed_point: bool = False
 
     def __post_init__(self) -> None:
         def bad(name, value, why):
@@ -110,6 +128,16 @@ class TrainConfig:
             bad("seed", self.seed, "must be an integer >= 0")
         if not is_int(self.chunk) or self.chunk < 1:
             bad("chunk", self.chunk, "must be an integer >= 1")
+        if self.lr_schedule not in LR_SCHEDULES:
+            bad("lr_schedule", self.lr_schedule, f"must be one of {list(LR_SCHEDULES)}")
+        if not is_num(self.lr_final_ratio) or not 0 < self.lr_final_ratio <= 1:
+            bad("lr_final_ratio", self.lr_final_ratio, "must be in (0, 1]")
+        if not is_num(self.causal_eps) or self.causal_eps < 0:
+            bad("causal_eps", self.causal_eps, "must be a finite number >= 0")
+        if not isinstance(self.release_fixed_point, bool):
+            bad("release_fixed_point", self.release_fixed_point, "must be true or false")
+        if self.release_fixed_point and self.n_points < 3:
+            bad("n_points", self.n_points, "must be >= 3 with release_fixed_point (it pins the third point)")
 
     def replace(self, **changes: Any) -> "TrainConfig":
         return dataclasses.replace(self, **changes)
@@ -228,11 +256,13 @@ def init_opt_state(params, cfg: TrainConfig, dtype):
     return _set_hyperparams(_ADAM.init(params), cfg, dtype)
 
 
-def _initial_track(params, dtype) -> dict[str, Any]:
+def _initial_track(params, dtype, threshold: float = math.inf) -> dict[str, Any]:
+    """The trainer's device-side bookkeeping; ``threshold`` is the best rule's starting loss
+    (∞, or 1 for ``release_exact``, whose ``best_params`` then start as the initial ones)."""
     inf = jnp.asarray(jnp.inf, dtype)
     return {
         "best_params": params,  # per best_rule
-        "best_loss": inf,
+        "best_loss": jnp.asarray(threshold, dtype),
         "best_epoch": jnp.asarray(-1, jnp.int32),
         "any_params": params,  # lowest finite loss over the whole run (divergence fallback)
         "any_loss": inf,
@@ -246,18 +276,60 @@ def _select(pred, a, b):
     return jax.tree_util.tree_map(lambda x, y: jnp.where(pred, x, y), a, b)
 
 
-def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, rule):
-    """Run the epochs in ``epochs`` (shape (chunk,)); a compiled unit (see ``_compiled_chunk``)."""
-    grid = settings["grid"]
+@dataclass(frozen=True)
+class _Mode:
+    """The parts of a config that change the compiled epoch (the rest are traced values)."""
+
+    rule: str  # "release" | "lowest" | "release_exact" ("last" trains as "lowest")
+    schedule: str
+    lr_final_ratio: float
+    causal: bool
+    fixed_point: bool
+
+    @classmethod
+    def of(cls, cfg: "TrainConfig") -> "_Mode":
+        rule = "lowest" if cfg.best_rule == "last" else cfg.best_rule
+        ratio = float(cfg.lr_final_ratio) if cfg.lr_schedule != "constant" else 1.0
+        return cls(rule, cfg.lr_schedule, ratio, cfg.causal_eps > 0, cfg.release_fixed_point)
+
+    def lr_factor(self, progress: jax.Array) -> jax.Array:
+        """lr(e)/lr for progress = e / budget in [0, 1] (an Optax schedule over unit time)."""
+        if self.schedule == "cosine":
+            return optax.cosine_decay_schedule(1.0, decay_steps=1, alpha=self.lr_final_ratio)(progress)
+        if self.schedule == "exponential":
+            return optax.exponential_decay(1.0, transition_steps=1, decay_rate=self.lr_final_ratio)(progress)
+        return jnp.ones_like(progress)
+
+
+def _collocation(settings, key, epoch, mode: _Mode):
     t0, T = settings["t0"], settings["T"]
+    t = jittered(settings["grid"], jax.random.fold_in(key, epoch), settings["sigma"], t0, T)
+    if mode.fixed_point:
+        t = with_release_fixed_point(t, t0, T)
+    return jnp.sort(t) if mode.causal else t
 
-    def loss_fn(p, t):
+
+def _objective(mode: _Mode, settings, rest, system):
+    """p, t ↦ (objective, (physics loss, residual term, energy penalty))."""
+
+    def fn(p, t):
         model = eqx.combine(p, rest)
-        return physics_loss(model, system, t, settings["energy0"], settings["lam_reg"])
+        if mode.causal:
+            dt = (settings["T"] - settings["t0"]) / (settings["grid"].shape[0] - 1)
+            return causal_physics_loss(model, system, t, settings["energy0"], settings["lam_reg"],
+                                       settings["causal_eps"], dt)
+        loss, (res, en) = physics_loss(model, system, t, settings["energy0"], settings["lam_reg"])
+        return loss, (loss, res, en)
 
-    grad_fn = jax.value_and_grad(loss_fn, has_aux=True)
+    return fn
+
+
+def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, mode: _Mode):
+    """Run the epochs in ``epochs`` (shape (chunk,)); a compiled unit (see ``_compiled_chunk``)."""
+    grad_fn = jax.value_and_grad(_objective(mode, settings, rest, system), has_aux=True)
     n_gamma = eqx.combine(params, rest).scaling.gamma_array().shape[0]
-    dtype = grid.dtype
+    dtype = settings["grid"].dtype
+    exact = mode.rule == "release_exact"
 
     def skipped(carry, epoch):
         nan = jnp.asarray(jnp.nan, dtype)
@@ -265,30 +337,37 @@ def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, ru
 
     def one_epoch(carry, epoch):
         p, o, tr = carry
-        t = jittered(grid, jax.random.fold_in(key, epoch), settings["sigma"], t0, T)
-        (loss, (res, en)), grads = grad_fn(p, t)
+        t = _collocation(settings, key, epoch, mode)
+        (_, (loss, res, en)), grads = grad_fn(p, t)
         gamma = eqx.combine(p, rest).scaling.gamma_array()
+        if mode.schedule != "constant":
+            progress = epoch.astype(dtype) / settings["budget"].astype(dtype)
+            hp = dict(o.hyperparams)
+            hp["learning_rate"] = settings["lr"] * mode.lr_factor(progress).astype(dtype)
+            o = o._replace(hyperparams=hp)
+        updates, o_new = _ADAM.update(grads, o, p)
+        p_new = eqx.apply_updates(p, updates)
         finite = jnp.isfinite(loss)
-        # bookkeeping on the parameters that produced this loss (before the update)
+        # bookkeeping: the loss was measured on p (before this epoch's update)
         better_any = finite & (loss < tr["any_loss"])
-        eligible = epoch >= settings["best_start"] if rule == "release" else True
+        eligible = epoch >= settings["best_start"] if mode.rule in ("release", "release_exact") else True
         better = finite & eligible & (loss < tr["best_loss"])
         tr = dict(tr)
         tr["any_params"] = _select(better_any, p, tr["any_params"])
         tr["any_loss"] = jnp.where(better_any, loss, tr["any_loss"])
         tr["any_epoch"] = jnp.where(better_any, epoch, tr["any_epoch"])
-        tr["best_params"] = _select(better, p, tr["best_params"])
+        tr["best_params"] = _select(better, p_new if exact else p, tr["best_params"])
         tr["best_loss"] = jnp.where(better, loss, tr["best_loss"])
         tr["best_epoch"] = jnp.where(better, epoch, tr["best_epoch"])
-        met = finite & (loss <= settings["tolerance"])
+        met = finite & ((loss < settings["tolerance"]) if exact else (loss <= settings["tolerance"]))
         stop = jnp.where(~finite, 2, jnp.where(met, 1, 0)).astype(jnp.int32)
         tr["stop"] = stop
         tr["stop_epoch"] = jnp.where(stop > 0, epoch, tr["stop_epoch"])
-        updates, o_new = _ADAM.update(grads, o, p)
-        p_new = eqx.apply_updates(p, updates)
-        # on a stop the parameters that produced the stopping loss stay as they are
-        p = _select(stop > 0, p, p_new)
-        o = _select(stop > 0, o, o_new)
+        # on a stop the parameters that produced the stopping loss stay as they are (the release
+        # rule keeps the update of a tolerance stop)
+        hold = (stop == 2) if exact else (stop > 0)
+        p = _select(hold, p, p_new)
+        o = _select(hold, o, o_new)
         return (p, o, tr), (loss, res, en, gamma)
 
     def body(carry, epoch):
@@ -304,16 +383,16 @@ def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, ru
 _CHUNK_CACHE: dict[Any, Any] = {}
 
 
-def _compiled_chunk(args: tuple, system: HamiltonianSystem, rule: str):
-    """Compile ``_run_chunk`` once per (system, rule, argument structure and shapes)."""
+def _compiled_chunk(args: tuple, system: HamiltonianSystem, mode: _Mode):
+    """Compile ``_run_chunk`` once per (system, mode, argument structure and shapes)."""
     leaves, treedef = jax.tree_util.tree_flatten(args)
     sig = tuple((tuple(x.shape), str(x.dtype)) for x in leaves)
-    key = (id(system), rule, treedef, sig, jax.config.read("jax_enable_x64"))
+    key = (id(system), mode, treedef, sig, jax.config.read("jax_enable_x64"))
     hit = _CHUNK_CACHE.get(key)
     if hit is not None and hit[0] is system:
         return hit[1], 0.0
     start = time.perf_counter()
-    fn = jax.jit(lambda *a: _run_chunk(*a, system=system, rule=rule))
+    fn = jax.jit(lambda *a: _run_chunk(*a, system=system, mode=mode))
     compiled = fn.lower(*args).compile()
     elapsed = time.perf_counter() - start
     _CHUNK_CACHE[key] = (system, compiled)
@@ -328,6 +407,29 @@ def _progress_bar(enabled: bool, total: int, initial: int, desc: str):
     return tqdm(total=total, initial=initial, desc=desc, unit="ep", dynamic_ncols=True, leave=True)
 
 
+def _settings(cfg: TrainConfig, model: TrialSolution, system: HamiltonianSystem, T: float,
+              energy0: float | None, dtype) -> dict[str, jax.Array]:
+    """The traced values of a run (a second run with other values reuses the compiled step)."""
+    t0 = float(model.t0)
+    tol = cfg.tolerance if cfg.tolerance is not None else -1.0
+    start = math.floor(cfg.best_start_fraction * cfg.epochs)
+    if cfg.best_rule == "release_exact":  # the release's test is epoch > fraction × budget
+        start += 1
+    return {
+        "grid": uniform_grid(t0, T, cfg.n_points, dtype),
+        "t0": jnp.asarray(t0, dtype),
+        "T": jnp.asarray(T, dtype),
+        "sigma": jnp.asarray(cfg.sigma, dtype),
+        "energy0": jnp.asarray(system.energy(model.z0) if energy0 is None else energy0, dtype),
+        "lam_reg": jnp.asarray(cfg.lam_reg, dtype),
+        "tolerance": jnp.asarray(tol, dtype),
+        "budget": jnp.asarray(cfg.epochs, jnp.int32),
+        "best_start": jnp.asarray(int(start), jnp.int32),
+        "lr": jnp.asarray(cfg.lr, dtype),
+        "causal_eps": jnp.asarray(cfg.causal_eps, dtype),
+    }
+
+
 # ------------------------------------------------------------------------------ train
 def train(
     model: TrialSolution,
@@ -339,6 +441,7 @@ def train(
     resume: TrainState | None = None,
     desc: str = "train",
     on_chunk: Callable[[TrainState], None] | None = None,
+    energy0: float | None = None,
 ) -> TrainResult:
     """Train ``model`` on [model.t0, T] and return a :class:`TrainResult`.
 
@@ -352,6 +455,8 @@ def train(
         resume: a :class:`TrainState` from an earlier, interrupted run of the same config.
         desc: label of the progress bar.
         on_chunk: called with the current :class:`TrainState` after every chunk (checkpointing).
+        energy0: the energy E0 of the penalty term; default H(model.z0). Time-marching passes the
+            energy of the problem's initial state, so that window after window is held to it.
 
     Ctrl-C between epochs stops the run cleanly: the result has ``stop_reason="interrupted"``
     and a ``state`` to resume from.
@@ -383,25 +488,14 @@ def train(
                     raise ValueError
             except (AttributeError, ValueError, IndexError, TypeError):
                 raise ConfigError("opt_state does not match the trainable parameters of this model") from None
-        track = _initial_track(params, dtype)
+        track = _initial_track(params, dtype, 1.0 if cfg.best_rule == "release_exact" else math.inf)
         start_epoch, history = 0, History.empty(gamma_names)
 
-    tol = cfg.tolerance if cfg.tolerance is not None else -1.0
-    settings = {
-        "grid": uniform_grid(t0, float(T), cfg.n_points, dtype),
-        "t0": jnp.asarray(t0, dtype),
-        "T": jnp.asarray(float(T), dtype),
-        "sigma": jnp.asarray(cfg.sigma, dtype),
-        "energy0": jnp.asarray(system.energy(model.z0), dtype),
-        "lam_reg": jnp.asarray(cfg.lam_reg, dtype),
-        "tolerance": jnp.asarray(tol, dtype),
-        "budget": jnp.asarray(cfg.epochs, jnp.int32),
-        "best_start": jnp.asarray(int(math.floor(cfg.best_start_fraction * cfg.epochs)), jnp.int32),
-    }
+    mode = _Mode.of(cfg)
+    settings = _settings(cfg, model, system, float(T), energy0, dtype)
     key = jax.random.PRNGKey(cfg.seed)
-    rule = "release" if cfg.best_rule == "release" else "lowest"
     epochs0 = jnp.arange(cfg.chunk, dtype=jnp.int32)
-    compiled, compile_time = _compiled_chunk((params, rest, opt_state, track, epochs0, settings, key), system, rule)
+    compiled, compile_time = _compiled_chunk((params, rest, opt_state, track, epochs0, settings, key), system, mode)
 
     bar = _progress_bar(cfg.progress, cfg.epochs, start_epoch, desc)
     epoch = start_epoch
@@ -448,7 +542,9 @@ def train(
         best_epoch = int(track["any_epoch"])
     else:
         reason = "budget"
-        if cfg.best_rule == "last" or int(track["best_epoch"]) < 0:
+        if cfg.best_rule == "release_exact":  # the initial parameters when no loss fell below 1
+            chosen, best_epoch = eqx.combine(track["best_params"], rest), int(track["best_epoch"])
+        elif cfg.best_rule == "last" or int(track["best_epoch"]) < 0:
             chosen, best_epoch = final_model, -1
         else:
             chosen, best_epoch = eqx.combine(track["best_params"], rest), int(track["best_epoch"])
