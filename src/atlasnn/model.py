@@ -93,6 +93,20 @@ def _sin_cos_xla(x: jax.Array) -> tuple[jax.Array, jax.Array]:
     return jnp.sin(x), jnp.cos(x)
 
 
+@jax.custom_batching.custom_vmap
+def _sin_cos_f32(x: jax.Array) -> tuple[jax.Array, jax.Array]:
+    fast = jnp.max(jnp.abs(x), initial=0.0) <= SINCOS_FAST_LIMIT
+    return jax.lax.cond(fast, _sin_cos_poly, _sin_cos_xla, x)
+
+
+@_sin_cos_f32.def_vmap
+def _sin_cos_f32_batched(axis_size, in_batched, x):
+    # Elementwise, so a batch (e.g. of seeds trained together) is one array: one test of the
+    # range for the whole batch keeps a single branch, where plain vmap would turn the cond into
+    # a select and evaluate both branches.
+    return _sin_cos_f32(x), (in_batched[0], in_batched[0])
+
+
 @jax.custom_jvp
 def sin_cos(x: jax.Array) -> tuple[jax.Array, jax.Array]:
     """(sin x, cos x) elementwise, differentiable to any order (d sin = cos, d cos = −sin).
@@ -101,14 +115,13 @@ def sin_cos(x: jax.Array) -> tuple[jax.Array, jax.Array]:
     minimax polynomials: absolute error ≤ 5e-8 (XLA's: 3.3e-8), at most 0.8 ulp for |x| ≤ 100
     (XLA's: 0.56), mean 0.25 ulp like XLA's; near the zeros of sin/cos at |x| ≳ 1000 the error in
     ulps of the (tiny) result grows, the absolute error does not. Otherwise (a larger argument
-    anywhere in x, NaN, float64) ``jnp.sin`` and ``jnp.cos``; under ``vmap`` both paths are
-    evaluated (the branch becomes a select).
+    anywhere in x, NaN, float64) ``jnp.sin`` and ``jnp.cos``; under ``vmap`` the range test covers
+    the whole batch.
     """
     x = jnp.asarray(x)
     if x.dtype != jnp.float32:
         return _sin_cos_xla(x)
-    fast = jnp.max(jnp.abs(x), initial=0.0) <= SINCOS_FAST_LIMIT
-    return jax.lax.cond(fast, _sin_cos_poly, _sin_cos_xla, x)
+    return _sin_cos_f32(x)
 
 
 @sin_cos.defjvp

@@ -43,27 +43,32 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 
-from atlasnn.collocation import check_interval, jittered, uniform_grid, with_release_fixed_point
+from atlasnn.collocation import check_interval
 from atlasnn.errors import ConfigError
-from atlasnn.loss import causal_physics_loss, physics_loss
 from atlasnn.model import TrialSolution
 from atlasnn.systems import HamiltonianSystem
+from atlasnn.train_step import (  # noqa: F401  (trainable_filter, init_opt_state: public here too)
+    _ADAM,
+    Mode,
+    compiled_chunk,
+    init_opt_state,
+    initial_track,
+    run_settings,
+    set_hyperparams,
+    trainable_filter,
+)
+
+_initial_track = initial_track  # the name checkpoint.load_state and older code use
 
 BEST_RULES = ("release", "lowest", "last", "release_exact")
 LR_SCHEDULES = ("constant", "cosine", "exponential")
-
-# One Adam transformation for every run; lr and betas live in its state (inject_hyperparams),
-# so runs with other hyperparameters reuse the same compiled step.
-_ADAM = optax.inject_hyperparams(optax.adam)(learning_rate=1e-3, b1=0.9, b2=0.999, eps=1e-8)
-
 
 @dataclass(frozen=True)
 class TrainConfig:
@@ -231,174 +236,6 @@ class TrainResult:
         return self.epochs_run / self.wall_time if self.wall_time > 0 else float("nan")
 
 
-# --------------------------------------------------------------------------- helpers
-def trainable_filter(model: TrialSolution, freeze_gamma: bool) -> TrialSolution:
-    """A bool tree: network weights always trainable, γ unless frozen, z0 never."""
-    spec = jax.tree_util.tree_map(lambda _: False, model)
-    spec = eqx.tree_at(lambda m: m.net, spec, jax.tree_util.tree_map(eqx.is_inexact_array, model.net))
-    if not freeze_gamma:
-        spec = eqx.tree_at(
-            lambda m: m.scaling, spec, jax.tree_util.tree_map(eqx.is_inexact_array, model.scaling)
-        )
-    return spec
-
-
-def _set_hyperparams(opt_state, cfg: TrainConfig, dtype):
-    hp = dict(opt_state.hyperparams)
-    hp["learning_rate"] = jnp.asarray(cfg.lr, dtype)
-    hp["b1"] = jnp.asarray(cfg.betas[0], dtype)
-    hp["b2"] = jnp.asarray(cfg.betas[1], dtype)
-    return opt_state._replace(hyperparams=hp)
-
-
-def init_opt_state(params, cfg: TrainConfig, dtype):
-    """Adam's state for ``params`` with the config's lr and betas."""
-    return _set_hyperparams(_ADAM.init(params), cfg, dtype)
-
-
-def _initial_track(params, dtype, threshold: float = math.inf) -> dict[str, Any]:
-    """The trainer's device-side bookkeeping; ``threshold`` is the best rule's starting loss
-    (∞, or 1 for ``release_exact``, whose ``best_params`` then start as the initial ones)."""
-    inf = jnp.asarray(jnp.inf, dtype)
-    return {
-        "best_params": params,  # per best_rule
-        "best_loss": jnp.asarray(threshold, dtype),
-        "best_epoch": jnp.asarray(-1, jnp.int32),
-        "any_params": params,  # lowest finite loss over the whole run (divergence fallback)
-        "any_loss": inf,
-        "any_epoch": jnp.asarray(-1, jnp.int32),
-        "stop": jnp.asarray(0, jnp.int32),  # 0 running, 1 tolerance met, 2 diverged
-        "stop_epoch": jnp.asarray(-1, jnp.int32),
-    }
-
-
-def _select(pred, a, b):
-    return jax.tree_util.tree_map(lambda x, y: jnp.where(pred, x, y), a, b)
-
-
-@dataclass(frozen=True)
-class _Mode:
-    """The parts of a config that change the compiled epoch (the rest are traced values)."""
-
-    rule: str  # "release" | "lowest" | "release_exact" ("last" trains as "lowest")
-    schedule: str
-    lr_final_ratio: float
-    causal: bool
-    fixed_point: bool
-
-    @classmethod
-    def of(cls, cfg: "TrainConfig") -> "_Mode":
-        rule = "lowest" if cfg.best_rule == "last" else cfg.best_rule
-        ratio = float(cfg.lr_final_ratio) if cfg.lr_schedule != "constant" else 1.0
-        return cls(rule, cfg.lr_schedule, ratio, cfg.causal_eps > 0, cfg.release_fixed_point)
-
-    def lr_factor(self, progress: jax.Array) -> jax.Array:
-        """lr(e)/lr for progress = e / budget in [0, 1] (an Optax schedule over unit time)."""
-        if self.schedule == "cosine":
-            return optax.cosine_decay_schedule(1.0, decay_steps=1, alpha=self.lr_final_ratio)(progress)
-        if self.schedule == "exponential":
-            return optax.exponential_decay(1.0, transition_steps=1, decay_rate=self.lr_final_ratio)(progress)
-        return jnp.ones_like(progress)
-
-
-def _collocation(settings, key, epoch, mode: _Mode):
-    t0, T = settings["t0"], settings["T"]
-    t = jittered(settings["grid"], jax.random.fold_in(key, epoch), settings["sigma"], t0, T)
-    if mode.fixed_point:
-        t = with_release_fixed_point(t, t0, T)
-    return jnp.sort(t) if mode.causal else t
-
-
-def _objective(mode: _Mode, settings, rest, system):
-    """p, t ↦ (objective, (physics loss, residual term, energy penalty))."""
-
-    def fn(p, t):
-        model = eqx.combine(p, rest)
-        if mode.causal:
-            dt = (settings["T"] - settings["t0"]) / (settings["grid"].shape[0] - 1)
-            return causal_physics_loss(model, system, t, settings["energy0"], settings["lam_reg"],
-                                       settings["causal_eps"], dt)
-        loss, (res, en) = physics_loss(model, system, t, settings["energy0"], settings["lam_reg"])
-        return loss, (loss, res, en)
-
-    return fn
-
-
-def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, mode: _Mode):
-    """Run the epochs in ``epochs`` (shape (chunk,)); a compiled unit (see ``_compiled_chunk``)."""
-    grad_fn = jax.value_and_grad(_objective(mode, settings, rest, system), has_aux=True)
-    n_gamma = eqx.combine(params, rest).scaling.gamma_array().shape[0]
-    dtype = settings["grid"].dtype
-    exact = mode.rule == "release_exact"
-
-    def skipped(carry, epoch):
-        nan = jnp.asarray(jnp.nan, dtype)
-        return carry, (nan, nan, nan, jnp.full((n_gamma,), jnp.nan, dtype))
-
-    def one_epoch(carry, epoch):
-        p, o, tr = carry
-        t = _collocation(settings, key, epoch, mode)
-        (_, (loss, res, en)), grads = grad_fn(p, t)
-        gamma = eqx.combine(p, rest).scaling.gamma_array()
-        if mode.schedule != "constant":
-            progress = epoch.astype(dtype) / settings["budget"].astype(dtype)
-            hp = dict(o.hyperparams)
-            hp["learning_rate"] = settings["lr"] * mode.lr_factor(progress).astype(dtype)
-            o = o._replace(hyperparams=hp)
-        updates, o_new = _ADAM.update(grads, o, p)
-        p_new = eqx.apply_updates(p, updates)
-        finite = jnp.isfinite(loss)
-        # bookkeeping: the loss was measured on p (before this epoch's update)
-        better_any = finite & (loss < tr["any_loss"])
-        eligible = epoch >= settings["best_start"] if mode.rule in ("release", "release_exact") else True
-        better = finite & eligible & (loss < tr["best_loss"])
-        tr = dict(tr)
-        tr["any_params"] = _select(better_any, p, tr["any_params"])
-        tr["any_loss"] = jnp.where(better_any, loss, tr["any_loss"])
-        tr["any_epoch"] = jnp.where(better_any, epoch, tr["any_epoch"])
-        tr["best_params"] = _select(better, p_new if exact else p, tr["best_params"])
-        tr["best_loss"] = jnp.where(better, loss, tr["best_loss"])
-        tr["best_epoch"] = jnp.where(better, epoch, tr["best_epoch"])
-        met = finite & ((loss < settings["tolerance"]) if exact else (loss <= settings["tolerance"]))
-        stop = jnp.where(~finite, 2, jnp.where(met, 1, 0)).astype(jnp.int32)
-        tr["stop"] = stop
-        tr["stop_epoch"] = jnp.where(stop > 0, epoch, tr["stop_epoch"])
-        # on a stop the parameters that produced the stopping loss stay as they are (the release
-        # rule keeps the update of a tolerance stop)
-        hold = (stop == 2) if exact else (stop > 0)
-        p = _select(hold, p, p_new)
-        o = _select(hold, o, o_new)
-        return (p, o, tr), (loss, res, en, gamma)
-
-    def body(carry, epoch):
-        running = (carry[2]["stop"] == 0) & (epoch < settings["budget"])
-        return jax.lax.cond(running, one_epoch, skipped, carry, epoch)
-
-    (params, opt_state, track), (loss, res, en, gamma) = jax.lax.scan(
-        body, (params, opt_state, track), epochs
-    )
-    return params, opt_state, track, {"loss": loss, "residual": res, "energy": en, "gamma": gamma}
-
-
-_CHUNK_CACHE: dict[Any, Any] = {}
-
-
-def _compiled_chunk(args: tuple, system: HamiltonianSystem, mode: _Mode):
-    """Compile ``_run_chunk`` once per (system, mode, argument structure and shapes)."""
-    leaves, treedef = jax.tree_util.tree_flatten(args)
-    sig = tuple((tuple(x.shape), str(x.dtype)) for x in leaves)
-    key = (id(system), mode, treedef, sig, jax.config.read("jax_enable_x64"))
-    hit = _CHUNK_CACHE.get(key)
-    if hit is not None and hit[0] is system:
-        return hit[1], 0.0
-    start = time.perf_counter()
-    fn = jax.jit(lambda *a: _run_chunk(*a, system=system, mode=mode))
-    compiled = fn.lower(*args).compile()
-    elapsed = time.perf_counter() - start
-    _CHUNK_CACHE[key] = (system, compiled)
-    return compiled, elapsed
-
-
 def _progress_bar(enabled: bool, total: int, initial: int, desc: str):
     if not enabled:
         return None
@@ -407,27 +244,133 @@ def _progress_bar(enabled: bool, total: int, initial: int, desc: str):
     return tqdm(total=total, initial=initial, desc=desc, unit="ep", dynamic_ncols=True, leave=True)
 
 
-def _settings(cfg: TrainConfig, model: TrialSolution, system: HamiltonianSystem, T: float,
-              energy0: float | None, dtype) -> dict[str, jax.Array]:
-    """The traced values of a run (a second run with other values reuses the compiled step)."""
-    t0 = float(model.t0)
-    tol = cfg.tolerance if cfg.tolerance is not None else -1.0
-    start = math.floor(cfg.best_start_fraction * cfg.epochs)
-    if cfg.best_rule == "release_exact":  # the release's test is epoch > fraction × budget
-        start += 1
-    return {
-        "grid": uniform_grid(t0, T, cfg.n_points, dtype),
-        "t0": jnp.asarray(t0, dtype),
-        "T": jnp.asarray(T, dtype),
-        "sigma": jnp.asarray(cfg.sigma, dtype),
-        "energy0": jnp.asarray(system.energy(model.z0) if energy0 is None else energy0, dtype),
-        "lam_reg": jnp.asarray(cfg.lam_reg, dtype),
-        "tolerance": jnp.asarray(tol, dtype),
-        "budget": jnp.asarray(cfg.epochs, jnp.int32),
-        "best_start": jnp.asarray(int(start), jnp.int32),
-        "lr": jnp.asarray(cfg.lr, dtype),
-        "causal_eps": jnp.asarray(cfg.causal_eps, dtype),
-    }
+def _stack(trees: Sequence[Any]) -> Any:
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *trees)
+
+
+def _unstack(tree: Any, i: int) -> Any:
+    return jax.tree_util.tree_map(lambda x: x[i], tree)
+
+
+@dataclass
+class _Run:
+    """Host-side state of one run of a batch (parameters live in the stacked device arrays)."""
+
+    cfg: TrainConfig
+    T: float
+    history: History
+    epoch: int  # the next epoch to run
+    active: bool
+
+
+def _start(model, system, T, cfg, opt_state, resume, energy0, index):
+    """(params, rest, opt_state, track, settings, key, _Run) of one run, checked."""
+    check_interval(float(model.t0), float(T), cfg.n_points)
+    if model.state_dim != system.state_dim:
+        raise ConfigError(
+            f"model state dimension {model.state_dim} does not match system {system.name!r} "
+            f"(2d = {system.state_dim})"
+        )
+    dtype = model.z0.dtype
+    if resume is not None:
+        model = resume.model
+    params, rest = eqx.partition(model, trainable_filter(model, cfg.freeze_gamma))
+    if resume is not None:
+        opt_state, track, epoch, history = resume.opt_state, resume.track, resume.epoch, resume.history
+    else:
+        if opt_state is None:
+            opt_state = init_opt_state(params, cfg, dtype)
+        else:
+            try:
+                opt_state = set_hyperparams(opt_state, cfg, dtype)
+                if jax.tree_util.tree_structure(opt_state.inner_state[0].mu) != jax.tree_util.tree_structure(params):
+                    raise ValueError
+            except (AttributeError, ValueError, IndexError, TypeError):
+                where = "" if index is None else f" (run {index} of the batch)"
+                raise ConfigError(f"opt_state does not match the trainable parameters of this model{where}") from None
+        track = initial_track(params, dtype, 1.0 if cfg.best_rule == "release_exact" else math.inf)
+        epoch, history = 0, History.empty(tuple(model.scaling.gamma_names))
+    settings = run_settings(cfg, model, system, float(T), energy0, dtype)
+    active = epoch < cfg.epochs and int(track["stop"]) == 0
+    run = _Run(cfg, float(T), history, epoch, active)
+    return params, rest, opt_state, track, settings, jax.random.PRNGKey(cfg.seed), run
+
+
+def _check_batch(runs: list[_Run], rests: list[Any]) -> None:
+    """Runs trained as one program must agree on what is compiled and on the host loop."""
+    first = runs[0].cfg
+    for i, r in enumerate(runs[1:], 1):
+        for name in ("n_points", "chunk", "freeze_gamma"):
+            if getattr(r.cfg, name) != getattr(first, name):
+                raise ConfigError(f"runs trained as one batch must share train.{name}: run {i} has "
+                                  f"{getattr(r.cfg, name)!r}, run 0 has {getattr(first, name)!r}")
+        if Mode.of(r.cfg) != Mode.of(first):
+            raise ConfigError(f"runs trained as one batch must share best_rule, lr_schedule, lr_final_ratio, "
+                              f"causal weighting and release_fixed_point (run {i} differs from run 0)")
+    shapes = [jax.tree_util.tree_structure(x) for x in rests]
+    if any(s != shapes[0] for s in shapes[1:]):
+        raise ConfigError("models trained as one batch must have the same architecture, scaling and t0")
+    running = {r.epoch for r in runs if r.active}
+    if len(running) > 1:
+        raise ConfigError(f"resumed runs of one batch are at different epochs {sorted(running)}; resume them separately")
+
+
+def _result(run: _Run, params, rest, opt_state, track, interrupted: bool, wall: float,
+            compile_time: float, t0: float, batch: int) -> TrainResult:
+    """The TrainResult of one run from its final device state (see the module docstring)."""
+    cfg = run.cfg
+    stop = int(track["stop"])
+    final_model = eqx.combine(params, rest)
+    state = TrainState(final_model, opt_state, track, run.epoch, run.history)
+    diverged_epoch = None
+    if interrupted and run.active:
+        reason, chosen, best_epoch = "interrupted", final_model, -1
+    elif stop == 1:
+        reason, chosen, best_epoch = "tolerance", final_model, int(track["stop_epoch"])
+    elif stop == 2:
+        reason, diverged_epoch = "diverged", int(track["stop_epoch"])
+        chosen, best_epoch = eqx.combine(track["any_params"], rest), int(track["any_epoch"])
+    else:
+        reason = "budget"
+        if cfg.best_rule == "release_exact":  # the initial parameters when no loss fell below 1
+            chosen, best_epoch = eqx.combine(track["best_params"], rest), int(track["best_epoch"])
+        elif cfg.best_rule == "last" or int(track["best_epoch"]) < 0:
+            chosen, best_epoch = final_model, -1
+        else:
+            chosen, best_epoch = eqx.combine(track["best_params"], rest), int(track["best_epoch"])
+    info = {"batch_size": batch, "batch_wall_time": wall} if batch > 1 else {}
+    return TrainResult(
+        model=chosen, history=run.history, epochs_run=run.epoch, tolerance_met=stop == 1,
+        stop_reason=reason, best_epoch=best_epoch, wall_time=wall / batch, compile_time=compile_time,
+        config=cfg, interval=(t0, run.T), state=state, diverged_epoch=diverged_epoch, info=info,
+    )
+
+
+def _advance(runs: list[_Run], hist: dict, track: dict, epoch: int, batched: bool) -> int:
+    """Append one chunk's history to every run still active; returns the epochs advanced."""
+    stops, stop_epochs = np.atleast_1d(jax.device_get(track["stop"])), np.atleast_1d(jax.device_get(track["stop_epoch"]))
+    advanced = 0
+    for i, run in enumerate(runs):
+        if not run.active:
+            continue
+        n = min(run.cfg.chunk, run.cfg.epochs - epoch)
+        if stops[i]:
+            n = int(stop_epochs[i]) - epoch + 1
+        run.history = run.history.extend(_unstack(hist, i) if batched else hist, n)
+        run.epoch = epoch + n
+        run.active = run.epoch < run.cfg.epochs and not stops[i]
+        advanced = max(advanced, n)
+    return advanced
+
+
+def _postfix(runs: list[_Run]) -> dict[str, str]:
+    if len(runs) == 1:
+        h = runs[0].history
+        post = {"loss": f"{h.loss[-1]:.3e}"}
+        post.update({g: f"{h.gamma[-1, i]:.4f}" for i, g in enumerate(h.gamma_names)})
+        return post
+    last = [r.history.loss[-1] for r in runs if len(r.history)]
+    return {"loss": f"{np.nanmedian(last):.3e} (median)", "running": f"{sum(r.active for r in runs)}/{len(runs)}"}
 
 
 # ------------------------------------------------------------------------------ train
@@ -461,104 +404,90 @@ def train(
     Ctrl-C between epochs stops the run cleanly: the result has ``stop_reason="interrupted"``
     and a ``state`` to resume from.
     """
-    cfg = config
-    t0 = float(model.t0)
-    check_interval(t0, float(T), cfg.n_points)
-    if model.state_dim != system.state_dim:
-        raise ConfigError(
-            f"model state dimension {model.state_dim} does not match system {system.name!r} "
-            f"(2d = {system.state_dim})"
-        )
-    dtype = model.z0.dtype
-    gamma_names = tuple(model.scaling.gamma_names)
+    callback = None if on_chunk is None else (lambda states: on_chunk(states[0]))
+    return train_batch([model], system, T, [config], opt_states=[opt_state], resumes=[resume],
+                       desc=desc, on_chunk=callback, energy0=energy0)[0]
 
-    if resume is not None:
-        model = resume.model
-    spec = trainable_filter(model, cfg.freeze_gamma)
-    params, rest = eqx.partition(model, spec)
-    if resume is not None:
-        opt_state, track, start_epoch, history = resume.opt_state, resume.track, resume.epoch, resume.history
-    else:
-        if opt_state is None:
-            opt_state = init_opt_state(params, cfg, dtype)
-        else:
-            try:
-                opt_state = _set_hyperparams(opt_state, cfg, dtype)
-                if jax.tree_util.tree_structure(opt_state.inner_state[0].mu) != jax.tree_util.tree_structure(params):
-                    raise ValueError
-            except (AttributeError, ValueError, IndexError, TypeError):
-                raise ConfigError("opt_state does not match the trainable parameters of this model") from None
-        track = _initial_track(params, dtype, 1.0 if cfg.best_rule == "release_exact" else math.inf)
-        start_epoch, history = 0, History.empty(gamma_names)
 
-    mode = _Mode.of(cfg)
-    settings = _settings(cfg, model, system, float(T), energy0, dtype)
-    key = jax.random.PRNGKey(cfg.seed)
-    epochs0 = jnp.arange(cfg.chunk, dtype=jnp.int32)
-    compiled, compile_time = _compiled_chunk((params, rest, opt_state, track, epochs0, settings, key), system, mode)
+def train_batch(
+    models: Sequence[TrialSolution],
+    system: HamiltonianSystem,
+    T: float | Sequence[float],
+    configs: Sequence[TrainConfig],
+    *,
+    opt_states: Sequence[Any] | None = None,
+    resumes: Sequence[TrainState | None] | None = None,
+    desc: str = "train",
+    on_chunk: Callable[[list[TrainState]], None] | None = None,
+    energy0: float | Sequence[float | None] | None = None,
+) -> list[TrainResult]:
+    """Train S models as ONE compiled program (``jax.vmap`` over a leading batch axis).
 
-    bar = _progress_bar(cfg.progress, cfg.epochs, start_epoch, desc)
-    epoch = start_epoch
+    Typically the S models are S seeds of one config (``configs[i] = cfg.replace(seed=i)``), but
+    any runs that share the compiled program can be batched: same architecture, scaling and t0,
+    the same ``n_points``, ``chunk``, ``freeze_gamma`` and :class:`~atlasnn.train_step.Mode`
+    (best rule, schedule, causal weighting, fixed point); epochs, lr, betas, tolerance, jitter,
+    λ_reg, seed, the interval end T, z0 and E0 may differ per run. Every run stops, keeps its
+    best parameters and diverges on its own, exactly as :func:`train` would do it alone (the
+    batched arithmetic may differ from a lone run in the last bits). ``T``, ``energy0``,
+    ``opt_states`` and ``resumes`` are one value for all or one per run. ``on_chunk`` receives
+    the list of current :class:`TrainState` after every chunk. A result's ``wall_time`` is its
+    share of the batch's (batch wall time / S; ``info["batch_wall_time"]`` has the whole).
+    """
+    n = len(models)
+    if n < 1 or len(configs) != n:
+        raise ConfigError(f"train_batch needs one config per model, got {n} models and {len(configs)} configs")
+
+    def per_run(value, what):
+        if isinstance(value, (list, tuple)):
+            if len(value) != n:
+                raise ConfigError(f"train_batch: {what} has {len(value)} entries for {n} models")
+            return list(value)
+        return [value] * n
+
+    Ts, e0s = per_run(T, "T"), per_run(energy0, "energy0")
+    opts, resumes_ = per_run(opt_states, "opt_states"), per_run(resumes, "resumes")
+    parts = [_start(m, system, t, c, o, r, e, i if n > 1 else None)
+             for i, (m, t, c, o, r, e) in enumerate(zip(models, Ts, configs, opts, resumes_, e0s))]
+    params, rests, opt_state, track, settings, keys, runs = (list(x) for x in zip(*parts))
+    _check_batch(runs, rests)
+    batched = n > 1
+    args = [params, rests, opt_state, track, settings, keys]
+    params, rest, opt_state, track, settings, key = (_stack(a) if batched else a[0] for a in args)
+    cfg0 = runs[0].cfg
+    epoch = max((r.epoch for r in runs if r.active), default=max(r.epoch for r in runs))
+    epochs0 = jnp.arange(cfg0.chunk, dtype=jnp.int32)
+    compiled, compile_time = compiled_chunk((params, rest, opt_state, track, epochs0, settings, key),
+                                            system, Mode.of(cfg0), batched)
+
+    def states() -> list[TrainState]:
+        if not batched:
+            return [TrainState(eqx.combine(params, rest), opt_state, track, runs[0].epoch, runs[0].history)]
+        return [TrainState(eqx.combine(_unstack(params, i), _unstack(rest, i)), _unstack(opt_state, i),
+                           _unstack(track, i), r.epoch, r.history) for i, r in enumerate(runs)]
+
+    bar = _progress_bar(cfg0.progress, max(r.cfg.epochs for r in runs), epoch, desc)
     interrupted = False
     start = time.perf_counter()
     try:
-        while epoch < cfg.epochs and int(track["stop"]) == 0:
-            epochs = jnp.arange(epoch, epoch + cfg.chunk, dtype=jnp.int32)
+        while any(r.active for r in runs):
+            epochs = jnp.arange(epoch, epoch + cfg0.chunk, dtype=jnp.int32)
             params, opt_state, track, hist = compiled(params, rest, opt_state, track, epochs, settings, key)
-            hist = jax.device_get(hist)
-            stop = int(track["stop"])
-            n = min(cfg.chunk, cfg.epochs - epoch)
-            if stop:
-                n = int(track["stop_epoch"]) - epoch + 1
-            history = history.extend(hist, n)
-            epoch += n
+            step = _advance(runs, jax.device_get(hist), track, epoch, batched)
+            epoch += step
             if bar is not None:
-                bar.update(n)
-                post = {"loss": f"{history.loss[-1]:.3e}"}
-                for i, g in enumerate(gamma_names):
-                    post[g] = f"{history.gamma[-1, i]:.4f}"
-                bar.set_postfix(post, refresh=False)
+                bar.update(step)
+                bar.set_postfix(_postfix(runs), refresh=False)
             if on_chunk is not None:
-                on_chunk(TrainState(eqx.combine(params, rest), opt_state, track, epoch, history))
+                on_chunk(states())
     except KeyboardInterrupt:
         interrupted = True
     finally:
         if bar is not None:
             bar.close()
     wall = time.perf_counter() - start
-
-    stop = int(track["stop"])
-    final_model = eqx.combine(params, rest)
-    state = TrainState(final_model, opt_state, track, epoch, history)
-    diverged_epoch = None
-    if interrupted:
-        reason = "interrupted"
-        chosen, best_epoch = final_model, -1
-    elif stop == 1:
-        reason, chosen, best_epoch = "tolerance", final_model, int(track["stop_epoch"])
-    elif stop == 2:
-        reason, diverged_epoch = "diverged", int(track["stop_epoch"])
-        chosen = eqx.combine(track["any_params"], rest)
-        best_epoch = int(track["any_epoch"])
-    else:
-        reason = "budget"
-        if cfg.best_rule == "release_exact":  # the initial parameters when no loss fell below 1
-            chosen, best_epoch = eqx.combine(track["best_params"], rest), int(track["best_epoch"])
-        elif cfg.best_rule == "last" or int(track["best_epoch"]) < 0:
-            chosen, best_epoch = final_model, -1
-        else:
-            chosen, best_epoch = eqx.combine(track["best_params"], rest), int(track["best_epoch"])
-    return TrainResult(
-        model=chosen,
-        history=history,
-        epochs_run=epoch,
-        tolerance_met=stop == 1,
-        stop_reason=reason,
-        best_epoch=best_epoch,
-        wall_time=wall,
-        compile_time=compile_time,
-        config=cfg,
-        interval=(t0, float(T)),
-        state=state,
-        diverged_epoch=diverged_epoch,
-    )
+    t0 = float(models[0].t0)
+    if not batched:
+        return [_result(runs[0], params, rest, opt_state, track, interrupted, wall, compile_time, t0, 1)]
+    return [_result(r, _unstack(params, i), _unstack(rest, i), _unstack(opt_state, i), _unstack(track, i),
+                    interrupted, wall, compile_time, t0, n) for i, r in enumerate(runs)]
