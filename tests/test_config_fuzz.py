@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 
 from atlasnn.cli import main
 from atlasnn.errors import AtlasError
-from atlasnn.experiments import runner
+from atlasnn.experiments import runner, training
 from atlasnn.experiments.config import parse_config
 from atlasnn.model import MODEL_SCALINGS, make_model
 from atlasnn.train import train
@@ -204,7 +204,7 @@ def _tiny_train(cfg) -> bool:
         if len(_COMPILED) >= MAX_COMPILES:
             return False
         _COMPILED.add(key)
-    system = runner._system(cfg)  # one system object per config: compiled steps are reused
+    system = training.system_of(cfg)  # one system object per config: compiled steps are reused
     z0 = system.initial_state(cfg.system.z0)
     seed = cfg.seeds[0]
     model = make_model(z0, scaling=MODEL_SCALINGS[model_name], width=cfg.width, depth=cfg.depth, t0=first.t0,

@@ -27,7 +27,7 @@ import pytest
 
 from atlasnn.checkpoint import load_checkpoint, load_state
 from atlasnn.cli import main
-from atlasnn.experiments import runner
+from atlasnn.experiments import runner, training
 from atlasnn.experiments.config import parse_config
 from atlasnn.experiments.runner import RunInterrupted, resume_experiment, run_experiment
 
@@ -111,6 +111,9 @@ def _quiet(*args):
 
 
 def _run(text, out, **kw):
+    # seed_batch=1: one seed per program, so that one seed can finish while another is
+    # interrupted (batched runs: test_resume_batch.py)
+    kw.setdefault("seed_batch", 1)
     return run_experiment(_cfg(text), out, progress=False, report=False, log=_quiet, config_text=text, **kw)
 
 
@@ -159,7 +162,7 @@ def test_interrupted_in_process_then_resumed_is_bit_identical(tmp_path, monkeypa
         if event == "chunk" and task.seed == 1 and state.epoch == 100:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(runner, "_hook", hook)
+    monkeypatch.setattr(training, "_hook", hook)
     with pytest.raises(RunInterrupted) as info:
         _run(SHORT, out)
     assert (info.value.finished, info.value.total) == (1, 2)
@@ -175,7 +178,7 @@ def test_interrupted_in_process_then_resumed_is_bit_identical(tmp_path, monkeypa
     state = load_state(out / "state" / "atlas_exp_seed1.npz")
     assert state.epoch == 100 and len(state.history) == 100
 
-    monkeypatch.setattr(runner, "_hook", lambda *a: None)
+    monkeypatch.setattr(training, "_hook", lambda *a: None)
     results = resume_experiment(out, progress=False, report=False, log=_quiet)
     assert [r["resumed_from_epoch"] for r in results["runs"]] == [None, 100]
     assert assert_same_runs(out, reference_short) == 2
@@ -197,13 +200,13 @@ def test_a_second_interrupt_during_the_resume_is_fine_too(tmp_path, monkeypatch,
             stop = next(stops, None)
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(runner, "_hook", hook)
+    monkeypatch.setattr(training, "_hook", hook)
     with pytest.raises(RunInterrupted):
         _run(SHORT, out)
     with pytest.raises(RunInterrupted) as info:
         resume_experiment(out, progress=False, report=False, log=_quiet)
     assert info.value.finished == 1
-    monkeypatch.setattr(runner, "_hook", lambda *a: None)
+    monkeypatch.setattr(training, "_hook", lambda *a: None)
     resume_experiment(out, progress=False, report=False, log=_quiet)
     assert assert_same_runs(out, reference_short) == 2
 
@@ -261,7 +264,7 @@ def test_sigint_and_sigterm_in_a_real_process_then_resume(tmp_path):
     env["PYTHONPATH"] = os.pathsep.join([str(Path(runner.__file__).parents[2]), env.get("PYTHONPATH", "")])
 
     # 1. SIGINT while the second job trains (its state file is newer than the first job's record)
-    p = _start(["run", str(toml), "--out", str(out), "--no-progress"], env)
+    p = _start(["run", str(toml), "--out", str(out), "--no-progress", "--seed-batch", "1"], env)
     first = out / "tasks" / "short_atlas_exp_seed0.json"
     assert _wait_for(p, lambda: first.exists() and _newest_state(out) > first.stat().st_mtime), p.communicate()
     os.kill(p.pid, signal.SIGINT)
@@ -291,7 +294,7 @@ def test_sigint_and_sigterm_in_a_real_process_then_resume(tmp_path):
     # 3. resumed in this process: done, and equal to a run that was never interrupted
     assert main(["run", "--resume", str(out), "--no-progress"]) == 0
     ref = tmp_path / "ref"
-    run_experiment(_cfg(LONG), ref, progress=False, report=False, log=_quiet)
+    run_experiment(_cfg(LONG), ref, progress=False, report=False, log=_quiet, seed_batch=1)
     assert assert_same_runs(out, ref) == 3
     res = json.loads((out / "results.json").read_text())
     assert any(r["resumed_from_epoch"] for r in res["runs"])  # at least one job continued mid-way
@@ -310,7 +313,7 @@ def test_transfer_interrupted_then_resumed_is_bit_identical(where, tmp_path, mon
         if where == "between" and event == "source_done":
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(runner, "_hook", hook)
+    monkeypatch.setattr(training, "_hook", hook)
     with pytest.raises(RunInterrupted) as info:
         _run(TRANSFER, out)
     assert (info.value.finished, info.value.total) == (0, 1)
@@ -325,7 +328,7 @@ def test_transfer_interrupted_then_resumed_is_bit_identical(where, tmp_path, mon
     else:
         assert not target_state.exists()
 
-    monkeypatch.setattr(runner, "_hook", lambda *a: None)
+    monkeypatch.setattr(training, "_hook", lambda *a: None)
     results = resume_experiment(out, progress=False, report=False, log=_quiet)
     by_role = {r["role"]: r for r in results["runs"]}
     assert by_role["target"]["resumed_from_epoch"] == (200 if where == "target" else None)

@@ -50,16 +50,26 @@ def _print_summary(results, out: Path, start: float) -> int:
     return 0
 
 
+def _seed_batch(args) -> int | str:
+    text = str(args.seed_batch).strip().lower()
+    if text == "auto":
+        return "auto"
+    if not text.isdigit() or int(text) < 1:
+        raise AtlasError(f"--seed-batch must be a whole number >= 1 or auto, got {args.seed_batch!r}")
+    return int(text)
+
+
 def _run_config(cfg, args, config_text: str, default_out: str, config_source: str | None = None) -> int:
     from atlasnn.experiments.runner import run_experiment
 
-    seeds, jobs = _seeds(args), _jobs(args)
+    seeds, jobs, seed_batch = _seeds(args), _jobs(args), _seed_batch(args)
     out = Path(args.out or default_out)
     args.run_dir = out
     start = time.perf_counter()
     results = run_experiment(
         cfg, out, seeds=seeds, jobs=jobs, progress=not args.no_progress,
         overwrite=args.overwrite, config_text=config_text, quick=args.quick, config_source=config_source,
+        seed_batch=seed_batch,
     )
     return _print_summary(results, out, start)
 
@@ -215,6 +225,9 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--quick", action="store_true", help="the config's quick variant (far fewer epochs)")
         s.add_argument("--seeds", type=int, default=None, metavar="K", help="repeat every training with seeds 0..K-1")
         s.add_argument("--jobs", type=int, default=1, metavar="J", help="independent trainings in J processes")
+        s.add_argument("--seed-batch", default="auto", metavar="N",
+                       help="seeds of one model trained together as one compiled program: a number, or auto "
+                            "(batch where it measures faster; see docs/PERFORMANCE.md)")
         s.add_argument("--out", default=None, metavar="DIR", help="run directory (default runs/NAME[-quick])")
         s.add_argument("--overwrite", action="store_true", help="reuse a non-empty run directory")
         s.add_argument("--resume", default=None, metavar="DIR",

@@ -9,7 +9,7 @@ parameters that stay trainable).
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import equinox as eqx
 import jax
@@ -17,7 +17,7 @@ import jax
 from atlasnn.errors import ConfigError
 from atlasnn.model import TrialSolution
 from atlasnn.systems import HamiltonianSystem
-from atlasnn.train import TrainConfig, TrainResult, TrainState, train, trainable_filter
+from atlasnn.train import TrainConfig, TrainResult, TrainState, train_batch, trainable_filter
 
 
 def check_same_architecture(source: TrialSolution, architecture: dict[str, Any]) -> None:
@@ -94,16 +94,44 @@ def transfer_from(
     starts exactly as it would have in the uninterrupted run. ``opt_state`` may be ``None`` when
     ``carry_adam`` is false or ``resume`` is given.
     """
-    if architecture:
-        check_same_architecture(model, architecture)
-    if model.state_dim != system.state_dim:
-        raise ConfigError(
-            f"source model has state dimension {model.state_dim}, system {system.name!r} has {system.state_dim}"
-        )
-    cfg = config.replace(freeze_gamma=not thaw)
-    start = None
-    if carry_adam and resume is None:
-        if opt_state is None:
-            raise ConfigError("carry_adam needs the source run's Adam state (opt_state is None)")
-        start = restrict_opt_state(opt_state, model, cfg.freeze_gamma)
-    return train(model, system, T, cfg, opt_state=start, desc=desc, resume=resume, on_chunk=on_chunk)
+    callback = None if on_chunk is None else (lambda states: on_chunk(states[0]))
+    return transfer_batch([model], [opt_state], system, T, [config], thaw=thaw, carry_adam=carry_adam,
+                          architecture=architecture, desc=desc, resumes=[resume], on_chunk=callback)[0]
+
+
+def transfer_batch(
+    models: Sequence[TrialSolution],
+    opt_states: Sequence[Any],
+    system: HamiltonianSystem,
+    T: float,
+    configs: Sequence[TrainConfig],
+    *,
+    thaw: bool = False,
+    carry_adam: bool = True,
+    architecture: dict[str, Any] | None = None,
+    desc: str = "target",
+    resumes: Sequence[TrainState | None] | None = None,
+    on_chunk: Callable[[list[TrainState]], None] | None = None,
+) -> list[TrainResult]:
+    """:func:`transfer_from` for several sources (e.g. the seeds of one model) trained as one
+    compiled program (:func:`~atlasnn.train.train_batch`): one source model, Adam state and
+    target config per run."""
+    resumes = list(resumes) if resumes is not None else [None] * len(models)
+    starts, cfgs = [], []
+    for model, opt_state, config, resume in zip(models, opt_states, configs, resumes):
+        if architecture:
+            check_same_architecture(model, architecture)
+        if model.state_dim != system.state_dim:
+            raise ConfigError(
+                f"source model has state dimension {model.state_dim}, system {system.name!r} has {system.state_dim}"
+            )
+        cfg = config.replace(freeze_gamma=not thaw)
+        start = None
+        if carry_adam and resume is None:
+            if opt_state is None:
+                raise ConfigError("carry_adam needs the source run's Adam state (opt_state is None)")
+            start = restrict_opt_state(opt_state, model, cfg.freeze_gamma)
+        starts.append(start)
+        cfgs.append(cfg)
+    return train_batch(list(models), system, T, cfgs, opt_states=starts, resumes=resumes, desc=desc,
+                       on_chunk=on_chunk)

@@ -1,0 +1,127 @@
+"""Per-seed training throughput: S seeds in one compiled program against one seed per program.
+
+For each of the paper's four training configurations (ATLAS-NN exp model, SPEC §4; see
+``benchmarks/common.py``) and each batch size S, one round trains
+
+- one seed alone with :func:`atlasnn.train.train` (the time per epoch of that one seed), and
+- S seeds together with :func:`atlasnn.train.train_batch` (the batch's time per epoch / S),
+
+both after compilation, in one process; rounds are interleaved so that load from other processes
+hits both alike. The speed-up is (lone ms per epoch) / (batched ms per epoch per seed), medians
+over rounds. Both may use every core the machine has (XLA decides how to thread them); the
+runner's other lever, ``--jobs J`` processes, is measured end to end by ``make reproduce-all``.
+
+Usage::
+
+    python -m benchmarks.seed_batch [--configs osc-short hh-target] [--sizes 2 5 8]
+        [--epochs 2000] [--rounds 3] [--out bench-results/seed_batch.json] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+
+from benchmarks.common import BETAS, CONFIGS, atlas_system, machine_info
+
+
+def _config(cfg, epochs: int, seed: int):
+    from atlasnn.train import TrainConfig
+
+    return TrainConfig(epochs=epochs, lr=cfg.lr, betas=BETAS, lam_reg=cfg.lam_reg, n_points=cfg.n_points,
+                       sigma=cfg.sigma, progress=False, chunk=min(epochs, 1000), seed=seed)
+
+
+def _models(cfg, system, seeds):
+    from atlasnn.model import make_model
+
+    return [make_model(system.z0, scaling="atlas_exp", width=cfg.width, depth=cfg.depth, seed=s) for s in seeds]
+
+
+def _lone_ms(cfg, system, epochs: int) -> float:
+    from atlasnn.train import train
+
+    (model,) = _models(cfg, system, [0])
+    r = train(model, system, cfg.T, _config(cfg, epochs, 0))
+    return r.wall_time / r.epochs_run * 1e3
+
+
+def _batch_ms(cfg, system, epochs: int, size: int) -> float:
+    """Milliseconds per epoch per seed of a batch of ``size`` seeds."""
+    from atlasnn.train import train_batch
+
+    seeds = list(range(size))
+    res = train_batch(_models(cfg, system, seeds), system, cfg.T, [_config(cfg, epochs, s) for s in seeds])
+    return res[0].info["batch_wall_time"] / res[0].epochs_run / size * 1e3
+
+
+def measure(cfg, sizes: list[int], epochs: int, rounds: int, log=print) -> dict:
+    system = atlas_system(cfg.system)
+    warm = max(50, epochs // 20)
+    t = time.perf_counter()
+    _lone_ms(cfg, system, warm)  # compile the lone program ...
+    for s in sizes:
+        _batch_ms(cfg, system, warm, s)  # ... and one batched program per size
+    compile_s = time.perf_counter() - t
+    lone: list[float] = []
+    batched: dict[int, list[float]] = {s: [] for s in sizes}
+    for r in range(rounds):
+        lone.append(_lone_ms(cfg, system, epochs))
+        for s in sizes:
+            batched[s].append(_batch_ms(cfg, system, epochs, s))
+        log(f"  {cfg.name} round {r + 1}/{rounds}: lone {lone[-1]:.3f} ms/epoch; "
+            + ", ".join(f"S={s} {batched[s][-1]:.3f}" for s in sizes))
+    lone_ms = statistics.median(lone)
+    rows = {s: {"ms_per_epoch_per_seed": statistics.median(v), "rounds": v,
+                "speedup": lone_ms / statistics.median(v)} for s, v in batched.items()}
+    best = min(rows, key=lambda s: rows[s]["ms_per_epoch_per_seed"])
+    return {"config": cfg.name, "describes": cfg.describes, "K": cfg.n_points, "width": cfg.width,
+            "epochs": epochs, "rounds": rounds, "lone_ms_per_epoch": lone_ms, "lone_rounds": lone,
+            "batched": {str(s): v for s, v in rows.items()}, "fastest_batch": best if rows[best]["speedup"] > 1 else 1,
+            "compile_and_warmup_s": compile_s}
+
+
+def table(results: list[dict]) -> str:
+    sizes = sorted({int(s) for r in results for s in r["batched"]})
+    head = "| config | K | net | lone ms/epoch | " + " | ".join(f"S={s} ms/epoch/seed (speed-up)" for s in sizes)
+    lines = [head + " | fastest |", "|" + "---|" * (4 + len(sizes) + 1)]
+    for r in results:
+        cells = []
+        for s in sizes:
+            b = r["batched"].get(str(s))
+            cells.append(f"{b['ms_per_epoch_per_seed']:.3f} ({b['speedup']:.2f}×)" if b else "–")
+        lines.append(f"| {r['config']} | {r['K']} | {r['width']}×2 | {r['lone_ms_per_epoch']:.3f} | "
+                     + " | ".join(cells) + f" | S={r['fastest_batch']} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--configs", nargs="+", default=list(CONFIGS), choices=list(CONFIGS))
+    ap.add_argument("--sizes", nargs="+", type=int, default=[2, 5, 8])
+    ap.add_argument("--epochs", type=int, default=2000)
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--quick", action="store_true", help="a smoke check: 100 epochs, one round, S=2")
+    ap.add_argument("--out", default=None, help="write the results as JSON here")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.epochs, args.rounds, args.sizes = 100, 1, [2]
+    if any(s < 2 for s in args.sizes) or args.epochs < 1 or args.rounds < 1:
+        ap.error("--sizes must be >= 2, --epochs and --rounds >= 1")
+    info = machine_info()
+    results = [measure(CONFIGS[name], args.sizes, args.epochs, args.rounds) for name in args.configs]
+    print(table(results))
+    if args.out:
+        from pathlib import Path
+
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(json.dumps({"machine": info, "results": results,
+                                              "load_after": machine_info()["load_average"]}, indent=1))
+        print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,121 @@
+"""Planning a run: an experiment config → the independent trainings and their batches.
+
+A *training* is one model and one seed in one role: a short run, the baseline HNN trained from
+scratch on the target interval, or a transfer chain (source → target, which counts as one
+training). A *task* is what an executor runs as one unit: the trainings of one column for a batch
+of seeds, trained together as one compiled program (:func:`atlasnn.train.train_batch`). Every
+training keeps its own records, checkpoints and state files, so how seeds are batched never
+changes what a run directory holds.
+
+How many seeds go in one batch (``seed_batch``): an integer, or ``"auto"`` — batching pays on
+this kind of CPU only while one epoch is small (its fixed per-operation cost is shared by the
+batch), while a large epoch already keeps the core busy with matrix products and a batch only
+adds work (measured by ``python -m benchmarks.seed_batch``, docs/PERFORMANCE.md). ``"auto"``
+batches the seeds of a column when one epoch is below :data:`AUTO_BATCH_WORK` (collocation points
+× width²) and never makes fewer tasks than there are parallel jobs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from atlasnn.errors import ConfigError
+from atlasnn.experiments.config import ExperimentConfig, Stage
+
+#: "auto" batches the seeds of a column when K · width² of its largest stage is at most this
+#: (oscillator-short, K = 200 and 50×2: 5.0e5, batches; Hénon–Heiles, K ≥ 500 and 80×2: ≥ 3.2e6,
+#: does not). Set from the seed-batch benchmark; see the module docstring.
+AUTO_BATCH_WORK = 1.0e6
+#: at most this many seeds in one program ("auto"), so one batch never holds a whole long run
+AUTO_BATCH_MAX = 8
+
+
+@dataclass(frozen=True)
+class Task:
+    """The trainings of one column (role and model) for a batch of seeds."""
+
+    role: str  # "short" | "transfer" | "baseline"
+    model: str  # "hnn" | "atlas_tanh" | "atlas_exp"
+    seeds: tuple[int, ...]
+
+    @property
+    def column(self) -> str:
+        """The table column this task's trainings fill."""
+        if self.role == "short":
+            return self.model
+        if self.role == "baseline":
+            return "hnn_baseline"
+        return f"{self.model}_transfer"
+
+    @property
+    def seed(self) -> int:
+        """The seed of a one-seed task."""
+        if len(self.seeds) != 1:
+            raise ValueError(f"task {self.column} holds seeds {list(self.seeds)}, not one")
+        return self.seeds[0]
+
+    def one(self, seed: int) -> "Task":
+        """The one-seed task of ``seed`` (records and state files are kept per seed)."""
+        return Task(self.role, self.model, (seed,))
+
+    def trainings(self) -> list["Task"]:
+        return [self.one(s) for s in self.seeds]
+
+
+def columns_of(cfg: ExperimentConfig) -> list[tuple[str, str]]:
+    """(role, model) of every trained column, in table order."""
+    if cfg.kind == "short":
+        return [("short", m) for m in cfg.models]
+    return ([("baseline", "hnn")] if cfg.baseline else []) + [("transfer", m) for m in cfg.models]
+
+
+def _stages(cfg: ExperimentConfig, role: str) -> list[Stage]:
+    if role == "short":
+        return [cfg.stage]
+    if role == "baseline":
+        return [cfg.target]
+    return [cfg.source, cfg.target]
+
+
+def epoch_work(cfg: ExperimentConfig, role: str) -> float:
+    """K · width² of the largest stage of a column: the size of one epoch, roughly."""
+    return max(st.train.n_points for st in _stages(cfg, role)) * float(cfg.width) ** 2
+
+
+def batch_size(cfg: ExperimentConfig, role: str, n_seeds: int, jobs: int, seed_batch: int | str) -> int:
+    """How many seeds of one column to train together (see the module docstring)."""
+    if seed_batch != "auto":
+        if isinstance(seed_batch, bool) or not isinstance(seed_batch, int) or seed_batch < 1:
+            raise ConfigError(f"seed_batch must be an integer >= 1 or \"auto\", got {seed_batch!r}")
+        return min(seed_batch, n_seeds)
+    if epoch_work(cfg, role) > AUTO_BATCH_WORK:
+        return 1
+    columns = len(columns_of(cfg))
+    # keep at least `jobs` tasks so that every process has work
+    per_column = max(1, math.ceil(jobs / columns))
+    return max(1, min(AUTO_BATCH_MAX, math.ceil(n_seeds / per_column)))
+
+
+def plan_tasks(cfg: ExperimentConfig, seeds: tuple[int, ...], *, jobs: int = 1,
+               seed_batch: int | str = 1) -> list[Task]:
+    """The tasks of a run: per column, its seeds cut into batches (in seed order)."""
+    tasks = []
+    for role, model in columns_of(cfg):
+        size = batch_size(cfg, role, len(seeds), jobs, seed_batch)
+        for i in range(0, len(seeds), size):
+            tasks.append(Task(role, model, tuple(seeds[i:i + size])))
+    return tasks
+
+
+def trainings(tasks: list[Task]) -> list[Task]:
+    """Every one-seed training of a plan."""
+    return [t for task in tasks for t in task.trainings()]
+
+
+def eval_grid(stage: Stage, points: int | None) -> np.ndarray:
+    """The evaluation grid of a stage: ``points`` (default K) equally spaced times."""
+    n = points or stage.train.n_points
+    return np.linspace(stage.t0, stage.T, n)

@@ -1,0 +1,102 @@
+"""The runner's parts: plans with seed batches, a batch interrupted and resumed, the directory lock."""
+
+from __future__ import annotations
+
+import json
+import tomllib
+
+import pytest
+
+from atlasnn.cli import main
+from atlasnn.errors import ConfigError
+from atlasnn.experiments import training
+from atlasnn.experiments.config import builtin_config_path, load_config, parse_config
+from atlasnn.experiments.plan import AUTO_BATCH_WORK, Task, batch_size, epoch_work, plan_tasks
+from atlasnn.experiments.runner import RunInterrupted, resume_experiment, run_experiment
+from atlasnn.experiments.store import RunLock
+
+from test_resume import SHORT, _quiet, assert_same_runs
+
+
+def _cfg(text=SHORT):
+    return parse_config(tomllib.loads(text), source="cfg.toml")
+
+
+def _run(out, **kw):
+    return run_experiment(_cfg(), out, progress=False, report=False, log=_quiet, config_text=SHORT, **kw)
+
+
+# ------------------------------------------------------------------------------ plans
+def test_plans_cut_the_seeds_of_each_column_into_batches():
+    cfg = _cfg()
+    assert plan_tasks(cfg, (0, 1, 2), seed_batch=1) == [Task("short", "atlas_exp", (s,)) for s in (0, 1, 2)]
+    assert plan_tasks(cfg, (0, 1, 2), seed_batch=2) == [Task("short", "atlas_exp", (0, 1)),
+                                                        Task("short", "atlas_exp", (2,))]
+    assert plan_tasks(cfg, (3, 4), seed_batch=8) == [Task("short", "atlas_exp", (3, 4))]
+    with pytest.raises(ConfigError, match="seed_batch"):
+        plan_tasks(cfg, (0,), seed_batch=0)
+
+
+def test_auto_batches_small_epochs_and_keeps_every_job_busy():
+    small = load_config(builtin_config_path("oscillator-short"))
+    large = load_config(builtin_config_path("henon-heiles-transfer"))
+    assert epoch_work(small, "short") <= AUTO_BATCH_WORK < epoch_work(large, "transfer")
+    assert batch_size(small, "short", 5, 1, "auto") == 5  # three columns, one job
+    assert batch_size(large, "transfer", 5, 1, "auto") == 1
+    # one column and two jobs: at least two tasks
+    one_column = _cfg()
+    assert [len(t.seeds) for t in plan_tasks(one_column, (0, 1, 2, 3, 4), jobs=2, seed_batch="auto")] == [3, 2]
+
+
+# --------------------------------------------------------------- batch interrupted
+def test_a_batch_interrupted_mid_way_resumes_bit_identically(tmp_path, monkeypatch):
+    ref = tmp_path / "ref"
+    _run(ref, seed_batch=2)
+    out = tmp_path / "run"
+
+    def hook(event, task, column, state):
+        if event == "chunk" and task.seed == 1 and state.epoch == 200:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(training, "_hook", hook)
+    with pytest.raises(RunInterrupted) as info:
+        _run(out, seed_batch=2)
+    assert (info.value.finished, info.value.total) == (0, 2)
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["plan"] == [{"role": "short", "model": "atlas_exp", "seeds": [0, 1]}]
+    states = sorted(p.name for p in (out / "state").glob("*.npz"))
+    assert states == ["atlas_exp_seed0.npz", "atlas_exp_seed1.npz"]  # both seeds of the batch
+
+    monkeypatch.setattr(training, "_hook", lambda *a: None)
+    results = resume_experiment(out, jobs=2, progress=False, report=False, log=_quiet)  # plan kept
+    assert [r["resumed_from_epoch"] for r in results["runs"]] == [200, 200]
+    assert [r["batch_size"] for r in results["runs"]] == [2, 2]
+    assert assert_same_runs(out, ref) == 2
+
+
+# ------------------------------------------------------------------------------ lock
+def test_a_second_writer_is_refused_while_the_first_holds_the_directory(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    with RunLock(out):
+        with pytest.raises(ConfigError, match="in use by another atlasnn run"):
+            _run(out, seed_batch=1)
+        toml = tmp_path / "c.toml"
+        toml.write_text(SHORT)
+        assert main(["run", str(toml), "--out", str(out), "--no-progress"]) == 2
+    assert not (out / "meta.json").exists()  # the refused run wrote nothing
+
+
+def test_the_lock_is_released_after_a_run_and_after_a_failure(tmp_path, monkeypatch):
+    out = tmp_path / "run"
+    _run(out, seed_batch=1)
+    RunLock(out).acquire().release()  # free again
+
+    def boom(*a, **k):
+        raise RuntimeError("disk on fire")
+
+    monkeypatch.setattr("atlasnn.experiments.runner.run_local", boom)
+    with pytest.raises(RuntimeError):
+        _run(tmp_path / "other", seed_batch=1)
+    RunLock(tmp_path / "other").acquire().release()
+    assert json.loads((tmp_path / "other" / "meta.json").read_text())["status"] == "failed"
