@@ -124,3 +124,20 @@ def test_transfer_needs_source_and_target():
     del d["target"]
     with pytest.raises(ConfigError, match="^target"):
         parse_config(d)
+
+
+@pytest.mark.parametrize("name, points, per_k", [
+    ("oscillator-short", 2000, 10), ("oscillator-transfer", 5000, 10),
+    ("henon-heiles-short", 500, 1), ("henon-heiles-transfer", 1000, 1),
+])
+@pytest.mark.parametrize("quick", [False, True])
+def test_evaluation_grids_are_the_papers(name, points, per_k, quick):
+    """The paper's tables are on 10·K points (oscillator) or K points (Hénon–Heiles), K the
+    collocation count of the tabulated interval; L2 in the release's form depends on it."""
+    from atlasnn.experiments.plan import eval_grid
+
+    cfg = load_config(builtin_config_path(name), quick=quick)
+    st = cfg.eval_stage
+    grid = eval_grid(st, cfg.evaluation.eval_points)
+    assert grid.size == points == per_k * st.train.n_points
+    assert grid[0] == st.t0 and grid[-1] == pytest.approx(st.T)
