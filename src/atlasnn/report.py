@@ -37,6 +37,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from atlasnn.caveats import QUICK_BANNER, column_verdicts, verdict_detail, verdict_status_text
 from atlasnn.errors import ConfigError
 from atlasnn.labels import MODEL_LABELS
 
@@ -370,6 +371,8 @@ def summarize(results: Any) -> dict:
         "scalar_metrics": scalar_metrics,
         "columns_summary": col_summ,
         "sources": src_summ,
+        "quick": bool(res.get("quick")),
+        "verdicts": column_verdicts(res),
     }
 
 
@@ -681,7 +684,9 @@ def _stop_text(d: dict) -> str:
 def _header_lines(summary: dict, paper: dict | None) -> list[str]:
     base_label = summary["labels"][summary["baseline"]]
     seeds = summary["seeds"]
-    lines = [
+    lines = [f"{QUICK_BANNER}. Paper values are shown for reference only: they come from the full budget."] \
+        if summary.get("quick") else []
+    lines += [
         f"Experiment {summary['experiment']} ({summary['kind']})"
         + (f", compared with the paper's table {paper.get('table')} (one training run per model)" if paper else "")
         + ("." if paper else ". No paper values (not one of the paper's experiments, or left out)."),
@@ -713,7 +718,9 @@ def _latex_caption(summary: dict, paper: dict | None) -> str:
     esc = _latex_escape
     seeds = summary["seeds"]
     base_label = esc(summary["labels"][summary["baseline"]])
-    parts = [
+    parts = ["\\textbf{" + esc(_ascii(QUICK_BANNER)) + ".} Paper values for reference only (full budget)."] \
+        if summary.get("quick") else []
+    parts += [
         f"Experiment {esc(summary['experiment'])} ({summary['kind']})"
         + (f", compared with the paper's table {esc(str(paper.get('table')))} (one training run per model, "
            "values in parentheses)." if paper else "; no paper values."),
@@ -748,6 +755,22 @@ def _table_columns(summary: dict) -> list[tuple[str, str, str]]:
     return out
 
 
+def _verdict_marks(summary: dict) -> dict[str, int]:
+    """Footnote numbers for the columns with a verdict other than ok, in column order."""
+    verdicts = summary.get("verdicts") or {}
+    bad = [c for c in summary["columns"] if c in verdicts and verdicts[c]["notes"]]
+    return {c: i + 1 for i, c in enumerate(bad)}
+
+
+_ASCII = {"≤": "<=", "≥": ">=", "×": "x", "−": "-", "–": "-", "—": "-", "·": "*", "→": "->", "γ": "gamma",
+          "α": "alpha", "β": "beta", "Δ": "Delta", "≈": "~", "⚠": "!"}
+
+
+def _ascii(text: str) -> str:
+    """Text for pdflatex: common symbols spelled out, anything else non-ASCII replaced by '?'."""
+    return "".join(_ASCII.get(ch, ch) for ch in str(text)).encode("ascii", "replace").decode("ascii")
+
+
 # ============================================================================ renderers
 def _md(s: str) -> str:
     """A Markdown table cell: no raw pipes."""
@@ -755,11 +778,14 @@ def _md(s: str) -> str:
 
 
 def _markdown(summary, paper, rows, training) -> str:
-    lines = [f"# {summary['experiment']}: errors against the reference", ""]
+    quick = "QUICK RUN — " if summary.get("quick") else ""
+    lines = [f"# {quick}{summary['experiment']}: errors against the reference", ""]
     lines += [f"- {h}" for h in _header_lines(summary, paper)]
     lines.append("")
     tcols = _table_columns(summary)
-    lines.append("| Error | " + " | ".join(_md(h) for _, _, h in tcols) + " |")
+    marks = _verdict_marks(summary)
+    lines.append("| Error | " + " | ".join(_md(h + (f" ⚠{marks[c]}" if kind == "value" and c in marks else ""))
+                                          for kind, c, h in tcols) + " |")
     lines.append("|---|" + "|".join("---" for _ in tcols) + "|")
     for r in rows:
         cells = []
@@ -771,12 +797,20 @@ def _markdown(summary, paper, rows, training) -> str:
             else:
                 cells.append(_md_imp_cell(cell))
         lines.append(f"| {_md(r['label'])} | " + " | ".join(_md(c) for c in cells) + " |")
-    lines += ["", f"## {summary['experiment']}: training", ""]
+    if marks:
+        lines.append("")
+        for c, k in marks.items():
+            v = summary["verdicts"][c]
+            lines.append(f"- ⚠{k} {summary['labels'][c]}: {verdict_status_text(v)} — {verdict_detail(v)}")
+    lines += ["", f"## {quick}{summary['experiment']}: training", ""]
     transfer = summary["kind"] == "transfer"
     head = ["Model", "γ (ours)", "γ (paper)", "Epochs", "Tolerance met", "Stop", "Wall time [s]",
             "Final loss", "Best loss"]
     if transfer:
         head += ["Source epochs", "Source tolerance met", "Source wall time [s]", "Source final loss"]
+    verdicts = summary.get("verdicts") or {}
+    if verdicts:
+        head.append("Verdict")
     lines.append("- γ: median [min–max] across seeds (for transfer models: learned in the source task, frozen in the "
                  "target task). Epochs, wall time and losses: median [min–max]; tolerance met: seeds meeting it / seeds.")
     lines.append("")
@@ -795,6 +829,8 @@ def _markdown(summary, paper, rows, training) -> str:
             cells += ([_range_text(s["epochs"], _format_count), _tol_text(s["tolerance_met"]),
                        _range_text(s["wall_time"], _format_seconds), _range_text(s["final_loss"], format_number)]
                       if s else ["–"] * 4)
+        if verdicts:
+            cells.append(verdict_status_text(verdicts[t["column"]]) if t["column"] in verdicts else "–")
         lines.append("| " + " | ".join(_md(c) for c in cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -816,6 +852,9 @@ def _csv(summary, paper, rows, training) -> str:
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=CSV_FIELDS, lineterminator="\n")
     w.writeheader()
+    if summary.get("quick"):
+        w.writerow({"table": "note", "row": "quick_run", "definition": "results.json has quick = true",
+                    "text": QUICK_BANNER})
     for r in rows:
         for c in summary["columns"]:
             cell = r["cells"][c]
@@ -850,6 +889,11 @@ def _csv(summary, paper, rows, training) -> str:
         put("wall_time", t["wall_time"], "wall time per model [s]", None, _range_text(t["wall_time"], _format_seconds))
         put("final_loss", t["final_loss"], "final training loss", None, _range_text(t["final_loss"], format_number))
         put("best_loss", t["best_loss"], "best training loss", None, _range_text(t["best_loss"], format_number))
+        v = (summary.get("verdicts") or {}).get(t["column"])
+        if v is not None:
+            put("verdict", {"median": v["n"] - len(v["notes"]), "min": None, "max": None, "n": v["n"]},
+                "verdicts of the runs' quality checks (ours_median = trainings ok of n)", None,
+                verdict_status_text(v) + (f" — {verdict_detail(v)}" if v["notes"] else ""))
         if summary["kind"] == "transfer" and t["source"] is not None:
             s = t["source"]
             put("source_epochs", s["epochs"], f"source task ({t['source_column']}) epochs", None,
@@ -868,6 +912,10 @@ def _latex(summary, paper, rows, training) -> str:
     tcols = _table_columns(summary)
     exp = summary["experiment"]
     cap = _latex_caption(summary, paper)
+    marks = _verdict_marks(summary)
+    for c, k in marks.items():
+        v = summary["verdicts"][c]
+        cap += _latex_escape(_ascii(f" (!{k}) {summary['labels'][c]}: {verdict_status_text(v)} - {verdict_detail(v)}."))
     out = [
         f"% generated by atlasnn.report from results.json of {exp}; needs \\usepackage{{booktabs}}",
         "\\begin{table}[ht]",
@@ -876,7 +924,8 @@ def _latex(summary, paper, rows, training) -> str:
         "\\setlength{\\tabcolsep}{3pt}",
         "\\begin{tabular}{" + "l" * (len(tcols) + 1) + "}",
         "\\toprule",
-        "Error & " + " & ".join(_latex_escape(h) for _, _, h in tcols) + " \\\\",
+        "Error & " + " & ".join(_latex_escape(h) + (f"\\textsuperscript{{(!{marks[c]})}}" if kind == "value" and c in marks
+                                                    else "") for kind, c, h in tcols) + " \\\\",
         "\\midrule",
     ]
     prev_metric = None
@@ -963,6 +1012,7 @@ def _json(summary, paper, rows, training) -> str:
     doc = {
         "experiment": summary["experiment"],
         "kind": summary["kind"],
+        "quick": bool(summary.get("quick")),
         "header": _header_lines(summary, paper),
         "paper_table": paper.get("table") if paper else None,
         "table": {
