@@ -14,7 +14,7 @@ import json
 import shutil
 from pathlib import Path
 
-FIGURES = ["trajectories", "errors", "energy", "loss", "target_loss_comparison", "loss_source", "gamma",
+FIGURES = ["overview", "trajectories", "errors", "energy", "loss", "target_loss_comparison", "loss_source", "gamma",
            "seed_spread_l2_x"]
 
 

@@ -40,10 +40,10 @@ _KEEP_DEFAULT_DPI = {"test_plot_scaling_families"}
 @pytest.fixture(autouse=True)
 def _low_dpi(monkeypatch, request):
     """Render PNGs at a lower resolution to keep the suite fast (one test keeps the default)."""
-    import atlasnn.plots as plots
+    import atlasnn.plotkit as plotkit
 
     if request.node.name not in _KEEP_DEFAULT_DPI:
-        monkeypatch.setattr(plots, "DPI", 72)
+        monkeypatch.setattr(plotkit, "DPI", 72)
 
 
 # ------------------------------------------------------------------------------ inputs

@@ -56,7 +56,7 @@ def test_tables_have_every_row_and_column(quick_run):
     assert tex.count("\\begin{tabular}") == tex.count("\\end{tabular}") >= 1
 
 
-FIGURES = ["scaling_families", "loss", "gamma", "trajectories", "errors", "energy", "seed_spread_l2_x"]
+FIGURES = ["scaling_families", "loss", "gamma", "overview", "trajectories", "errors", "energy", "seed_spread_l2_x"]
 
 
 @pytest.mark.parametrize("stem", FIGURES)
@@ -83,7 +83,9 @@ def test_report_rerenders_without_training(quick_run, capsys):
     assert main(["report", str(quick_run)]) == 0
     assert (quick_run / "tables.md").exists()
     assert {p.name: p.stat().st_mtime_ns for p in (quick_run / "models").iterdir()} == before
-    assert "L2(x)" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "L2(x)" in out and "QUICK RUN" in out
+    assert f"overview: {quick_run / 'figures' / 'overview.png'}" in out
 
 
 def test_existing_run_is_not_overwritten(quick_run, capsys):

@@ -44,7 +44,7 @@ def _jobs(args) -> int:
 def _print_summary(results, out: Path, start: float) -> int:
     from atlasnn.render import summary_lines
 
-    for line in summary_lines(results):
+    for line in summary_lines(results, run_dir=out):
         print(line)
     print(f"done in {time.perf_counter() - start:.1f} s; see {out}/tables.md and {out}/figures/")
     return 0
@@ -180,7 +180,7 @@ def cmd_report(args) -> int:
     from atlasnn.report import load_results
 
     paths = write_report(Path(args.dir))
-    for line in summary_lines(load_results(Path(args.dir))):
+    for line in summary_lines(load_results(Path(args.dir)), run_dir=Path(args.dir)):
         print(line)
     print(f"wrote {len(paths)} files in {args.dir}")
     return 0

@@ -8,6 +8,7 @@ spread is in the tables and in the spread figure) and the median loss over seeds
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,8 @@ import numpy as np
 from atlasnn import plots
 from atlasnn.errors import AtlasError
 from atlasnn.experiments.config import MODEL_LABELS
-from atlasnn.report import load_paper, load_results, summarize, write_tables
+from atlasnn.caveats import QUICK_BANNER, column_verdicts, figure_title, is_quick, verdict_detail, verdict_status_text
+from atlasnn.report import format_number, load_paper, load_results, summarize, write_tables
 
 
 def _paper_name(results: dict) -> str:
@@ -71,7 +73,8 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
     table_cols = [c for c in results["columns"] if c != "se"]
     if results["kind"] == "short":
         histories = {labels[c]: loss_runs(c) for c in table_cols if loss_runs(c)}
-        written += plots.plot_loss_curves(fig_dir / "loss", histories, title=f"{results['experiment']}: training loss")
+        written += plots.plot_loss_curves(fig_dir / "loss", histories,
+                                          title=figure_title(results, f"{results['experiment']}: training loss"))
         gam = {labels[c]: hist[(c, seed0)]["gamma"] for c in table_cols if (c, seed0) in hist and hist[(c, seed0)]["gamma"]}
     else:
         src_cols = sorted({r["column"] for r in runs if r["role"] == "source"})
@@ -82,19 +85,20 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
         histories = {f"{MODEL_LABELS.get(c, c)} (source)": _src_loss(c) for c in src_cols if _src_loss(c)}
         if histories:
             written += plots.plot_loss_curves(fig_dir / "loss_source", histories, tolerance=_tolerance(results),
-                                              title=f"{results['experiment']}: source-task loss")
+                                              title=figure_title(results, f"{results['experiment']}: source-task loss"))
         target = {labels[c]: loss_runs(c) for c in table_cols if loss_runs(c)}
         written += plots.plot_loss_curves(fig_dir / "loss", target, tolerance=_tolerance(results),
-                                          title=f"{results['experiment']}: target-task loss")
+                                          title=figure_title(results, f"{results['experiment']}: target-task loss"))
         if _tolerance(results) is not None:
             first = {labels[c]: hist[(c, seed0)]["loss"] for c in table_cols if (c, seed0) in hist}
             written += plots.plot_target_loss_comparison(
                 fig_dir / "target_loss_comparison", first, _tolerance(results),
-                title=f"{results['experiment']}: target-task loss, seed {seed0}")
+                title=figure_title(results, f"{results['experiment']}: target-task loss, seed {seed0}"))
         gam = {f"{MODEL_LABELS.get(c, c)} (source)": hist[(c + ":source", seed0)]["gamma"]
                for c in src_cols if (c + ":source", seed0) in hist and hist[(c + ":source", seed0)]["gamma"]}
     if gam:
-        written += plots.plot_gamma_evolution(fig_dir / "gamma", gam)
+        written += plots.plot_gamma_evolution(
+            fig_dir / "gamma", gam, title=figure_title(results, "Evolution of the scaling parameters γ"))
 
     # ---- trajectories, errors, energy (first seed), with SE and the fine SE
     t = arrays["t_eval"]
@@ -109,7 +113,9 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
         if key in arrays:
             series.append(plots.Series(labels[c], t, arrays[key], arrays["z_ref"], arrays[f"energy_{c}_seed{seed0}"]))
     ref = plots.Series("reference", t, arrays["z_ref"], arrays["z_ref"], arrays["energy_ref"])
-    title = f"{results['experiment']} (seed {seed0})"
+    title = figure_title(results, f"{results['experiment']} (seed {seed0})")
+    written += plots.plot_overview(fig_dir / "overview", [ref] + series, names, results["energy0"], src_iv,
+                                   title=figure_title(results, f"{results['experiment']}: overview (seed {seed0})"))
     written += plots.plot_trajectories(fig_dir / "trajectories", series, names, src_iv, title=title)
     written += plots.plot_errors(fig_dir / "errors", series, names, src_iv, title=title)
     written += plots.plot_energy(fig_dir / "energy", [ref] + series, results["energy0"], src_iv, title=title)
@@ -124,7 +130,8 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
               for c in table_cols}
     paper = {labels[c]: v for c, v in paper_rows.get(f"l2_{first}", {}).items() if c in labels and c != "se"}
     written += plots.plot_seed_spread(fig_dir / f"seed_spread_l2_{first}", values, f"L2({first}) (release form)",
-                                      paper or None, title=f"{results['experiment']}: L2({first}) per seed")
+                                      paper or None,
+                                      title=figure_title(results, f"{results['experiment']}: L2({first}) per seed"))
     return written
 
 
@@ -135,23 +142,114 @@ def write_report(run_dir: str | Path) -> list[Path]:
     return list(write_tables(results, run_dir)) + write_figures(run_dir, results)
 
 
-def summary_lines(results: dict) -> list[str]:
-    """A short plain-text summary: median L2 (release form) of the first state per column."""
+#: the printed summary is laid out for terminals of this width
+SUMMARY_WIDTH = 100
+
+
+def _l2_cells(cs: dict, states: list[str]) -> list[str]:
+    """Median L2 (release form) per state component; the first with its [min–max] over seeds."""
+    cells = []
+    for i, name in enumerate(states):
+        st = cs["metrics"].get("l2_discrete", {}).get(name)
+        if st is None or st["median"] is None:
+            cells.append("n/a")
+            continue
+        text = format_number(st["median"])
+        if i == 0 and st["n"] > 1 and format_number(st["min"]) != format_number(st["max"]):
+            text += f" [{format_number(st['min'])}–{format_number(st['max'])}]"
+        if st.get("n_nonfinite"):
+            text += f" ({st['n_nonfinite']} non-finite)"
+        cells.append(text)
+    return cells
+
+
+def _has_data(cs: dict, states: list[str]) -> bool:
+    per_state = cs["metrics"].get("l2_discrete", {})
+    return any((per_state.get(s) or {}).get("n") or (per_state.get(s) or {}).get("n_nonfinite") for s in states)
+
+
+def _fit_columns(widths: list[int], fixed: int, limit: int) -> int:
+    """How many of the state columns (in order, at least one) fit beside ``fixed`` characters."""
+    used, k = fixed, 0
+    for w in widths:
+        if k >= 1 and used + 2 + w > limit:
+            break
+        used += 2 + w
+        k += 1
+    return k
+
+
+def summary_lines(results: dict | str | Path, run_dir: str | Path | None = None) -> list[str]:
+    """The end-of-run summary: one line per model with the median L2 (release form) of every
+    state component over seeds ([min–max] for the first), the paper's L2 of the first component,
+    and each model's verdict when the runs carry one.
+
+    A quick run is labelled as such. Columns that did not run (e.g. SE for a non-separable
+    system) are left out. Components that do not fit in :data:`SUMMARY_WIDTH` columns are
+    counted, not shown (tables.md has them all). With ``run_dir`` (or a run directory as
+    ``results``) the last line points to the overview figure.
+    """
+    if run_dir is None and isinstance(results, (str, Path)):
+        run_dir = Path(results) if Path(results).is_dir() else Path(results).parent
     results = load_results(results)
     s = summarize(results)
-    first = results["state_names"][0]
+    states = list(results["state_names"])
+    quick = is_quick(results)
     try:
-        paper_rows = load_paper(_paper_name(results))["rows"].get(f"l2_{first}", {})
+        paper_rows = load_paper(_paper_name(results))["rows"].get(f"l2_{states[0]}", {})
     except AtlasError:
         paper_rows = {}
+    verdicts = column_verdicts(results)
     n = len(results["seeds"])
-    lines = [f"{results['experiment']}: L2({first}) (release form), median over {n} seed(s) [min-max]; paper value"]
-    for c in results["columns"]:
-        cs = s["columns_summary"].get(c)
-        if not cs:
-            continue
-        st = cs["metrics"]["l2_discrete"][first]
-        paper = paper_rows.get(c)
-        ptxt = f"{paper:.3g}" if isinstance(paper, (int, float)) else "-"
-        lines.append(f"  {results['labels'].get(c, c):28s} {st['median']:.3e} [{st['min']:.2e}-{st['max']:.2e}]   paper {ptxt}")
+    cols = [c for c in results["columns"] if c in s["columns_summary"] and _has_data(s["columns_summary"][c], states)]
+
+    label = {c: results.get("labels", {}).get(c, c) for c in cols}
+    cells = {c: _l2_cells(s["columns_summary"][c], states) for c in cols}
+    paper = {c: format_number(paper_rows[c]) if isinstance(paper_rows.get(c), (int, float)) else "–" for c in cols}
+    status = {c: verdict_status_text(verdicts[c]) if c in verdicts else "" for c in cols}
+    heads = [f"L2({name})" for name in states]
+    w_label = max([len("model")] + [len(label[c]) for c in cols])
+    widths = [max([len(heads[i])] + [len(cells[c][i]) for c in cols]) for i in range(len(states))]
+    paper_head = f"paper L2({states[0]})"
+    w_paper = max([len(paper_head)] + [len(paper[c]) for c in cols]) if paper_rows else 0
+    w_status = max([len("verdict")] + [len(status[c]) for c in cols]) if verdicts else 0
+    fixed = 2 + w_label + (2 + w_paper if w_paper else 0) + (2 + w_status if w_status else 0)
+    k = _fit_columns(widths, fixed, SUMMARY_WIDTH)
+
+    lines = []
+    if quick:
+        lines.append(f"{results['experiment']}: {QUICK_BANNER}")
+    spread = f"median over {n} seeds, [min–max] for L2({states[0]})" if n > 1 else f"seed {results['seeds'][0]}"
+    lines += textwrap.wrap(f"{results['experiment']}: L2 (release form, {results.get('eval_points', '?')} points), "
+                           f"{spread}", SUMMARY_WIDTH, subsequent_indent="  ")
+
+    def row(name: str, values: list[str], p: str, v: str) -> str:
+        text = "  " + name.ljust(w_label) + "".join("  " + values[i].ljust(widths[i]) for i in range(k))
+        if w_paper:
+            text += "  " + p.ljust(w_paper)
+        if w_status:
+            text += "  " + v
+        return text.rstrip()
+
+    lines.append(row("model", heads, paper_head, "verdict"))
+    for c in cols:
+        lines.append(row(label[c], cells[c], paper[c], status[c]))
+        detail = verdict_detail(verdicts[c], max_notes=2, advice=False) if c in verdicts else ""
+        if detail:
+            text = f"    ↳ {detail}"
+            lines.append(text if len(text) <= SUMMARY_WIDTH else text[: SUMMARY_WIDTH - 1] + "…")
+    if k < len(states):
+        lines.append(f"  (+{len(states) - k} more components, {', '.join(states[k:k + 3])}"
+                     f"{', ...' if len(states) - k > 3 else ''}: in tables.md)")
+    if paper_rows:
+        note = "paper: one training run per model"
+        if quick:
+            note += ", at the full budget — this quick run is not comparable with it"
+        lines.append(f"  ({note})")
+    if any(v["notes"] for v in verdicts.values()):
+        lines.append("  (verdict reasons and advice in full: tables.md)")
+    if run_dir is not None:
+        overview = Path(run_dir) / "figures" / "overview.png"
+        if overview.exists():
+            lines.append(f"overview: {overview}")
     return lines

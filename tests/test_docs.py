@@ -1,0 +1,393 @@
+"""The docs run as written: every fenced code block of README.md and docs/*.md is executed.
+
+What each kind of block must do:
+
+* ```python — runs, as written, in a fresh Python process (the repository's interpreter);
+* ```bash / ```sh / ```shell — every line is a command (``#`` comments and blank lines aside,
+  a trailing ``\\`` continues a line); ```console — every line starting with ``$ `` is one, the
+  other lines are output. ``atlasnn ...`` and ``.venv/bin/atlasnn ...`` run through the CLI in
+  this process; ``python ...`` and ``.venv/bin/python ...`` in a fresh process. Any other command
+  (``make``, ``pip``, shell pipes) cannot run here: its block needs the skip marker;
+* ```toml — a config: parsed with :func:`atlasnn.experiments.config.parse_config`, and with
+  ``quick=True`` too when it has a ``[quick]`` table;
+* ```json — parsed;
+* ```text — an output sample: not run. A fence without a language is an error (say ``text``).
+
+Markers (an HTML comment on the line(s) just before the fence, invisible on the rendered page):
+
+* ``<!-- docs-test: skip (reason) -->`` — the block is not run (a full reproduction, a ``make``
+  target, a pip install). It is reported as a skipped test with its reason; its ``atlasnn``
+  commands are still parsed and their configs validated, and its Python is compiled;
+* ``<!-- docs-test: file NAME -->`` — the block's text is written to NAME first, as the page
+  tells the reader to save it.
+
+The blocks of one page run in order in one temporary directory (holding a copy of
+``examples/`` and ``scripts/``), as a reader following the page would; a block may use files an
+earlier block of the same page wrote.
+
+Budget: the commands run exactly as written, except that this harness caps every training of
+an ``atlasnn run``/``reproduce`` at :data:`EPOCH_CAP` epochs (it wraps the config loader; the
+runs' results.json are checked to prove the cap took effect), and their figures are drawn at
+72 dpi. The docs test checks that what the docs say works, not how accurate a full-budget run
+is; the cap keeps it to about a minute of CPU time.
+Python blocks are not capped: they must be written with small budgets.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import io
+import json
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+import time
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+EPOCH_CAP = 200
+PYTHON_TIMEOUT_S = 300
+SHELL_LANGS = {"bash", "sh", "shell", "console"}
+KNOWN_LANGS = SHELL_LANGS | {"python", "toml", "json", "text"}
+
+_FENCE = re.compile(r"^(?P<indent>\s*)(?P<fence>`{3,}|~{3,})(?P<lang>[\w+-]*)\s*$")
+_MARKER = re.compile(r"^\s*<!--\s*docs-test:\s*(?P<kind>skip|file)\s*(?P<arg>.*?)\s*-->\s*$")
+
+
+@dataclass
+class Block:
+    page: str  # path relative to the repository
+    line: int  # 1-based line of the opening fence
+    lang: str
+    code: str
+    skip: str | None = None  # the reason, when marked skip
+    file: str | None = None  # the file name, when marked file
+
+    @property
+    def id(self) -> str:
+        return f"{self.page}:{self.line}:{self.lang or 'none'}"
+
+
+def extract_blocks(text: str, page: str = "page.md") -> list[Block]:
+    """Fenced code blocks of a Markdown text, with the docs-test markers just before each."""
+    blocks: list[Block] = []
+    lines = text.splitlines()
+    i = 0
+    while i < len(lines):
+        m = _FENCE.match(lines[i])
+        if not m:
+            i += 1
+            continue
+        indent, fence, lang = m.group("indent"), m.group("fence"), m.group("lang").lower()
+        body, j = [], i + 1
+        while j < len(lines) and not re.match(rf"^\s*{re.escape(fence[0])}{{{len(fence)},}}\s*$", lines[j]):
+            body.append(lines[j][len(indent):] if lines[j].startswith(indent) else lines[j].lstrip())
+            j += 1
+        if j == len(lines):
+            raise AssertionError(f"{page}:{i + 1}: code fence is never closed")
+        block = Block(page, i + 1, lang, "\n".join(body) + "\n")
+        k = i - 1
+        while k >= 0 and (not lines[k].strip() or _MARKER.match(lines[k])):
+            mk = _MARKER.match(lines[k])
+            if mk:
+                arg = mk.group("arg")
+                if mk.group("kind") == "skip":
+                    reason = re.fullmatch(r"\((.+)\)", arg)
+                    if not reason:
+                        raise AssertionError(f"{page}:{k + 1}: a skip marker needs a reason: "
+                                             "<!-- docs-test: skip (why) -->")
+                    block.skip = reason.group(1)
+                else:
+                    if not re.fullmatch(r"[\w./-]+", arg) or arg.startswith("/") or ".." in arg:
+                        raise AssertionError(f"{page}:{k + 1}: bad file name {arg!r} in a file marker")
+                    block.file = arg
+            k -= 1
+        blocks.append(block)
+        i = j + 1
+    return blocks
+
+
+def shell_commands(block: Block) -> list[str]:
+    """The command lines of a shell or console block."""
+    out, pending = [], ""
+    for raw in block.code.splitlines():
+        line = raw.rstrip()
+        if block.lang == "console" and not pending:
+            if not line.startswith("$ "):
+                continue
+            line = line[2:]
+        if pending:
+            line = pending + " " + line.strip()
+            pending = ""
+        if line.endswith("\\"):
+            pending = line[:-1].rstrip()
+            continue
+        if line.strip() and not line.lstrip().startswith("#"):
+            out.append(line.strip())
+    return out
+
+
+def _argv(command: str) -> list[str]:
+    words = shlex.split(command, comments=True)
+    if any(w in ("|", "||", "&&", ";", ">", ">>", "<", "&") for w in words):
+        raise AssertionError(f"shell syntax cannot run in the docs test: {command!r}")
+    return words
+
+
+def _program(words: list[str]) -> str:
+    return Path(words[0]).name if words else ""
+
+
+# ------------------------------------------------------------------------------ the epoch cap
+def _capped(cfg):
+    """The config with every stage's epoch budget (and chunk) cut to EPOCH_CAP."""
+    changes = {}
+    for name in ("stage", "source", "target"):
+        stage = getattr(cfg, name, None)
+        if stage is None:
+            continue
+        tr = stage.train
+        tr = dataclasses.replace(tr, epochs=min(tr.epochs, EPOCH_CAP), chunk=min(tr.chunk, EPOCH_CAP))
+        changes[name] = dataclasses.replace(stage, train=tr)
+    return dataclasses.replace(cfg, **changes)
+
+
+@pytest.fixture
+def epoch_cap(monkeypatch):
+    """Cap the trainings of in-process CLI runs (and draw their figures at a lower resolution)."""
+    import atlasnn.experiments.config as config
+    import atlasnn.plotkit as plotkit
+
+    real = config.load_config
+    monkeypatch.setattr(config, "load_config", lambda *a, **k: _capped(real(*a, **k)))
+    monkeypatch.setattr(plotkit, "DPI", 72)
+
+
+def _check_cap(workspace: Path, since: float) -> None:
+    """Every results.json the command wrote has trainings within the cap."""
+    for path in workspace.rglob("results.json"):
+        if path.stat().st_mtime < since:
+            continue
+        res = json.loads(path.read_text(encoding="utf-8"))
+        epochs = [r.get("epochs") for r in res.get("runs", [])]
+        assert all(e is not None and e <= EPOCH_CAP for e in epochs), \
+            f"{path}: epochs {epochs}: the docs test's epoch cap did not apply (update _capped)"
+
+
+# ------------------------------------------------------------------------------ runners
+def _run_atlasnn(words: list[str], workspace: Path) -> None:
+    from atlasnn.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    start = time.time()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            rc = main(words[1:])
+        except SystemExit as exc:  # argparse
+            rc = exc.code
+    assert rc == 0, f"`{' '.join(words)}` exited {rc}:\n{err.getvalue()[-2000:]}"
+    if len(words) > 1 and words[1] in ("run", "reproduce"):
+        _check_cap(workspace, start)
+
+
+def _run_python(args: list[str], workspace: Path, what: str) -> None:
+    env = dict(os.environ, MPLBACKEND="Agg")
+    proc = subprocess.run([sys.executable, *args], cwd=workspace, env=env, capture_output=True, text=True,
+                          timeout=PYTHON_TIMEOUT_S)
+    assert proc.returncode == 0, f"{what} failed (exit {proc.returncode}):\n{proc.stderr[-3000:]}"
+
+
+def _check_atlasnn_command(words: list[str]) -> None:
+    """A command that is not run: its options must parse and its config must load."""
+    from atlasnn.cli import build_parser
+    from atlasnn.experiments.config import builtin_config_path, load_config
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        try:
+            args = build_parser().parse_args(words[1:])
+        except SystemExit:
+            raise AssertionError(f"`{' '.join(words)}` does not parse: {err.getvalue().strip()}") from None
+    command = getattr(args, "command", None)
+    if command == "reproduce" and args.name:
+        load_config(builtin_config_path(args.name), quick=args.quick)
+    elif command == "run" and args.config and (ROOT / args.config).exists():
+        load_config(ROOT / args.config, quick=args.quick)
+
+
+def run_block(block: Block, workspace: Path) -> None:
+    if block.file is not None:
+        target = workspace / block.file
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_text(block.code, encoding="utf-8")
+    if block.lang == "python":
+        script = workspace / f"_block_{block.line}.py"
+        script.write_text(block.code, encoding="utf-8")
+        _run_python([script.name], workspace, f"{block.id}")
+    elif block.lang in SHELL_LANGS:
+        for command in shell_commands(block):
+            words = _argv(command)
+            prog = _program(words)
+            if prog == "atlasnn":
+                _run_atlasnn(words, workspace)
+            elif prog.startswith("python"):
+                _run_python(words[1:], workspace, f"{block.id}: `{command}`")
+            else:
+                raise AssertionError(f"{block.id}: `{command}` cannot run in the docs test; "
+                                     "mark the block <!-- docs-test: skip (reason) -->")
+    elif block.lang == "toml":
+        _check_toml(block)
+    elif block.lang == "json":
+        json.loads(block.code)
+
+
+def _check_toml(block: Block) -> None:
+    from atlasnn.experiments.config import parse_config
+
+    data = tomllib.loads(block.code)
+    parse_config(data, source=block.id)
+    if "quick" in data:
+        parse_config(data, quick=True, source=block.id)
+
+
+def check_skipped_block(block: Block) -> None:
+    if block.lang in SHELL_LANGS:
+        for command in shell_commands(block):
+            words = _argv(command)
+            if _program(words) == "atlasnn":
+                _check_atlasnn_command(words)
+    elif block.lang == "python":
+        compile(block.code, block.id, "exec")
+
+
+# ------------------------------------------------------------------------------ the tests
+ALL_BLOCKS = [b for page in PAGES for b in extract_blocks(page.read_text(encoding="utf-8"),
+                                                           str(page.relative_to(ROOT)))]
+#: the blocks with something to run or check (output samples are not tests)
+CODE_BLOCKS = [b for b in ALL_BLOCKS if b.lang != "text"]
+
+
+@pytest.fixture(scope="module")
+def workspaces(tmp_path_factory):
+    """One directory per page, created on first use, with copies of examples/ and scripts/."""
+    made: dict[str, Path] = {}
+
+    def get(page: str) -> Path:
+        if page not in made:
+            ws = tmp_path_factory.mktemp(re.sub(r"\W", "_", page))
+            for sub in ("examples", "scripts"):
+                if (ROOT / sub).is_dir():
+                    shutil.copytree(ROOT / sub, ws / sub, ignore=shutil.ignore_patterns("__pycache__", "runs"))
+            made[page] = ws
+        return made[page]
+
+    return get
+
+
+def test_every_block_has_a_known_language():
+    unknown = [f"{b.id} ({b.lang or 'no language'})" for b in ALL_BLOCKS if b.lang not in KNOWN_LANGS]
+    assert not unknown, f"fence languages must be one of {sorted(KNOWN_LANGS)} (text for output samples): {unknown}"
+
+
+@pytest.mark.parametrize("block", CODE_BLOCKS, ids=[b.id for b in CODE_BLOCKS])
+def test_block(block: Block, workspaces, epoch_cap, monkeypatch):
+    if block.lang not in KNOWN_LANGS:
+        pytest.fail(f"{block.id}: unknown fence language {block.lang or '(none)'!r}")
+    if block.skip is not None:
+        check_skipped_block(block)
+        pytest.skip(f"docs-test: skip ({block.skip}); commands parsed and configs validated only")
+    workspace = workspaces(block.page)
+    monkeypatch.chdir(workspace)
+    run_block(block, workspace)
+
+
+def test_the_pages_have_runnable_blocks():
+    """Guards against the extractor silently finding nothing (a changed fence style, a moved page)."""
+    readme = [b for b in ALL_BLOCKS if b.page == "README.md"]
+    assert any(b.lang == "python" and b.skip is None for b in readme)
+    assert any(b.lang in SHELL_LANGS and b.skip is None for b in readme)
+    assert any(b.lang == "toml" and b.skip is None for b in readme)
+    assert (ROOT / "docs" / "METHOD.md") in PAGES
+
+
+# ------------------------------------------------------------------------------ the harness itself
+_SAMPLE = """\
+Intro.
+
+```python
+print(1)
+```
+
+<!-- docs-test: skip (needs a GPU) -->
+```bash
+make quick
+```
+
+<!-- docs-test: file tiny.toml -->
+
+```toml
+name = "x"
+```
+
+   ```console
+   $ atlasnn systems
+   output line
+   $ atlasnn report \\
+       runs/a  # a comment
+   ```
+
+```
+bare
+```
+"""
+
+
+def test_extractor_finds_blocks_and_markers():
+    blocks = extract_blocks(_SAMPLE, "s.md")
+    assert [(b.line, b.lang) for b in blocks] == [(3, "python"), (8, "bash"), (14, "toml"), (18, "console"),
+                                                  (25, "")]
+    assert blocks[0].skip is None and blocks[0].code == "print(1)\n"
+    assert blocks[1].skip == "needs a GPU"
+    assert blocks[2].file == "tiny.toml" and blocks[2].skip is None
+    assert shell_commands(blocks[3]) == ["atlasnn systems", "atlasnn report runs/a  # a comment"]
+    assert _argv(shell_commands(blocks[3])[1]) == ["atlasnn", "report", "runs/a"]
+
+
+def test_extractor_refuses_markers_without_reason_and_open_fences():
+    with pytest.raises(AssertionError, match="needs a reason"):
+        extract_blocks("<!-- docs-test: skip -->\n```bash\nmake\n```\n")
+    with pytest.raises(AssertionError, match="never closed"):
+        extract_blocks("```python\nprint(1)\n")
+    with pytest.raises(AssertionError, match="shell syntax"):
+        _argv("atlasnn report runs/a | head")
+
+
+def test_unrunnable_command_without_marker_fails(tmp_path):
+    with pytest.raises(AssertionError, match="mark the block"):
+        run_block(Block("s.md", 1, "bash", "make quick\n"), tmp_path)
+
+
+def test_skipped_commands_are_still_checked():
+    check_skipped_block(Block("s.md", 1, "bash", "atlasnn reproduce oscillator-short --seeds 3\n"))
+    with pytest.raises(AssertionError, match="does not parse"):
+        check_skipped_block(Block("s.md", 1, "bash", "atlasnn reproduce oscillator-short --sedes 3\n"))
+    from atlasnn.errors import ConfigError
+
+    with pytest.raises(ConfigError):
+        check_skipped_block(Block("s.md", 1, "bash", "atlasnn reproduce no-such-experiment\n"))
+
+
+def test_a_fragment_config_is_refused():
+    from atlasnn.errors import ConfigError
+
+    with pytest.raises(ConfigError):
+        _check_toml(Block("s.md", 1, "toml", '[system]\nhamiltonian = "p**2/2"\n'))
