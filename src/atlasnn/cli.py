@@ -217,8 +217,8 @@ def cmd_init(args) -> int:
                    hamiltonian=args.hamiltonian, coordinates=split(args.coordinates), momenta=split(args.momenta), z0=z0)
     kind = "transfer (source -> target)" if args.transfer else "single interval"
     print(f"wrote {args.path} ({kind}); every key is commented there, all of them: `atlasnn config`")
-    print(f"  smoke test, seconds: atlasnn run {shlex.quote(args.path)} --quick")
-    print(f"  full budget:         atlasnn run {shlex.quote(args.path)}")
+    print(f"  smoke test (a few hundred epochs): atlasnn run {shlex.quote(args.path)} --quick")
+    print(f"  the full budget:                   atlasnn run {shlex.quote(args.path)}")
     return 0
 
 

@@ -288,12 +288,14 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     evaluation = EvaluationConfig(**v["evaluation"])
     _check_fine_steps(evaluation, stages["interval" if kind == "short" else "target"])
 
-    cfg = ExperimentConfig(
-        name=_default_name(v, source), kind=kind, system=system, **v["network"], models=v["models"],
-        gamma_init=v["gamma_init"], stage=stages.get("interval"), source=stages.get("source"),
-        target=stages.get("target"), **v["transfer"], evaluation=evaluation, seeds=v["seeds"],
-        description=v["description"], follows=v["follows"], raw=raw,
-    )
+    # fields named like a top-level key (models, seeds, ...) or a key of [network] or [transfer]
+    # take its value; the rest are built above
+    fields = {f.name for f in dataclasses.fields(ExperimentConfig)}
+    by_name = {k: x for k, x in {**v, **v["network"], **v["transfer"]}.items() if k in fields}
+    cfg = ExperimentConfig(**{
+        **by_name, "name": _default_name(v, source), "kind": kind, "system": system, "stage": stages.get("interval"),
+        "source": stages.get("source"), "target": stages.get("target"), "evaluation": evaluation, "raw": raw,
+    })
     _check_system_builds(system)
     return cfg
 

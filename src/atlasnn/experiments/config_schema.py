@@ -146,8 +146,7 @@ SCHEMA: dict[str, TableSpec] = {
                                MODEL_ALIASES, unique=True), ["hnn", "atlas_tanh", "atlas_exp"],
             "The models to train: hnn (HNN, f = 1 − e^(−t)), atlas_tanh (ATLAS-NN (tanh), f = tanh(m t)) and "
             "atlas_exp (ATLAS-NN (exp), f = (1 − e^(−αt))/(1 + β e^(−αt))); the Python API's scaling names "
-            "exp_decay, tanh and rational_exp are accepted for them.",
-            note=lambda: "also exp_decay, tanh, rational_exp; non-empty; no repeats"),
+            "exp_decay, tanh and rational_exp are accepted for them."),
         Key("gamma_init", Sub("gamma_init", sparse=True), {},
             "Initial values of each model's time-scaling parameters γ (learned on the first interval)."),
         Key("interval", Sub("stage"), None, "The interval of a short run, [t0, T], and its training settings.",

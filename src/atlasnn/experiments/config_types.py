@@ -257,6 +257,7 @@ class NameList(ValueType):
 
     def limits(self):
         parts = [] if self.choices is None else ["from " + ", ".join(Choice(self.choices).options())]
+        parts += ["also " + ", ".join(self.aliases)] if self.aliases else []
         parts += ["non-empty"] if self.nonempty else []
         return "; ".join(parts + (["no repeats"] if self.unique else []))
 
@@ -348,7 +349,7 @@ class Variant(ValueType):
 class Key:
     """One config key. ``missing``: the message (after ``path = None:``) when a required key is
     absent; ``default_text``: how the reference states a default that is not a plain value;
-    ``note``: extra text for the reference's limits column (a function, read when printed)."""
+    ``note``: the reference's limits text in place of the type's (a function, read when printed)."""
 
     name: str
     type: ValueType

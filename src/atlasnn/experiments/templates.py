@@ -4,8 +4,8 @@ The template is a single-interval experiment or a transfer (source → target) o
 system or a Hamiltonian given as an expression (default: the pendulum H = p²/2 − cos q). Its
 settings are the paper's for the nonlinear oscillator (oscillator-short, oscillator-transfer);
 every key carries its meaning from the schema as a comment, and a tiny [quick] table makes
-``atlasnn run NAME.toml --quick`` a smoke test of seconds. The text is validated (with and
-without --quick) before it is written.
+``atlasnn run NAME.toml --quick`` a smoke test (a few hundred epochs). The text is validated
+(with and without --quick) before it is written.
 """
 
 from __future__ import annotations
@@ -69,22 +69,21 @@ def _tables(name: str, transfer: bool, system_items: list, what: str) -> list[tu
 
 
 def _comment(text: str) -> list[str]:
-    return textwrap.wrap(text, 98, initial_indent="# ", subsequent_indent="# ")
+    return textwrap.wrap(text, 98, initial_indent="# ", subsequent_indent="# ", break_on_hyphens=False)
 
 
 def _render(path_name: str, tables, transfer: bool) -> str:
     run = f"atlasnn run {path_name}"
-    lines = [
-        f"# {path_name}: an atlasnn experiment, written by `atlasnn init`; edit it for your system.",
-        "# A " + ("transfer run: every model is trained on the short source interval, then continued on "
-                  "the long target interval with its time scaling's γ frozen." if transfer else
-                  "single-interval run: every model is trained on [t0, T] and compared with symplectic "
-                  "Euler (SE) and a reference solution."),
-        "# The settings are the paper's for the nonlinear oscillator. Every key is explained above it; "
-        "keys left out",
-        "# take their defaults (all of them: `atlasnn config`, or docs/CONFIG.md).",
+    what = ("A transfer run: every model is trained on the short source interval, then continued on the "
+            "long target interval with its time scaling's γ frozen." if transfer else
+            "A single-interval run: every model is trained on [t0, T] and compared with symplectic Euler (SE) "
+            "and a reference solution.")
+    lines = _comment(f"{path_name}: an atlasnn experiment, written by `atlasnn init`; edit it for your system. "
+                     f"{what} The settings are the paper's for the nonlinear oscillator. Every key is explained "
+                     "above it; keys left out take their defaults (all of them: `atlasnn config`, or docs/CONFIG.md).")
+    lines += [
         "#",
-        f"#   {run} --quick    smoke test: seconds (the [quick] table at the end)",
+        f"#   {run} --quick    a smoke test, a few hundred epochs (the [quick] table at the end)",
         f"#   {run}            the full budget",
     ]
     for table, items in tables:
@@ -123,8 +122,10 @@ def init_template(path: str | Path, *, transfer: bool = False, system: str | Non
     if system is None and hamiltonian is None:
         hamiltonian, coordinates, momenta = PENDULUM
         z0 = [1.0, 0.0] if z0 is None else z0
+        what = f"the pendulum H = {hamiltonian}"
+    else:
+        what = f"the {system} system" if system is not None else f"H = {hamiltonian}"
     name = re.sub(r"[^A-Za-z0-9_.-]+", "-", path.stem).strip("-") or "experiment"
-    what = f"the {system} system" if system is not None else f"H = {hamiltonian}"
     text = None
     for separable in (True, False):  # separable = true if H passes the check
         items = _system_items(system, hamiltonian, coordinates, momenta, z0, separable)
