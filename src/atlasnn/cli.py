@@ -18,6 +18,7 @@ that resumes the run.
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import signal
 import sys
@@ -225,7 +226,11 @@ def cmd_init(args) -> int:
 def cmd_config(args) -> int:
     from atlasnn.experiments.config_reference import reference_markdown, reference_text
 
-    sys.stdout.write(reference_markdown() if args.markdown else reference_text())
+    try:
+        sys.stdout.write(reference_markdown() if args.markdown else reference_text())
+        sys.stdout.flush()
+    except BrokenPipeError:  # `atlasnn config | head`: the reader left; not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return 0
 
 

@@ -24,14 +24,13 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config_schema import (  # noqa: F401  (MAX_*, _number: the package's other users)
+from atlasnn.experiments.config_schema import (  # noqa: F401  (the limits, re-exported as before)
     MAX_DEPTH,
     MAX_EPOCHS,
     MAX_POINTS,
@@ -41,13 +40,10 @@ from atlasnn.experiments.config_schema import (  # noqa: F401  (MAX_*, _number: 
     MAX_TIME,
     MAX_WIDTH,
     SCHEMA,
-    _fail,
-    _number,
-    _one_line,
-    _table,
     parse_table,
     settings_fields,
 )
+from atlasnn.experiments.config_types import _fail, _number, _one_line, _table  # noqa: F401  (_number: cli integrate)
 from atlasnn.labels import MODEL_LABELS  # noqa: F401  (re-exported for the runner)
 from atlasnn.train import TrainConfig
 

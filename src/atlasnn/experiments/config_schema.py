@@ -32,7 +32,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from atlasnn.experiments.config_types import (  # noqa: F401  (primitives re-exported for config.py)
+from atlasnn.experiments.config_types import (
     Bool,
     Choice,
     Integer,
@@ -49,8 +49,6 @@ from atlasnn.experiments.config_types import (  # noqa: F401  (primitives re-exp
     Variant,
     _fail,
     _key,
-    _number,
-    _one_line,
     _table,
 )
 from atlasnn.model import ACTIVATIONS, MODEL_SCALINGS
