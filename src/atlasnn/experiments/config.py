@@ -6,10 +6,16 @@ out-of-range value raises :class:`~atlasnn.errors.ConfigError` with one line nam
 (dotted path) and the value.
 
 Every key is declared once, in :mod:`atlasnn.experiments.config_schema` (type, limits, default,
-meaning; its docstring says how to add one); :func:`parse_config` validates by walking those
-declarations and then applies the few rules that relate several keys, each a small named
-function below (T > t0, sigma or sigma_per_T, z0 against the coordinates, collocation times
-distinct in float32, H finite at z0, separability). ``atlasnn config`` prints the reference.
+meaning); :func:`parse_config` validates by walking those declarations and then applies the few
+rules that relate several keys, each a small named function below (T > t0, sigma or
+sigma_per_T, z0 against the coordinates, collocation times distinct in float32, H finite at z0,
+separability). ``atlasnn config`` prints the reference generated from the same declarations.
+
+Adding a key: one ``Key(...)`` line in its table in ``config_schema.SCHEMA`` (see that module's
+docstring); a key of [train], [evaluation] or [system] then is a field of TrainSettings /
+EvaluationConfig / SystemConfig (generated from the schema), a top-level, [network] or
+[transfer] key also needs a field in ExperimentConfig, and a rule relating it to other keys goes
+here. Then regenerate docs/CONFIG.md (``atlasnn config --markdown``).
 
 A file may carry a ``[quick]`` table with the same layout; ``quick=True`` merges it over the
 rest (a smoke-test variant: same structure, far fewer epochs).
