@@ -10,12 +10,27 @@ import pytest
 
 from atlasnn.checkpoint import load_checkpoint
 from atlasnn.cli import main
+from atlasnn.experiments import config as config_module
+from atlasnn.experiments.config import builtin_config_path
+
+
+CI_QUICK = "[quick]\ntrain = { epochs = 3000, chunk = 1000 }\nevaluation = { eval_points = 2000 }\n"
 
 
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
+    """``reproduce oscillator-short --quick`` with a 3 000-epoch [quick] table: the shipped one
+    trains 20 000 epochs (about a minute, to show the method working), too long for every CI run;
+    everything else is the shipped config, read through the same ``reproduce`` path."""
+    shipped = builtin_config_path("oscillator-short").read_text()
+    head, sep, tail = shipped.partition("\n[quick]\n")
+    assert sep and "\n[" not in tail, "the [quick] table is the shipped file's last table"
+    configs = tmp_path_factory.mktemp("configs")
+    (configs / "oscillator-short.toml").write_text(head + "\n" + CI_QUICK)
     out = tmp_path_factory.mktemp("run") / "oscillator-short-quick"
-    assert main(["reproduce", "oscillator-short", "--quick", "--out", str(out), "--no-progress"]) == 0
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(config_module, "builtin_config_dir", lambda: configs)
+        assert main(["reproduce", "oscillator-short", "--quick", "--out", str(out), "--no-progress"]) == 0
     return out
 
 

@@ -7,6 +7,8 @@
     atlasnn run|reproduce --resume DIR   continue an interrupted run
     atlasnn report DIR                   re-render tables and figures of a finished run
     atlasnn integrate [--system NAME]    reference vs classical integrators, an error table
+    atlasnn init NAME.toml [--transfer]  a commented experiment template for your own system
+    atlasnn config [--markdown]          every config key: type, default, limits, meaning
 
 Errors caused by input are printed as one line and exit with status 2. SIGINT (Ctrl-C) or
 SIGTERM during training saves the training state and exits with status 130, printing the command
@@ -16,6 +18,7 @@ that resumes the run.
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import signal
 import sys
@@ -211,6 +214,36 @@ def cmd_integrate(args) -> int:
     return 0
 
 
+def cmd_init(args) -> int:
+    from atlasnn.experiments.templates import write_template
+
+    z0 = None
+    if args.z0 is not None:
+        try:
+            z0 = [float(x) for x in args.z0]
+        except ValueError:
+            raise AtlasError(f"--z0 {' '.join(args.z0)}: expected numbers") from None
+    split = lambda names: [n for part in names or () for n in part.split(",") if n]  # noqa: E731  "q1,q2" or q1 q2
+    write_template(args.path, force=args.force, transfer=args.transfer, system=args.system,
+                   hamiltonian=args.hamiltonian, coordinates=split(args.coordinates), momenta=split(args.momenta), z0=z0)
+    kind = "transfer (source -> target)" if args.transfer else "single interval"
+    print(f"wrote {args.path} ({kind}); every key is commented there, all of them: `atlasnn config`")
+    print(f"  smoke test (a few hundred epochs): atlasnn run {shlex.quote(args.path)} --quick")
+    print(f"  the full budget:                   atlasnn run {shlex.quote(args.path)}")
+    return 0
+
+
+def cmd_config(args) -> int:
+    from atlasnn.experiments.config_reference import reference_markdown, reference_text
+
+    try:
+        sys.stdout.write(reference_markdown() if args.markdown else reference_text())
+        sys.stdout.flush()
+    except BrokenPipeError:  # `atlasnn config | head`: the reader left; not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="atlasnn", description="ATLAS-NN: learnable time-scaled Hamiltonian neural networks")
     p.add_argument("--version", action="version", version=f"atlasnn {__version__}")
@@ -253,6 +286,24 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--T", default="4*pi", help="end time (number or multiple of pi, e.g. 20*pi)")
     s.add_argument("--steps", type=int, default=199)
     s.set_defaults(func=cmd_integrate)
+
+    s = sub.add_parser("init", help="write a commented experiment template for your own system")
+    s.add_argument("path", metavar="NAME.toml", help="the file to write (refused if it exists, unless --force)")
+    s.add_argument("--transfer", action="store_true", help="a transfer experiment (source -> target), "
+                   "not a single interval")
+    s.add_argument("--system", default=None, metavar="BUILTIN", help="a built-in system (see `atlasnn systems`)")
+    s.add_argument("--hamiltonian", default=None, metavar="EXPR",
+                   help="your own H, e.g. \"p**2/2 - cos(q)\" (the default: that pendulum)")
+    s.add_argument("--coordinates", nargs="+", default=None, metavar="NAME", help="names of q (with --hamiltonian)")
+    s.add_argument("--momenta", nargs="+", default=None, metavar="NAME", help="names of p (with --hamiltonian)")
+    s.add_argument("--z0", nargs="+", default=None, metavar="X", help="initial state (q..., p...); "
+                   "default: the built-in's, or q = 1, p = 0")
+    s.add_argument("--force", action="store_true", help="overwrite an existing file")
+    s.set_defaults(func=cmd_init)
+
+    s = sub.add_parser("config", help="every key of an experiment file: type, default, limits, meaning")
+    s.add_argument("--markdown", action="store_true", help="as Markdown (docs/CONFIG.md is this output)")
+    s.set_defaults(func=cmd_config)
     return p
 
 

@@ -1,0 +1,263 @@
+"""The experiment-config schema: every key of an experiment TOML file, declared once.
+
+A key is one :class:`Key` in its table's :class:`TableSpec` in ``SCHEMA``: its name, its value
+type (an instance of one of the types below; it carries the limits and the choices, checks a
+value and describes itself), its default and a one-sentence meaning in the paper's words. From
+these declarations come
+
+- validation: :func:`parse_table` walks a table and its sub-tables, refusing an unknown key, a
+  wrong type or an out-of-range value with one line naming the key and the value
+  (:mod:`atlasnn.experiments.config` adds the few rules that relate several keys);
+- the settings dataclasses ``TrainSettings``, ``EvaluationConfig`` and ``SystemConfig``, whose
+  fields are the keys of [train], [evaluation] and [system] (:func:`settings_fields`);
+- the config reference, ``atlasnn config`` and docs/CONFIG.md (:mod:`.config_reference`);
+- the comments of the template ``atlasnn init`` writes (:mod:`.templates`).
+
+How to add a key
+----------------
+1. Add one ``Key(...)`` to its table below: name, type with limits, default, meaning. That is all
+   it takes for the key to be validated and documented; a key of [train], [evaluation] or
+   [system] also becomes a field of TrainSettings / EvaluationConfig / SystemConfig, and a [train]
+   key that is also a field of :class:`atlasnn.train.TrainConfig` reaches the trainer. A key of
+   the top level, [network] or [transfer] also needs its field in ExperimentConfig (config.py
+   fills the fields by name). A new table: a new ``TableSpec`` here and a ``Key(name,
+   Sub("its id"), ...)`` where it sits.
+2. If its value must agree with other keys (like T > t0), add a small named rule to config.py.
+3. Regenerate the reference: ``atlasnn config --markdown > docs/CONFIG.md`` (a test compares it
+   with the command's output, another checks that every key the parser accepts is documented).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from atlasnn.experiments.config_types import (
+    Bool,
+    Choice,
+    Integer,
+    Key,
+    NameList,
+    Number,
+    NumberList,
+    NumberTable,
+    SeedList,
+    String,
+    Sub,
+    TableSpec,
+    TextTable,
+    Variant,
+    _fail,
+    _key,
+    _table,
+)
+from atlasnn.model import ACTIVATIONS, MODEL_SCALINGS
+from atlasnn.train import BEST_RULES
+
+# Upper limits: far beyond any sensible experiment, low enough that a typo (an extra digit, a
+# float such as 1e20 where an integer belongs) fails here, as one line, and not as an overflow or
+# an out-of-memory error halfway through a run.
+MAX_EPOCHS = 1_000_000_000  # the trainer counts epochs in int32
+MAX_POINTS = 1_000_000  # collocation points K, evaluation points
+MAX_WIDTH = 10_000
+MAX_DEPTH = 100
+MAX_SEED = 2**32 - 1  # jax.random.PRNGKey takes a uint32 seed (larger ones wrap around silently)
+MAX_SEEDS = 10_000
+MAX_TIME = 1e6  # |t0|, |T|
+MAX_STEPS = 100_000_000  # classical integrator steps (se_steps × fine_factor)
+
+# The paper's model names, and the Python API's scaling names accepted for them in configs.
+MODEL_NAMES = tuple(sorted(MODEL_SCALINGS))
+MODEL_ALIASES = {scaling: model for model, scaling in MODEL_SCALINGS.items()}
+
+
+
+def parse_table(table: str, path: str, given: Any, *, sparse: bool = False) -> dict[str, Any]:
+    """Validate the table ``given`` at ``path`` against ``SCHEMA[table]``: no unknown keys (an
+    alias counts as its key; giving both is refused), every required key present, each value
+    checked by its type; absent keys take their defaults unless ``sparse``."""
+    spec = SCHEMA[table]
+    names = [k.name for k in spec.keys]
+    d = _table(path, given, set(names) | set(spec.aliases), set(names))  # aliases: accepted, not listed
+    for alias, name in spec.aliases.items():
+        if alias in d and name in d:
+            _fail(_key(path, alias), d[alias], f"the same as {_key(path, name)}; give one of them")
+    for k in spec.keys:
+        if k.missing is not None and k.name not in d:
+            k.fill(_key(path, k.name))
+    spelled = {spec.aliases.get(k, k): k for k in d}  # key name -> the spelling given
+    out: dict[str, Any] = {}
+    for k in spec.keys:
+        if k.name in spelled:
+            out[k.name] = k.type.parse(_key(path, spelled[k.name]), d[spelled[k.name]])
+        elif not (sparse or spec.sparse):
+            out[k.name] = k.fill(_key(path, k.name))
+    return out
+
+
+def settings_fields(table: str) -> list[tuple[str, Any, Any]]:
+    """``(name, type, field)`` of each key of a table, for :func:`dataclasses.make_dataclass`."""
+    out = []
+    for k in SCHEMA[table].keys:
+        default = k.default
+        if isinstance(default, list):  # lists are parsed to tuples
+            default = tuple(default)
+        f = dataclasses.field(default_factory=dict) if isinstance(default, dict) else dataclasses.field(default=default)
+        out.append((k.name, Any, f))
+    return out
+
+
+def _builtin_systems() -> str:
+    from atlasnn.systems import BUILTIN_SYSTEMS
+
+    return "built-ins: " + ", ".join(sorted(BUILTIN_SYSTEMS))
+
+
+def _integrators() -> tuple[str, ...]:
+    from atlasnn.integrators import INTEGRATORS
+
+    return tuple(sorted(INTEGRATORS))
+
+
+_STAGE_TIME = Number(low=-MAX_TIME, high=MAX_TIME, pi=True)
+_GAMMA = Number(low=0, low_open=True)
+
+# Every table, by id. A table's id is its path, except that [interval], [source] and [target]
+# share "stage" and their train tables share "train".
+SCHEMA: dict[str, TableSpec] = {
+    "": TableSpec("The top level of an experiment file.", (
+        Key("name", String(r"[A-Za-z0-9_.-]+", "use letters, digits, '-', '_' and '.' only",
+                           "letters, digits, '-', '_', '.'"), None,
+            "The experiment's name, used in the run directory's name and in its results.",
+            default_text="the file's name without .toml"),
+        Key("description", String(), "", "One line saying what the experiment is, shown by `atlasnn experiments` "
+            "and in the results."),
+        Key("kind", Choice(("short", "transfer")), None,
+            "A short run trains every model on one interval; a transfer run trains on a short source "
+            "interval, then transfers the network to a long target interval with the time scaling's γ frozen.",
+            default_text='"transfer" if [source] is given, else "short"'),
+        Key("system", Sub("system"), None, "The Hamiltonian system whose equations of motion the network solves.",
+            missing="expected a table", default_text="required"),
+        Key("network", Sub("network"), {}, "The network N(t; θ) of the trial solution ẑ(t) = z0 + f(t − t0; γ)·N(t; θ)."),
+        Key("train", Sub("train"), {}, "Training settings of every interval (a stage's own train table overrides them key by key)."),
+        Key("models", NameList(f"expected a non-empty list drawn from {list(MODEL_NAMES)}", MODEL_NAMES,
+                               MODEL_ALIASES, unique=True), ["hnn", "atlas_tanh", "atlas_exp"],
+            "The models to train: hnn (HNN, f = 1 − e^(−t)), atlas_tanh (ATLAS-NN (tanh), f = tanh(m t)) and "
+            "atlas_exp (ATLAS-NN (exp), f = (1 − e^(−αt))/(1 + β e^(−αt))); the Python API's scaling names "
+            "exp_decay, tanh and rational_exp are accepted for them."),
+        Key("gamma_init", Sub("gamma_init", sparse=True), {},
+            "Initial values of each model's time-scaling parameters γ (learned on the first interval)."),
+        Key("interval", Sub("stage"), None, "The interval of a short run, [t0, T], and its training settings.",
+            default_text="required for a short run"),
+        Key("source", Sub("stage"), None, "The source interval of a transfer run, on which γ is learned.",
+            default_text="required for a transfer run"),
+        Key("target", Sub("stage"), None, "The target interval of a transfer run; it starts at the source's t0 and "
+            "its network starts from the source's.", default_text="required for a transfer run"),
+        Key("transfer", Sub("transfer"), {}, "How a transfer run carries the source model to the target."),
+        Key("evaluation", Sub("evaluation"), {}, "Where the trained models are measured, and against which classical integrators."),
+        Key("seeds", SeedList(MAX_SEED, MAX_SEEDS), [0], "Seeds of the network initialisation and the jitter: every model is "
+            "trained once per seed (a list, or a count K for seeds 0 to K−1)."),
+        Key("follows", TextTable("expected a table of strings (notes on paper vs release choices)"), {},
+            "Notes saying which choices follow the paper and which the authors' release; kept with the results."),
+        Key("quick", Variant(), None, "A smoke-test variant merged over the file by --quick: any of the keys "
+            "above, typically far fewer epochs.", default_text="none (--quick then refuses the file)"),
+    )),
+    "system": TableSpec("A built-in system by name, or your own Hamiltonian written as an expression.", (
+        Key("name", String(), None, "A built-in system (`atlasnn systems` lists them) or, with hamiltonian, "
+            "a name for your own.", default_text="none", note=_builtin_systems),
+        Key("hamiltonian", String(), None, "Your own Hamiltonian H(q, p) as an expression in the coordinates, "
+            "momenta and params, e.g. \"p**2/2 - cos(q)\" (parsed, never run as Python).", default_text="none"),
+        Key("coordinates", NameList("expected a non-empty list of names"), [],
+            "Names of the coordinates q of your own Hamiltonian.", default_text="required with hamiltonian"),
+        Key("momenta", NameList("expected a non-empty list of names"), [],
+            "Names of the momenta p of your own Hamiltonian, one per coordinate.",
+            default_text="required with hamiltonian"),
+        Key("separable", Bool(), False, "Whether H = T(p) + V(q), which the symplectic integrators need "
+            "(checked for your own Hamiltonian)."),
+        Key("params", NumberTable(), {}, "Values of named parameters of H (a built-in's, e.g. lam, or names "
+            "used in your expression)."),
+        Key("z0", NumberList(Number()), None, "The initial state z0 = (q, p) at t0, coordinates first.",
+            default_text="the built-in's own"),
+    )),
+    "network": TableSpec("The fully connected network N(t; θ) from the time t to R^(2d).", (
+        Key("width", Integer(1, MAX_WIDTH), 50, "Neurons per hidden layer."),
+        Key("depth", Integer(1, MAX_DEPTH), 2, "Number of hidden layers."),
+        Key("activation", Choice(lambda: tuple(sorted(ACTIVATIONS))), "sin", "Activation of the hidden layers."),
+    )),
+    "train": TableSpec("Adam on the physics loss L = residual of Hamilton's equations + λ_reg·energy "
+                       "penalty, at K jittered collocation times.", (
+        Key("epochs", Integer(1, MAX_EPOCHS), 10_000, "Epoch budget: Adam updates on this interval (fewer if "
+            "the loss reaches the tolerance)."),
+        Key("lr", Number(low=0, low_open=True), 1e-3, "Adam's learning rate."),
+        Key("betas", NumberList(Number(low=0, high=0.999999999), 2, "expected two numbers [beta1, beta2]"),
+            [0.9, 0.999], "Adam's decay rates (β1, β2); the authors' release used (0.999, 0.9999).",
+            note=lambda: "2 numbers, each in [0, 1)"),
+        Key("lam_reg", Number(low=0), 1.0, "λ_reg, the weight of the energy penalty (1/K)·Σ(H(ẑ(t_n)) − E0)² in the loss."),
+        Key("n_points", Integer(2, MAX_POINTS), 200, "K, the number of collocation times t_n on the interval."),
+        Key("sigma", Number(low=0), None, "The jitter σ: every epoch each t_n moves by Δt·σ·ε, ε ~ N(0, 1), Δt "
+            "the grid spacing (reflected back into the interval).", default_text="0, or sigma_per_T·T"),
+        Key("sigma_per_T", Number(low=0), None, "σ as a multiple of the interval end T (σ = value·T, the "
+            "release's convention); give sigma or sigma_per_T, not both.", default_text="none"),
+        Key("tolerance", Number(low=0), None, "Stop as soon as the loss L <= tolerance, keeping that epoch's "
+            "parameters.", default_text="none (train the whole budget)"),
+        Key("best_rule", Choice(BEST_RULES), "release", "Which parameters a run returns at the end of its budget: "
+            "release (the lowest-loss ones after best_start_fraction of the budget, as the authors' release), "
+            "lowest (lowest loss in the whole run) or last."),
+        Key("best_start_fraction", Number(low=0, high=1), 0.8, "Fraction of the budget after which the release "
+            "rule looks for the lowest loss."),
+        Key("chunk", Integer(1, MAX_EPOCHS), 1000, "Epochs per compiled call: progress is shown, and an interrupt "
+            "saves the training state, between chunks."),
+    )),
+    "stage": TableSpec("An interval [t0, T] and the training settings used on it.", (
+        Key("t0", _STAGE_TIME, 0.0, "Start of the interval, where the trial solution equals z0 exactly."),
+        Key("T", _STAGE_TIME, None, "End of the interval (greater than t0).",
+            missing="missing (the end of the interval)", default_text="required"),
+        Key("train", Sub("train", sparse=True), {}, "Training settings for this interval only, overriding [train] key by key."),
+    )),
+    "gamma_init": TableSpec("Initial γ per model; a γ left out starts at 1.0, as in the paper.", (
+        Key("hnn", Sub("gamma_init.hnn"), {}, "HNN's scaling f = 1 − e^(−t) has no γ."),
+        Key("atlas_tanh", Sub("gamma_init.atlas_tanh"), {}, "ATLAS-NN (tanh): f = tanh(m t)."),
+        Key("atlas_exp", Sub("gamma_init.atlas_exp"), {}, "ATLAS-NN (exp): f = (1 − e^(−αt))/(1 + β e^(−αt))."),
+    ), aliases=dict(MODEL_ALIASES), sparse=True),
+    "gamma_init.hnn": TableSpec("HNN (also spelt exp_decay): no γ.", (), sparse=True),
+    "gamma_init.atlas_tanh": TableSpec("ATLAS-NN (tanh) (also spelt tanh).", (
+        Key("m", _GAMMA, 1.0, "Initial m of f(t) = tanh(m t)."),
+    ), sparse=True),
+    "gamma_init.atlas_exp": TableSpec("ATLAS-NN (exp) (also spelt rational_exp).", (
+        Key("alpha", _GAMMA, 1.0, "Initial α of f(t) = (1 − e^(−αt))/(1 + β e^(−αt))."),
+        Key("beta", _GAMMA, 1.0, "Initial β of f(t) = (1 − e^(−αt))/(1 + β e^(−αt))."),
+    ), sparse=True),
+    "transfer": TableSpec("Source → target: the target model starts from the source's weights and γ.", (
+        Key("thaw", Bool(), False, "Train γ on the target too (the paper's future work); false keeps γ frozen, as in the paper."),
+        Key("carry_adam", Bool(), True, "Start the target's Adam from the source's moments, as the authors' release does."),
+        Key("baseline", Bool(), True, "Also train an HNN from scratch on the target, the paper's baseline."),
+    )),
+    "evaluation": TableSpec("Errors against a reference solution (SciPy DOP853, float64) on an evaluation grid.", (
+        Key("eval_points", Integer(2, MAX_POINTS), None, "Number of equally spaced times of the evaluation grid.",
+            default_text="K, the interval's n_points"),
+        Key("se_steps", Integer(1, MAX_STEPS), None, "Steps of the symplectic Euler (SE) baseline of the tables.",
+            default_text="K − 1"),
+        Key("fine_factor", Integer(1, MAX_STEPS), 100, "The figures' fine SE takes se_steps × fine_factor steps "
+            "(SE-100 for the oscillator, SE-10 for Hénon–Heiles)."),
+        Key("integrators", NameList("expected a list of names", _integrators, nonempty=False), [],
+            "More classical integrators to tabulate beside SE."),
+        Key("reference_rtol", Number(low=0, low_open=True, high=1e-6), 1e-12, "Relative tolerance of the reference solution."),
+        Key("reference_atol", Number(low=0, low_open=True, high=1e-6), 1e-12, "Absolute tolerance of the reference solution."),
+    )),
+}
+
+
+def table_id(path: str) -> str:
+    """The ``SCHEMA`` id of the table at a dotted path ("" the top level): "interval.train" -> "train"."""
+    tid = ""
+    for part in [p for p in path.split(".") if p]:
+        spec = SCHEMA[tid]
+        typ = spec.key(spec.aliases.get(part, part)).type
+        tid = typ.table if isinstance(typ, Sub) else ""  # [quick] has the top level's keys
+    return tid
+
+
+def key_spec(path: str) -> Key:
+    """The declaration of the key at a dotted path, e.g. ``key_spec("interval.train.lr")``."""
+    table, _, name = path.rpartition(".")
+    return SCHEMA[table_id(table)].key(name)
