@@ -66,7 +66,7 @@ MESSAGES = [
     ('short', lambda d: d['train'].update(best_start_fraction=1.5),
      'train.best_start_fraction = 1.5: must be <= 1'),
     ('short', lambda d: d['train'].update(best_rule='median'),
-     "train.best_rule = 'median': must be one of ['release', 'lowest', 'last']"),
+     "train.best_rule = 'median': must be one of ['release', 'lowest', 'last', 'release_exact']"),
     ('short', lambda d: d['train'].update(sigma=0.1),
      'train.sigma = 0.1: give either sigma or sigma_per_T, not both'),
     ('short', lambda d: d['train'].update(n_points=10**7),
@@ -244,7 +244,7 @@ def test_schema_parse_equals_the_paper_configs_resolution():
     assert cfg.source.train.lr == 8e-3 and cfg.target.train.lr == 5e-3  # stage over [train]
     assert cfg.source.train.epochs == 30000 and cfg.target.train.n_points == 500
     assert cfg.target.train.sigma_per_T == 0.03 and cfg.target.train.sigma is None
-    assert cfg.evaluation.eval_points == 10000 and cfg.evaluation.se_steps is None
+    assert cfg.evaluation.eval_points == 5000 and cfg.evaluation.se_steps is None
     assert cfg.evaluation.integrators == () and cfg.seeds == (0,)
     assert cfg.gamma_init == {"atlas_tanh": {"m": 1.0}, "atlas_exp": {"alpha": 1.0, "beta": 1.0}}
     assert cfg.system.coordinates == () and cfg.system.params == {"lam": 1.0}

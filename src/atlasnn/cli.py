@@ -53,13 +53,21 @@ def _print_summary(results, out: Path, start: float) -> int:
     return 0
 
 
-def _seed_batch(args) -> int | str:
+def _seed_batch(args) -> int | str | None:
+    if args.seed_batch is None:
+        return None
     text = str(args.seed_batch).strip().lower()
     if text == "auto":
         return "auto"
     if not text.isdigit() or int(text) < 1:
         raise AtlasError(f"--seed-batch must be a whole number >= 1 or auto, got {args.seed_batch!r}")
     return int(text)
+
+
+def _default_out(cfg, args) -> str:
+    """runs/NAME[-PROFILE][-quick]; the profile is named when one was chosen."""
+    profile = f"-{cfg.profile}" if args.profile is not None else ""
+    return f"runs/{cfg.name}{profile}{'-quick' if args.quick else ''}"
 
 
 def _run_config(cfg, args, config_text: str, default_out: str, config_source: str | None = None) -> int:
@@ -96,6 +104,9 @@ def _resume(args, check) -> int:
         raise AtlasError(f"--seeds {args.seeds} differs from the run's seeds {list(seeds)} (recorded in {out}/meta.json)")
     if args.quick and not meta.get("quick"):
         raise AtlasError(f"--quick given, but the run in {out} was started without --quick")
+    if args.profile is not None and args.profile != meta.get("profile", cfg.profile):
+        raise AtlasError(f"--profile {args.profile} differs from the run's profile {meta.get('profile', cfg.profile)!r} "
+                         f"(recorded in {out}/meta.json)")
     check(cfg, meta, out)
     start = time.perf_counter()
     results = run_experiment(
@@ -148,9 +159,8 @@ def cmd_reproduce(args) -> int:
     if args.name is None:
         raise AtlasError("reproduce needs the NAME of an experiment (see `atlasnn experiments`), or --resume DIR")
     path = builtin_config_path(args.name)
-    cfg = load_config(path, quick=args.quick)
-    suffix = "-quick" if args.quick else ""
-    return _run_config(cfg, args, path.read_text(encoding="utf-8"), f"runs/{cfg.name}{suffix}", f"{args.name}.toml")
+    cfg = load_config(path, quick=args.quick, profile=args.profile)
+    return _run_config(cfg, args, path.read_text(encoding="utf-8"), _default_out(cfg, args), f"{args.name}.toml")
 
 
 def cmd_run(args) -> int:
@@ -172,9 +182,8 @@ def cmd_run(args) -> int:
         return _resume(args, check)
     if args.config is None:
         raise AtlasError("run needs a CONFIG.toml, or --resume DIR")
-    cfg = load_config(args.config, quick=args.quick)
-    suffix = "-quick" if args.quick else ""
-    return _run_config(cfg, args, Path(args.config).read_text(encoding="utf-8"), f"runs/{cfg.name}{suffix}",
+    cfg = load_config(args.config, quick=args.quick, profile=args.profile)
+    return _run_config(cfg, args, Path(args.config).read_text(encoding="utf-8"), _default_out(cfg, args),
                        str(args.config))
 
 
@@ -258,9 +267,12 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--quick", action="store_true", help="the config's quick variant (far fewer epochs)")
         s.add_argument("--seeds", type=int, default=None, metavar="K", help="repeat every training with seeds 0..K-1")
         s.add_argument("--jobs", type=int, default=1, metavar="J", help="independent trainings in J processes")
-        s.add_argument("--seed-batch", default="auto", metavar="N",
+        s.add_argument("--seed-batch", default=None, metavar="N",
                        help="seeds of one model trained together as one compiled program: a number, or auto "
-                            "(batch where it measures faster; see docs/PERFORMANCE.md)")
+                            "(batch where it measures faster; default: the config's execution.seed_batch, auto)")
+        s.add_argument("--profile", default=None, metavar="NAME",
+                       help="a named variant of the config, e.g. release (the authors' release's settings; "
+                            "default: the file as written, the paper's for the built-in experiments)")
         s.add_argument("--out", default=None, metavar="DIR", help="run directory (default runs/NAME[-quick])")
         s.add_argument("--overwrite", action="store_true", help="reuse a non-empty run directory")
         s.add_argument("--resume", default=None, metavar="DIR",

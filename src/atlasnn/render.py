@@ -220,8 +220,9 @@ def summary_lines(results: dict | str | Path, run_dir: str | Path | None = None)
     if quick:
         lines.append(f"{results['experiment']}: {QUICK_BANNER}")
     spread = f"median over {n} seeds, [min–max] for L2({states[0]})" if n > 1 else f"seed {results['seeds'][0]}"
-    lines += textwrap.wrap(f"{results['experiment']}: L2 (release form, {results.get('eval_points', '?')} points), "
-                           f"{spread}", SUMMARY_WIDTH, subsequent_indent="  ")
+    profile = f" (profile {results['profile']})" if results.get("profile") else ""
+    lines += textwrap.wrap(f"{results['experiment']}{profile}: L2 (release form, {results.get('eval_points', '?')} "
+                           f"points), {spread}", SUMMARY_WIDTH, subsequent_indent="  ")
 
     def row(name: str, values: list[str], p: str, v: str) -> str:
         text = "  " + name.ljust(w_label) + "".join("  " + values[i].ljust(widths[i]) for i in range(k))

@@ -337,5 +337,6 @@ def summarize(results: Any) -> dict:
         "columns_summary": col_summ,
         "sources": src_summ,
         "quick": bool(res.get("quick")),
+        "profile": res.get("profile"),
         "verdicts": column_verdicts(res),
     }

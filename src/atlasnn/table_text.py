@@ -333,13 +333,19 @@ def _stop_text(d: dict) -> str:
 
 
 # ============================================================================ headers
+def _profile_text(summary: dict) -> str:
+    """", profile release" for a run of a named profile (runs of older versions have none)."""
+    profile = summary.get("profile")
+    return f", profile {profile}" if profile else ""
+
+
 def _header_lines(summary: dict, paper: dict | None) -> list[str]:
     base_label = summary["labels"][summary["baseline"]]
     seeds = summary["seeds"]
     lines = [f"{QUICK_BANNER}. Paper values are shown for reference only: they come from the full budget."] \
         if summary.get("quick") else []
     lines += [
-        f"Experiment {summary['experiment']} ({summary['kind']})"
+        f"Experiment {summary['experiment']} ({summary['kind']})" + _profile_text(summary)
         + (f", compared with the paper's table {paper.get('table')} (one training run per model)" if paper else "")
         + ("." if paper else ". No paper values (not one of the paper's experiments, or left out)."),
         f"Seeds: {len(seeds)} ({', '.join(str(s) for s in seeds)}). Each network cell: median [min–max] across seeds; "
@@ -373,7 +379,7 @@ def _latex_caption(summary: dict, paper: dict | None) -> str:
     parts = ["\\textbf{" + esc(_ascii(QUICK_BANNER)) + ".} Paper values for reference only (full budget)."] \
         if summary.get("quick") else []
     parts += [
-        f"Experiment {esc(summary['experiment'])} ({summary['kind']})"
+        f"Experiment {esc(summary['experiment'])} ({summary['kind']})" + esc(_profile_text(summary))
         + (f", compared with the paper's table {esc(str(paper.get('table')))} (one training run per model, "
            "values in parentheses)." if paper else "; no paper values."),
         f"{len(seeds)} seeds ({esc(', '.join(str(s) for s in seeds))}): each network cell is the median "

@@ -142,10 +142,13 @@ class ExperimentConfig:
     thaw: bool = False
     carry_adam: bool = True
     baseline: bool = True
+    lr_from_source: bool = False
     evaluation: EvaluationConfig = EvaluationConfig()
     seeds: tuple[int, ...] = (0,)
     description: str = ""
     follows: dict[str, str] = field(default_factory=dict)
+    profile: str = "default"
+    seed_batch: int | str = "auto"
     raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -265,11 +268,17 @@ def _check_fine_steps(evaluation: EvaluationConfig, stage: Stage) -> None:
 
 
 # ----------------------------------------------------------------------- parsing
-def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "config") -> ExperimentConfig:
-    """Validate a config dict (as read from TOML) and return an :class:`ExperimentConfig`."""
+def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "config",
+                 profile: str | None = None) -> ExperimentConfig:
+    """Validate a config dict (as read from TOML) and return an :class:`ExperimentConfig`.
+
+    ``profile``: a variant in ``[profiles]`` merged over the file first (the file's own ``profile``
+    name, or None, takes the file as written); ``quick``: ``[quick]`` merged over that.
+    """
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: expected a table at the top level")
     _table("", data, {k.name for k in SCHEMA[""].keys})
+    data = _apply_profile(data, profile, source)
     if quick:
         q = data.get("quick")
         if q is None:
@@ -293,13 +302,27 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     # fields named like a top-level key (models, seeds, ...) or a key of [network] or [transfer]
     # take its value; the rest are built above
     fields = {f.name for f in dataclasses.fields(ExperimentConfig)}
-    by_name = {k: x for k, x in {**v, **v["network"], **v["transfer"]}.items() if k in fields}
+    by_name = {k: x for k, x in {**v, **v["network"], **v["transfer"], **v["execution"]}.items() if k in fields}
     cfg = ExperimentConfig(**{
         **by_name, "name": _default_name(v, source), "kind": kind, "system": system, "stage": stages.get("interval"),
         "source": stages.get("source"), "target": stages.get("target"), "evaluation": evaluation, "raw": raw,
     })
     _check_system_builds(system)
     return cfg
+
+
+def _apply_profile(data: dict[str, Any], profile: str | None, source: str) -> dict[str, Any]:
+    """The file with the named profile merged over it (its ``profile`` key set to that name)."""
+    own = data.get("profile", "default")
+    variants = SCHEMA[""].key("profiles").type.parse("profiles", data.get("profiles", {}))
+    if profile is None or profile == own:
+        return {k: v for k, v in data.items() if k != "profiles"}
+    if profile not in variants:
+        known = [own, *sorted(variants)]
+        raise ConfigError(f"{source}: has no profile {profile!r} (it has {known}; --profile chooses one)")
+    merged = _deep_merge({k: v for k, v in data.items() if k != "profiles"}, variants[profile])
+    merged["profile"] = profile  # (the profile's follows notes are merged over the file's, key by key)
+    return merged
 
 
 def _check_system_builds(system: SystemConfig) -> None:
@@ -362,7 +385,7 @@ def _check_separable(sysm, z0) -> None:
                       f"{float(h[:d, d:].flat[int(np.argmax(cross))]):g} at {at}); set separable = false")
 
 
-def load_config(path: str | Path, *, quick: bool = False) -> ExperimentConfig:
+def load_config(path: str | Path, *, quick: bool = False, profile: str | None = None) -> ExperimentConfig:
     """Read and validate a TOML experiment file."""
     path = Path(path)
     try:
@@ -375,7 +398,7 @@ def load_config(path: str | Path, *, quick: bool = False) -> ExperimentConfig:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
-    return parse_config(data, quick=quick, source=str(path))
+    return parse_config(data, quick=quick, source=str(path), profile=profile)
 
 
 def builtin_config_dir() -> Path:

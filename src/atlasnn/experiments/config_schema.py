@@ -35,12 +35,14 @@ from typing import Any
 from atlasnn.experiments.config_types import (
     Bool,
     Choice,
+    CountOrAuto,
     Integer,
     Key,
     NameList,
     Number,
     NumberList,
     NumberTable,
+    Profiles,
     SeedList,
     String,
     Sub,
@@ -52,7 +54,7 @@ from atlasnn.experiments.config_types import (
     _table,
 )
 from atlasnn.model import ACTIVATIONS, MODEL_SCALINGS
-from atlasnn.train import BEST_RULES
+from atlasnn.train import BEST_RULES, LR_SCHEDULES
 
 # Upper limits: far beyond any sensible experiment, low enough that a typo (an extra digit, a
 # float such as 1e20 where an integer belongs) fails here, as one line, and not as an overflow or
@@ -159,6 +161,14 @@ SCHEMA: dict[str, TableSpec] = {
             "trained once per seed (a list, or a count K for seeds 0 to K−1)."),
         Key("follows", TextTable("expected a table of strings (notes on paper vs release choices)"), {},
             "Notes saying which choices follow the paper and which the authors' release; kept with the results."),
+        Key("execution", Sub("execution"), {}, "How the trainings are run (not what they compute)."),
+        Key("profile", String(r"[A-Za-z0-9_-]+", "use letters, digits, '-' and '_' only",
+                              "letters, digits, '-', '_'"), "default",
+            "The name of the settings this file holds as written (the paper's experiments: \"paper\"); "
+            "recorded with the results."),
+        Key("profiles", Profiles(), {}, "Named variants of the experiment, each a table of the keys above "
+            "merged over the file by --profile NAME (e.g. [profiles.release]: the authors' release's settings).",
+            default_text="none"),
         Key("quick", Variant(), None, "A smoke-test variant merged over the file by --quick: any of the keys "
             "above, typically far fewer epochs.", default_text="none (--quick then refuses the file)"),
     )),
@@ -201,10 +211,20 @@ SCHEMA: dict[str, TableSpec] = {
         Key("tolerance", Number(low=0), None, "Stop as soon as the loss L <= tolerance, keeping that epoch's "
             "parameters.", default_text="none (train the whole budget)"),
         Key("best_rule", Choice(BEST_RULES), "release", "Which parameters a run returns at the end of its budget: "
-            "release (the lowest-loss ones after best_start_fraction of the budget, as the authors' release), "
-            "lowest (lowest loss in the whole run) or last."),
+            "release (the lowest-loss ones after best_start_fraction of the budget), lowest (lowest loss in the "
+            "whole run), last, or release_exact (the authors' release to the letter: the parameters after the "
+            "update of the best epoch past the fraction, a running threshold starting at 1, and a strict "
+            "loss < tolerance test)."),
         Key("best_start_fraction", Number(low=0, high=1), 0.8, "Fraction of the budget after which the release "
-            "rule looks for the lowest loss."),
+            "rules look for the lowest loss."),
+        Key("lr_schedule", Choice(LR_SCHEDULES), "constant", "The learning rate over the epoch budget: constant, "
+            "or a cosine or exponential decay (Optax schedules) from lr to lr·lr_final_ratio."),
+        Key("lr_final_ratio", Number(low=0, low_open=True, high=1), 0.01, "With a decaying lr_schedule, the "
+            "learning rate at the end of the budget as a fraction of lr."),
+        Key("causal_eps", Number(low=0), 0.0, "Causal weighting of the loss (Wang, Sankaran & Perdikaris, 2022): "
+            "each collocation time's loss is weighted by exp(−ε·∫ loss before it); 0 turns it off."),
+        Key("release_fixed_point", Bool(), False, "Pin one collocation time at t0 + 1 every epoch, as the "
+            "authors' release does (its third point is set to −1 and reflected)."),
         Key("chunk", Integer(1, MAX_EPOCHS), 1000, "Epochs per compiled call: progress is shown, and an interrupt "
             "saves the training state, between chunks."),
     )),
@@ -231,6 +251,13 @@ SCHEMA: dict[str, TableSpec] = {
         Key("thaw", Bool(), False, "Train γ on the target too (the paper's future work); false keeps γ frozen, as in the paper."),
         Key("carry_adam", Bool(), True, "Start the target's Adam from the source's moments, as the authors' release does."),
         Key("baseline", Bool(), True, "Also train an HNN from scratch on the target, the paper's baseline."),
+        Key("lr_from_source", Bool(), False, "Train the target at the source's learning rate instead of the "
+            "target's own, as the authors' release did in effect (loading the source's Adam state also set "
+            "its learning rate)."),
+    )),
+    "execution": TableSpec("How the trainings are run; results do not depend on these beyond rounding.", (
+        Key("seed_batch", CountOrAuto(1024), "auto", "Seeds of one model trained together as one compiled "
+            "program: a number, or auto (batch where it measures faster; --seed-batch overrides it)."),
     )),
     "evaluation": TableSpec("Errors against a reference solution (SciPy DOP853, float64) on an evaluation grid.", (
         Key("eval_points", Integer(2, MAX_POINTS), None, "Number of equally spaced times of the evaluation grid.",

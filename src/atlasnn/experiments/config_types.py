@@ -344,6 +344,45 @@ class Variant(ValueType):
         return _table(path, v, {k.name for k in SCHEMA[""].keys} - {"quick"})
 
 
+@dataclass(frozen=True)
+class Profiles(ValueType):
+    """Named variants of the file (``[profiles.release]``): each like [quick], merged over the
+    file by ``--profile NAME`` (before [quick])."""
+
+    label = "table of variants"
+
+    def parse(self, path, v):
+        if not isinstance(v, dict):
+            _fail(path, v, "expected a table of named variants, e.g. [profiles.release]")
+        out = {}
+        for name, variant in v.items():
+            if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_-]+", name):
+                _fail(_key(path, name), variant, "profile names use letters, digits, '-' and '_' only")
+            out[name] = Variant().parse(_key(path, name), variant)
+            for inner in ("profile", "profiles"):
+                if inner in variant:
+                    _fail(_key(_key(path, name), inner), variant[inner], "a profile cannot set the profiles")
+        return out
+
+
+@dataclass(frozen=True)
+class CountOrAuto(ValueType):
+    """A whole number >= 1, or the string "auto" (decided by the program)."""
+
+    high: int
+    label = "integer or \"auto\""
+
+    def parse(self, path, v):
+        if v == "auto":
+            return v
+        if isinstance(v, str):
+            _fail(path, v, 'expected a whole number or "auto"')
+        return _integer(path, v, 1, self.high)
+
+    def limits(self):
+        return f'[1, {self.high}] or "auto"'
+
+
 # ------------------------------------------------------------------------ keys and tables
 @dataclass(frozen=True)
 class Key:

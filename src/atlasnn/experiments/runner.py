@@ -135,7 +135,7 @@ def run_experiment(
     resume: bool = False,
     config_source: str | None = None,
     handle_signals: bool = True,
-    seed_batch: int | str = "auto",
+    seed_batch: int | str | None = None,
 ) -> dict[str, Any]:
     """Run every training of ``cfg`` and write the run directory ``out``; returns results.
 
@@ -145,7 +145,7 @@ def run_experiment(
     in ``out`` (use :func:`resume_experiment`, which reads the config from ``out``).
     ``handle_signals``: while running, SIGINT and SIGTERM stop training at the end of the current
     chunk (main thread only). Raises :class:`RunInterrupted` (a KeyboardInterrupt) when
-    interrupted.
+    interrupted. ``seed_batch`` None takes the config's ``execution.seed_batch``.
     """
     seeds = tuple(seeds if seeds is not None else cfg.seeds)
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
@@ -164,7 +164,7 @@ def run_experiment(
         meta = read_run_meta(out)  # as it is now, under the lock
     else:
         meta = None
-        tasks = plan_tasks(cfg, seeds, jobs=jobs, seed_batch=seed_batch)
+        tasks = plan_tasks(cfg, seeds, jobs=jobs, seed_batch=cfg.seed_batch if seed_batch is None else seed_batch)
         lock = open_run_dir(out, overwrite)
     guard = SignalGuard() if handle_signals else NoGuard()
     try:
@@ -283,7 +283,8 @@ class _Run:
                 (self.out / "config.toml").write_text(config_text, encoding="utf-8")
             write_json(self.out / "config.json", {"resolved": cfg_dict, "as_given": self.cfg.raw})
             self.meta = {
-                "experiment": self.cfg.name, "quick": quick, "seeds": list(self.seeds), "jobs": self.jobs,
+                "experiment": self.cfg.name, "profile": self.cfg.profile, "quick": quick,
+                "seeds": list(self.seeds), "jobs": self.jobs,
                 "versions": versions(),
                 "started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(self.started)),
                 "command": " ".join(sys.argv), "reference": reference, "status": "running",
@@ -333,7 +334,8 @@ class _Run:
         warnings = [w for w in (divergence_advice(cfg, r) for r in runs) if w]
         warnings += [n for o in ordered for n in o.get("notes", [])]
         return {
-            "experiment": cfg.name, "kind": cfg.kind, "description": cfg.description, "quick": quick,
+            "experiment": cfg.name, "profile": cfg.profile, "kind": cfg.kind, "description": cfg.description,
+            "quick": quick,
             "system": system.describe(), "state_names": list(system.state_names), "energy0": e0,
             "seeds": list(self.seeds), "tolerance": st.train.tolerance, "columns": cfg.columns(),
             "baseline": cfg.baseline_column(), "labels": {c: MODEL_LABELS.get(c, c) for c in cfg.columns()},

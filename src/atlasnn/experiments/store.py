@@ -207,7 +207,7 @@ def load_run_config(out: str | Path):
             quick = False  # the recorded config is the merged one
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ConfigError(f"--resume {out}: cannot read the run's config ({one_line(exc)})") from None
-    return parse_config(data, quick=quick, source=str(source)), meta
+    return parse_config(data, quick=quick, source=str(source), profile=meta.get("profile")), meta
 
 
 # ------------------------------------------------------------- records and states

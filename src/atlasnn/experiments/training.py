@@ -305,6 +305,8 @@ def _train_chain(run: _TaskRun) -> None:
         sources.update(_train_sources(run, missing))
     tgt = cfg.target
     tcs = run.configs(tgt, seeds, freeze_gamma=not cfg.thaw)
+    if cfg.lr_from_source:  # the release's target ran at the source's lr (its Adam state carried it)
+        tcs = [tc.replace(lr=cfg.source.train.lr) for tc in tcs]
     results = run.stage(task.column, seeds, tcs, lambda s0, cb: transfer_batch(
         [sources[s][0] for s in seeds], [sources[s][1] for s in seeds], run.system, tgt.T, tcs,
         thaw=cfg.thaw, carry_adam=cfg.carry_adam, desc=run.label(task.column, seeds), resumes=s0, on_chunk=cb))
