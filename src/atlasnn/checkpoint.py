@@ -23,8 +23,10 @@ number, shapes and dtypes. A system defined by a Python function cannot be store
 has to be passed again when loading. Built-in and expression systems are rebuilt from their
 ``spec``.
 
-Files are written atomically: to a temporary file in the same directory, flushed and fsynced,
-then renamed onto the real name, so a crash never leaves a half-written file under that name.
+Files are written atomically by :func:`atlasnn.fileio.write_atomic`: to a temporary file in the
+same directory, flushed and fsynced, then renamed onto the real name, so a crash never leaves a
+half-written file under that name; the file gets the permissions an ordinary ``open()`` gives
+(0644 under the usual umask 022).
 
 Every problem with a file is raised as a one-line :class:`~atlasnn.errors.CheckpointError` that
 names the file.
@@ -39,7 +41,6 @@ import json
 import math
 import os
 import re
-import tempfile
 from dataclasses import dataclass
 from typing import Any, Mapping
 
@@ -50,6 +51,7 @@ import numpy as np
 
 from atlasnn._version import __version__
 from atlasnn.errors import AtlasError, CheckpointError
+from atlasnn.fileio import write_atomic
 from atlasnn.model import TrialSolution, make_model
 from atlasnn.solution import Solution
 from atlasnn.systems import HamiltonianSystem, system_from_spec
@@ -251,34 +253,12 @@ def _build_meta(
 
 
 def _write_atomic(path: str, arrays: Mapping[str, np.ndarray]) -> None:
-    """np.savez to a temporary file beside ``path``, fsync, then rename onto ``path``."""
-    directory = os.path.dirname(os.path.abspath(path))
+    """np.savez through :func:`atlasnn.fileio.write_atomic` (temporary file beside ``path``,
+    fsync, rename; the permissions of an ordinary file)."""
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=directory)
+        write_atomic(path, lambda f: np.savez(f, allow_pickle=False, **arrays))
     except OSError as exc:
         raise _fail(path, f"cannot write: {exc.strerror or exc}") from None
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, allow_pickle=False, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException as exc:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        if isinstance(exc, OSError):
-            raise _fail(path, f"cannot write: {exc.strerror or exc}") from None
-        raise
-    try:  # make the rename itself durable (best effort; not possible on every platform)
-        dfd = os.open(directory, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:
-        pass
 
 
 def _save(path, model, system, kind, history, train_config, extra, more_arrays, more_meta) -> str:
