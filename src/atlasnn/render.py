@@ -128,16 +128,28 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
     return written
 
 
+def _shown(results: dict) -> dict:
+    """``results`` without the columns that hold nothing to show: the symplectic-Euler column of a
+    non-separable system is planned but never run (no integrator row, no training runs)."""
+    filled = {e.get("column") for e in results.get("integrators") or []}
+    filled |= {r.get("column") for r in results.get("runs") or []}
+    columns = [c for c in results["columns"] if c in filled]
+    if columns == list(results["columns"]):
+        return results
+    labels = {c: v for c, v in (results.get("labels") or {}).items() if c in columns}
+    return {**results, "columns": columns, "labels": labels}
+
+
 def write_report(run_dir: str | Path) -> list[Path]:
     """Tables and figures of a finished run directory; returns the paths written."""
     run_dir = Path(run_dir)
-    results = load_results(run_dir)
+    results = _shown(load_results(run_dir))
     return list(write_tables(results, run_dir)) + write_figures(run_dir, results)
 
 
 def summary_lines(results: dict) -> list[str]:
     """A short plain-text summary: median L2 (release form) of the first state per column."""
-    results = load_results(results)
+    results = _shown(load_results(results))
     s = summarize(results)
     first = results["state_names"][0]
     try:
@@ -150,7 +162,9 @@ def summary_lines(results: dict) -> list[str]:
         cs = s["columns_summary"].get(c)
         if not cs:
             continue
-        st = cs["metrics"]["l2_discrete"][first]
+        st = cs["metrics"].get("l2_discrete", {}).get(first)
+        if not st or st.get("median") is None:
+            continue
         paper = paper_rows.get(c)
         ptxt = f"{paper:.3g}" if isinstance(paper, (int, float)) else "-"
         lines.append(f"  {results['labels'].get(c, c):28s} {st['median']:.3e} [{st['min']:.2e}-{st['max']:.2e}]   paper {ptxt}")
