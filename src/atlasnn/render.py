@@ -29,16 +29,26 @@ def _tolerance(results: dict) -> float | None:
     return tol if tol else None
 
 
-def _histories(run_dir: Path, runs: list[dict]) -> dict[str, dict]:
-    """Loss and γ histories per (column, seed) from the checkpoints (read as plain arrays)."""
+def _histories(run_dir: Path, results: dict) -> dict[str, dict]:
+    """Loss and γ histories per (column, seed) from the checkpoints (read as plain arrays).
+
+    Every checkpoint must belong to the run: the system of ``results.json`` (identity, z0), the
+    record's interval, column, role and seed; anything else is refused with one line."""
     from atlasnn.checkpoint import load_checkpoint
+    from atlasnn.errors import CheckpointError
 
     out = {}
-    for r in runs:
+    for r in results["runs"]:
         path = run_dir / r["checkpoint"]
         if not path.exists():
             continue
         ck = load_checkpoint(path)
+        owner = f"the run in {run_dir}"
+        ck.require({"system": results.get("system"), "interval": r.get("interval")}, owner=owner)
+        for key in ("column", "role", "seed"):
+            if key in ck.extra and key in r and ck.extra[key] != r[key]:
+                raise CheckpointError(f"checkpoint {path}: not a model of {owner}: its {key} is "
+                                      f"{ck.extra[key]!r}, the run's record says {r[key]!r}")
         h = ck.history
         if h is None:
             continue
@@ -59,7 +69,7 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
     seed0 = seeds[0]
     runs = results["runs"]
     src_iv = tuple(results["source_interval"]) if results.get("source_interval") else None
-    hist = _histories(run_dir, runs)
+    hist = _histories(run_dir, results)
     written: list[Path] = []
 
     written += plots.plot_scaling_families(fig_dir / "scaling_families")
