@@ -548,9 +548,10 @@ class Checkpoint:
         if why:
             raise _fail(self.path, f"not a model of {owner}: {why}")
 
-    def solution(self) -> Solution:
-        """The model as a :class:`~atlasnn.solution.Solution` (interval and extra as its info)."""
-        return Solution(self.model, self.system, interval=self.interval, info=self.extra)
+    def solution(self, outside: str = "warn") -> Solution:
+        """The model as a :class:`~atlasnn.solution.Solution` with the stored training interval
+        (evaluating beyond it warns, raises or is allowed per ``outside``) and extra as its info."""
+        return Solution(self.model, self.system, interval=self.interval, info=self.extra, outside=outside)
 
 
 def load_checkpoint(
