@@ -7,6 +7,7 @@ import contextlib
 import errno
 import json
 import os
+import shutil
 import subprocess
 
 import pytest
@@ -72,8 +73,42 @@ def test_out_in_an_unwritable_directory(tmp_path, config, capsys):
         locked.chmod(0o700)
     assert status == 2
     line = one_line_error(err)
-    assert str(locked) in line and "Permission denied" in line
+    assert line == (f"atlasnn: error: --out {locked / 'run'}: cannot write in {locked} (where --out "
+                    f"{locked / 'run'} would be created): Permission denied")
     assert os.listdir(locked) == []
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or shutil.which("setpriv") is None,
+                    reason="as root, the same check runs the CLI as the user nobody (needs setpriv)")
+def test_out_in_an_unwritable_directory_as_nobody():
+    """Root ignores permissions, so run the command as nobody (uid 65534) in a directory that
+    nobody may enter but not write into."""
+    import sys
+    import tempfile
+
+    base = tempfile.mkdtemp(prefix="atlasnn-perm-")
+    try:
+        os.chmod(base, 0o755)
+        locked = os.path.join(base, "locked")
+        os.mkdir(locked, 0o555)
+        config = os.path.join(base, "tiny.toml")
+        with open(config, "w") as f:
+            f.write(TINY)
+        os.chmod(config, 0o644)
+        as_nobody = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", sys.executable, "-c"]
+        probe = subprocess.run(as_nobody + ["import atlasnn.cli"], capture_output=True, text=True, cwd=base)
+        if probe.returncode != 0:
+            pytest.skip(f"nobody cannot import atlasnn here: {probe.stderr.strip()[-200:]}")
+        code = "import sys; from atlasnn.cli import main; sys.exit(main(sys.argv[1:]))"
+        done = subprocess.run(as_nobody + [code, "run", config, "--out", os.path.join(locked, "run"), "--no-progress"],
+                              capture_output=True, text=True, cwd=base, timeout=120)
+        assert done.returncode == 2, done.stderr
+        target = os.path.join(locked, "run")
+        assert done.stderr == (f"atlasnn: error: --out {target}: cannot write in {locked} (where --out {target} "
+                               "would be created): Permission denied\n")
+        assert os.listdir(locked) == []
+    finally:
+        shutil.rmtree(base)
 
 
 @contextlib.contextmanager

@@ -335,8 +335,8 @@ def _check_out(args) -> None:
         return
     path = Path(out).absolute()
     existing = path
-    while not existing.exists() and existing != existing.parent:
-        if existing.is_symlink():  # a dangling link: let the runner report it
+    while not os.path.exists(existing) and existing != existing.parent:  # False also when not searchable
+        if os.path.islink(existing):  # a dangling link: let the runner report it
             return
         existing = existing.parent
     target = existing if existing == path else f"{existing} (where --out {out} would be created)"
