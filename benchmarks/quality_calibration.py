@@ -99,6 +99,8 @@ def main(argv=None) -> None:
                   f"[{time.perf_counter() - start:.0f} s]", flush=True)
             for r in v.reasons:
                 print(f"    {r}")
+            if v.advice:
+                print(f"    advice: {v.advice}")
 
 
 if __name__ == "__main__":
