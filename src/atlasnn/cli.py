@@ -6,11 +6,14 @@
     atlasnn run CONFIG.toml [...]        a user's own experiment
     atlasnn run|reproduce --resume DIR   continue an interrupted run
     atlasnn report DIR                   re-render tables and figures of a finished run
-    atlasnn integrate [--system NAME]    reference vs classical integrators, an error table
+    atlasnn integrate [CONFIG] [--system NAME] [--T 6.0|20*pi]
+                                         reference vs classical integrators, an error table
 
-Errors caused by input are printed as one line and exit with status 2. SIGINT (Ctrl-C) or
-SIGTERM during training saves the training state and exits with status 130, printing the command
-that resumes the run.
+Errors caused by input, and file-system errors (a path that cannot be created or written, a full
+disk: ``PATH: CAUSE``), are printed as one line; the exit status is 2 when the command failed
+before its run started and 1 when it failed mid-run (the run had written its meta.json; its
+finished trainings are on disk). SIGINT (Ctrl-C) or SIGTERM during training saves the training
+state and exits with status 130, printing the command that resumes the run.
 """
 
 from __future__ import annotations
