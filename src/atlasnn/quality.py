@@ -121,7 +121,7 @@ class Verdict:
     status: str
     reasons: tuple[str, ...] = ()
     advice: str = ""
-    measures: Mapping[str, Any] = field(default_factory=dict)
+    measures: Mapping[str, Any] = field(default_factory=dict, hash=False)
 
     def as_dict(self) -> dict[str, Any]:
         """A JSON-able copy (lists and plain floats; non-finite floats as None)."""
