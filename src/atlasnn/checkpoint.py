@@ -23,8 +23,10 @@ number, shapes and dtypes. A system defined by a Python function cannot be store
 has to be passed again when loading. Built-in and expression systems are rebuilt from their
 ``spec``.
 
-Files are written atomically: to a temporary file in the same directory, flushed and fsynced,
-then renamed onto the real name, so a crash never leaves a half-written file under that name.
+Files are written atomically by :func:`atlasnn.fileio.write_atomic`: to a temporary file in the
+same directory, flushed and fsynced, then renamed onto the real name, so a crash never leaves a
+half-written file under that name; the file gets the permissions an ordinary ``open()`` gives
+(0644 under the usual umask 022).
 
 Every problem with a file is raised as a one-line :class:`~atlasnn.errors.CheckpointError` that
 names the file.
@@ -39,7 +41,6 @@ import json
 import math
 import os
 import re
-import tempfile
 from dataclasses import dataclass
 from typing import Any, Mapping
 
@@ -50,6 +51,8 @@ import numpy as np
 
 from atlasnn._version import __version__
 from atlasnn.errors import AtlasError, CheckpointError
+from atlasnn.fileio import write_atomic
+from atlasnn.identity import interval_mismatch, record_probes, system_mismatch
 from atlasnn.model import TrialSolution, make_model
 from atlasnn.solution import Solution
 from atlasnn.systems import HamiltonianSystem, system_from_spec
@@ -244,6 +247,10 @@ def _build_meta(
             "system": None if system is None else _to_json(system.describe(), "system"),
             "train_config": _to_json(_config_dict(train_config), "train_config"),
             "extra": _to_json(dict(extra or {}), "extra"),
+            # H at four fixed states near z0: lets a loader tell Hamiltonians apart even when
+            # they are Python functions (atlasnn.identity)
+            "system_probes": None if system is None else _to_json(
+                record_probes(system, np.asarray(model.z0, dtype=np.float64)), "system_probes"),
         }
     except (TypeError, ValueError) as exc:
         raise _fail(path, f"cannot save: {exc}") from None
@@ -251,34 +258,12 @@ def _build_meta(
 
 
 def _write_atomic(path: str, arrays: Mapping[str, np.ndarray]) -> None:
-    """np.savez to a temporary file beside ``path``, fsync, then rename onto ``path``."""
-    directory = os.path.dirname(os.path.abspath(path))
+    """np.savez through :func:`atlasnn.fileio.write_atomic` (temporary file beside ``path``,
+    fsync, rename; the permissions of an ordinary file)."""
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=directory)
+        write_atomic(path, lambda f: np.savez(f, allow_pickle=False, **arrays))
     except OSError as exc:
         raise _fail(path, f"cannot write: {exc.strerror or exc}") from None
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, allow_pickle=False, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException as exc:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        if isinstance(exc, OSError):
-            raise _fail(path, f"cannot write: {exc.strerror or exc}") from None
-        raise
-    try:  # make the rename itself durable (best effort; not possible on every platform)
-        dfd = os.open(directory, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:
-        pass
 
 
 def _save(path, model, system, kind, history, train_config, extra, more_arrays, more_meta) -> str:
@@ -474,6 +459,10 @@ def _resolve_system(path: str, meta: Mapping[str, Any], system: HamiltonianSyste
                 f"the given system {system.name!r} has state dimension {system.state_dim}, "
                 f"the stored model has {state_dim}",
             )
+        if stored is not None:
+            why = system_mismatch(stored, system, meta.get("system_probes"))
+            if why:
+                raise _fail(path, f"not a model of the given system: {why}")
         return system
     spec = stored.get("spec") if stored else None
     if not spec:
@@ -537,25 +526,60 @@ class Checkpoint:
         except (TypeError, AtlasError) as exc:
             raise _fail(self.path, f"stored train_config is not usable ({_describe_exc(exc)})") from None
 
-    def solution(self) -> Solution:
-        """The model as a :class:`~atlasnn.solution.Solution` (interval and extra as its info)."""
-        return Solution(self.model, self.system, interval=self.interval, info=self.extra)
+    def require(self, expect: Mapping[str, Any], owner: str = "the expected problem") -> None:
+        """Refuse (one-line CheckpointError) a model that is not of ``expect``'s problem: keys
+        ``"system"`` (a HamiltonianSystem or a ``describe()`` dict), ``"interval"`` ((t0, T)) and
+        ``"z0"`` (the model's initial state); ``owner`` names the problem in the message."""
+        unknown = sorted(set(expect) - {"system", "interval", "z0"})
+        if unknown:
+            raise TypeError(f"expect has unknown keys {unknown} (known: interval, system, z0)")
+        stored = self.meta.get("system") if isinstance(self.meta.get("system"), dict) else self.system.describe()
+        why = None
+        if expect.get("system") is not None:
+            why = system_mismatch(stored, expect["system"], self.meta.get("system_probes"))
+        if why is None and expect.get("z0") is not None:
+            # the model holds z0 in its own float type: compare with the expected z0 rounded to it
+            z0, want = self.meta.get("z0"), [float(x) for x in expect["z0"]]
+            rounded = np.asarray(want, dtype=self.meta.get("dtype", "float64")).astype(np.float64)
+            if not (isinstance(z0, list) and len(z0) == len(want) and np.allclose(z0, rounded, rtol=1e-12, atol=0.0)):
+                why = f"its model starts at z0 = {[float(f'{x:.8g}') for x in z0]}, not at {want}"
+        if why is None and "interval" in expect:
+            why = interval_mismatch(self.interval, expect["interval"])
+        if why:
+            raise _fail(self.path, f"not a model of {owner}: {why}")
+
+    def solution(self, outside: str = "warn") -> Solution:
+        """The model as a :class:`~atlasnn.solution.Solution` with the stored training interval
+        (evaluating beyond it warns, raises or is allowed per ``outside``) and extra as its info."""
+        return Solution(self.model, self.system, interval=self.interval, info=self.extra, outside=outside)
 
 
-def load_checkpoint(path: str | os.PathLike, system: HamiltonianSystem | None = None) -> Checkpoint:
+def load_checkpoint(
+    path: str | os.PathLike,
+    system: HamiltonianSystem | None = None,
+    *,
+    expect: Mapping[str, Any] | None = None,
+) -> Checkpoint:
     """Load a checkpoint written by :func:`save_checkpoint` (or :func:`save_state`).
 
     Args:
         path: the file.
         system: the Hamiltonian system; required when it was a Python function (no spec), else
-            rebuilt from the stored spec. A given system must have the model's state dimension.
+            rebuilt from the stored spec. A given system must be the stored one: same d, state
+            names, spec (built-in name and parameters, or expression and parameters), z0, and H
+            at the recorded probe states (see :mod:`atlasnn.identity`, which also says what
+            cannot be compared for Python-function systems).
+        expect: what the caller knows the model must be, any of ``"system"`` (a
+            HamiltonianSystem or its ``describe()`` dict, e.g. a run's ``results["system"]``),
+            ``"interval"`` ((t0, T) of the training) and ``"z0"`` (the model's initial state).
 
     A float64 checkpoint is restored as float64 arrays; evaluate it with JAX's x64 mode on
     (``jax.enable_x64(True)`` or ``atlasnn.enable_x64()``).
 
     Raises:
         CheckpointError: one line naming the file and the problem (missing, foreign, truncated,
-            altered, newer format, incompatible leaves, system needed).
+            altered, newer format, incompatible leaves, system needed, another system or
+            interval than the given or expected one).
     """
     p = os.fspath(path)
     arrays, meta = _read(p)
@@ -565,7 +589,10 @@ def load_checkpoint(path: str | os.PathLike, system: HamiltonianSystem | None = 
     except (KeyError, TypeError, ValueError) as exc:
         raise _fail(p, f"malformed meta ({_describe_exc(exc)})") from None
     history = _history_from(p, meta, arrays)
-    return Checkpoint(model=model, system=sys_, history=history, meta=meta, path=p)
+    ck = Checkpoint(model=model, system=sys_, history=history, meta=meta, path=p)
+    if expect:
+        ck.require(expect)
+    return ck
 
 
 def load_state(path: str | os.PathLike, system: HamiltonianSystem | None = None):
@@ -575,7 +602,7 @@ def load_state(path: str | os.PathLike, system: HamiltonianSystem | None = None)
     The optimizer state and bookkeeping are rebuilt without pickle: a template is built from the
     restored model and the stored TrainConfig (``init_opt_state`` and ``_initial_track`` on the
     trainable partition) and the stored leaves are put into its structure, shapes checked.
-    ``system``, when given, is checked against the model's state dimension.
+    ``system``, when given, must be the stored one (as for :func:`load_checkpoint`).
     """
     from atlasnn import train as tr
 

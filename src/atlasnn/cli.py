@@ -6,13 +6,16 @@
     atlasnn run CONFIG.toml [...]        a user's own experiment
     atlasnn run|reproduce --resume DIR   continue an interrupted run
     atlasnn report DIR                   re-render tables and figures of a finished run
-    atlasnn integrate [--system NAME]    reference vs classical integrators, an error table
+    atlasnn integrate [CONFIG] [--system NAME] [--T 6.0|20*pi]
+                                         reference vs classical integrators, an error table
     atlasnn init NAME.toml [--transfer]  a commented experiment template for your own system
     atlasnn config [--markdown]          every config key: type, default, limits, meaning
 
-Errors caused by input are printed as one line and exit with status 2. SIGINT (Ctrl-C) or
-SIGTERM during training saves the training state and exits with status 130, printing the command
-that resumes the run.
+Errors caused by input, and file-system errors (a path that cannot be created or written, a full
+disk: ``PATH: CAUSE``), are printed as one line; the exit status is 2 when the command failed
+before its run started and 1 when it failed mid-run (the run had written its meta.json; its
+finished trainings are on disk). SIGINT (Ctrl-C) or SIGTERM during training saves the training
+state and exits with status 130, printing the command that resumes the run.
 """
 
 from __future__ import annotations
@@ -198,28 +201,90 @@ def cmd_report(args) -> int:
     return 0
 
 
+def _end_time(flag: str, text: str) -> float:
+    """An end time from the command line: a plain number ("6.0", "100", "1e2") or a multiple of
+    pi ("4*pi", "20pi", "pi/2"); finite, > 0 and at most the configs' time limit."""
+    from atlasnn.experiments.config import MAX_TIME, _number
+
+    try:
+        value: float | str = float(text)
+    except ValueError:
+        value = text
+    return _number(flag, value, low=0, low_open=True, high=MAX_TIME, allow_pi=True)
+
+
+def _integrate_problem(args):
+    """(system, z0, t0, T, steps) from --system/--T/--steps, or from a config file (its system,
+    z0 and evaluation interval; --T and --steps still override)."""
+    from atlasnn.systems import builtin_system
+
+    config = args.config_pos or args.config
+    if args.config_pos and args.config and args.config_pos != args.config:
+        raise AtlasError(f"two configs given ({args.config_pos} and --config {args.config}); give one")
+    if config is None:
+        system = builtin_system(args.system or "nonlinear_oscillator")
+        T = _end_time("--T", args.T or "4*pi")
+        return system, system.initial_state(), 0.0, T, args.steps or 199
+    if args.system is not None:
+        raise AtlasError(f"--system {args.system} and a config ({config}) both name a system; give one")
+    from atlasnn.experiments.config import load_config
+
+    cfg = load_config(config)
+    stage = cfg.eval_stage
+    system = cfg.system.build()
+    z0 = system.initial_state(cfg.system.z0)
+    T = stage.T if args.T is None else _end_time("--T", args.T)
+    if T <= stage.t0:
+        raise AtlasError(f"--T {args.T}: must be greater than the config's t0 = {stage.t0:g}")
+    steps = args.steps or cfg.evaluation.se_steps or stage.train.n_points - 1
+    return system, z0, stage.t0, T, steps
+
+
+def _energy64(system, z):
+    """H along a float64 trajectory, evaluated in float64 (JAX computes in float32 otherwise)."""
+    import jax
+    import numpy as np
+
+    with jax.enable_x64(True), np.errstate(all="ignore"):
+        return np.asarray(system.energy(jax.numpy.asarray(z, dtype=jax.numpy.float64)))
+
+
 def cmd_integrate(args) -> int:
     import numpy as np
 
-    from atlasnn.experiments.config import _number
     from atlasnn.integrators import INTEGRATORS, REFERENCE_DESCRIPTION, integrate, reference_solution
     from atlasnn.metrics import energy_drift, error_table
-    from atlasnn.systems import builtin_system
 
-    system = builtin_system(args.system)
-    z0 = system.initial_state()
-    T = _number("--T", args.T, low=0, low_open=True, allow_pi=True)
-    print(f"{system.name}: z0 = {z0.tolist()}, [0, {T:.4f}], {args.steps} steps; reference: {REFERENCE_DESCRIPTION}")
-    E0 = float(system.energy(z0))
-    print(f"{'method':18s}" + "".join(f"{'L2(' + n + ')':>12s}" for n in system.state_names) + f"{'max|err|':>12s}{'energy drift':>14s}")
-    for method in INTEGRATORS:
-        t, z = integrate(method, system, z0, 0.0, T, args.steps)
+    if args.steps is not None and args.steps < 1:
+        raise AtlasError(f"--steps must be >= 1, got {args.steps}")
+    system, z0, t0, T, steps = _integrate_problem(args)
+    print(f"{system.name}: z0 = {z0.tolist()}, [{t0:g}, {T:.4f}], {steps} steps; reference: {REFERENCE_DESCRIPTION}")
+    E0 = float(_energy64(system, z0))
+    if not system.separable:
+        print(f"skipping {', '.join(INTEGRATORS)}: they need a separable H = T(p) + V(q) and "
+              f"{system.name!r} is not declared separable")
+        t = np.linspace(t0, T, steps + 1)
         ref = reference_solution(system, z0, t)
-        tab = error_table(t, z, ref, system.state_names)
-        drift = energy_drift(np.asarray(system.energy(z)), E0)
+        drift = energy_drift(_energy64(system, ref), E0)
+        state = ", ".join(f"{n} = {v:.6g}" for n, v in zip(system.state_names, ref[-1]))
+        print(f"reference: energy drift {drift:.3e} on {steps + 1} points; at t = {T:.4f}: {state}")
+        return 0
+    print(f"{'method':18s}" + "".join(f"{'L2(' + n + ')':>12s}" for n in system.state_names) + f"{'max|err|':>12s}{'energy drift':>14s}")
+    unstable, refs = [], {}
+    for method in INTEGRATORS:
+        with np.errstate(all="ignore"):
+            t, z = integrate(method, system, z0, t0, T, steps)
+            key = t.tobytes()  # every method has the same grid: solve the reference once
+            ref = refs[key] = refs[key] if key in refs else reference_solution(system, z0, t)
+            tab = error_table(t, z, ref, system.state_names)
+            drift = energy_drift(_energy64(system, z), E0)
+        if not np.all(np.isfinite(z)):
+            unstable.append(method)
         cells = "".join(f"{tab['components'][n]['l2_discrete']:12.3e}" for n in system.state_names)
         print(f"{method:18s}{cells}{tab['whole']['max_abs']:12.3e}{drift:14.3e}")
     print("L2 = sqrt(sum_i err_i^2) on each method's own grid (the release's tabulated form)")
+    if unstable:
+        print(f"nan: {', '.join(unstable)} blew up (step {(T - t0) / steps:.3g} is too large for it); raise --steps")
     return 0
 
 
@@ -293,10 +358,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("dir", help="a run directory written by reproduce or run")
     s.set_defaults(func=cmd_report)
 
-    s = sub.add_parser("integrate", help="reference solution vs symplectic integrators on a built-in system")
-    s.add_argument("--system", default="nonlinear_oscillator")
-    s.add_argument("--T", default="4*pi", help="end time (number or multiple of pi, e.g. 20*pi)")
-    s.add_argument("--steps", type=int, default=199)
+    s = sub.add_parser("integrate", help="reference solution vs symplectic integrators (a built-in system or "
+                                         "the system of a config)")
+    s.add_argument("config_pos", nargs="?", metavar="CONFIG", help="a TOML experiment file: its system, z0 and "
+                   "interval (the target's for a transfer experiment)")
+    s.add_argument("--config", default=None, metavar="FILE", help="the same as CONFIG")
+    s.add_argument("--system", default=None, help="a built-in system (default nonlinear_oscillator)")
+    s.add_argument("--T", default=None, help="end time: a number (6.0, 100) or a multiple of pi (20*pi); "
+                   "default 4*pi, or the config's T")
+    s.add_argument("--steps", type=int, default=None, help="integrator steps (default 199, or the config's K - 1)")
     s.set_defaults(func=cmd_integrate)
 
     s = sub.add_parser("init", help="write a commented experiment template for your own system")
@@ -323,6 +393,79 @@ def _raise_interrupt(signum, frame):
     raise KeyboardInterrupt
 
 
+def _os_error_line(exc: OSError, run_dir) -> str:
+    """One line naming the path(s) and the cause (strerror) of a file-system error."""
+    cause = exc.strerror or " ".join(str(exc).split()) or type(exc).__name__
+    if exc.filename is not None and exc.filename2 is not None:
+        return f"cannot move {exc.filename} to {exc.filename2}: {cause}"
+    if exc.filename is not None:
+        return f"{exc.filename}: {cause}"
+    return f"{cause} (writing in {run_dir})" if run_dir is not None else cause
+
+
+def _check_out(args) -> None:
+    """Refuse an ``--out`` that cannot be created or written, before anything is computed: the first
+    existing ancestor must be a directory we may write into (root is not checked for permissions
+    by the kernel, but a read-only file system still says so through access(2))."""
+    import os
+
+    out = getattr(args, "out", None)
+    if out is None or getattr(args, "resume", None) is not None:
+        return
+    path = Path(out).absolute()
+    existing = path
+    while not os.path.exists(existing) and existing != existing.parent:  # False also when not searchable
+        if os.path.islink(existing):  # a dangling link: let the runner report it
+            return
+        existing = existing.parent
+    target = existing if existing == path else f"{existing} (where --out {out} would be created)"
+    if not existing.is_dir():
+        raise AtlasError(f"--out {out}: {existing} is not a directory")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        import errno
+
+        try:
+            read_only = bool(os.statvfs(existing).f_flag & os.ST_RDONLY)
+        except OSError:
+            read_only = False
+        cause = os.strerror(errno.EROFS) if read_only else os.strerror(errno.EACCES)
+        raise AtlasError(f"--out {out}: cannot write in {target}: {cause}")
+
+
+def _meta_stamp(run_dir) -> tuple | None:
+    """(inode, mtime) of ``run_dir/meta.json``, or None."""
+    if run_dir is None:
+        return None
+    try:
+        st = (Path(run_dir) / "meta.json").stat()
+    except OSError:
+        return None
+    return st.st_ino, st.st_mtime_ns
+
+
+class _RunWatch:
+    """Tells, after a failure, whether the command's run had started: its run directory's
+    ``meta.json`` (written by the runner just before training) was written during this command.
+    The stamps of ``--out``/``--resume`` are taken up front; a default ``runs/NAME`` is judged by
+    the file's mtime against the command's start."""
+
+    def __init__(self, args):
+        self.args = args
+        self.start_ns = time.time_ns()
+        self.before = {str(Path(v)): _meta_stamp(v) for v in (getattr(args, "out", None),
+                                                               getattr(args, "resume", None)) if v is not None}
+
+    def status(self) -> int:
+        """1 when the run failed mid-run (its finished work is on disk), else 2."""
+        run_dir = getattr(self.args, "run_dir", None)
+        now = _meta_stamp(run_dir)
+        if now is None:
+            return 2
+        key = str(Path(run_dir))
+        started = now != self.before[key] if key in self.before else now[1] >= self.start_ns
+        return 1 if started else 2
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -337,12 +480,21 @@ def main(argv: list[str] | None = None) -> int:
         if old is not signal.SIG_IGN and old is not None:
             old_term = old
             signal.signal(signal.SIGTERM, _raise_interrupt)
+    watch = _RunWatch(args)
     try:
+        _check_out(args)
         return int(args.func(args) or 0)
     except AtlasError as exc:
         message = " ".join(str(exc).splitlines()) or type(exc).__name__  # one line, always
         print(f"atlasnn: error: {message}", file=sys.stderr)
-        return 2
+        return watch.status()
+    except OSError as exc:  # the file system: a path we cannot create, write or read
+        print(f"atlasnn: error: {_os_error_line(exc, getattr(args, 'run_dir', None))}", file=sys.stderr)
+        return watch.status()
+    except MemoryError:
+        print("atlasnn: error: out of memory (MemoryError); lower train.n_points, network.width or --jobs",
+              file=sys.stderr)
+        return watch.status()
     except KeyboardInterrupt as exc:
         runner = sys.modules.get("atlasnn.experiments.runner")  # loaded if a run was interrupted
         if runner is not None and isinstance(exc, runner.RunInterrupted):

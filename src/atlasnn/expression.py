@@ -42,6 +42,7 @@ __all__ = [
     "FUNCTIONS",
     "CONSTANTS",
     "MAX_EXPRESSION_LENGTH",
+    "MAX_OPERATIONS",
     "MAX_DEPTH",
     "CompiledExpression",
     "compile_expression",
@@ -68,6 +69,17 @@ CONSTANTS: dict[str, float] = {"pi": math.pi}
 
 #: Longest accepted expression text, in characters.
 MAX_EXPRESSION_LENGTH = 10_000
+
+#: Most operations (binary and unary operators and function calls) an expression may have.
+#: JAX traces every operation several times in a run (H, J∇H by autodiff, the loss and its
+#: gradient, the finite and separability checks, the reference solver, the integrators), so the
+#: wait before the first epoch grows with their number. Measured with
+#: ``python -m benchmarks.expression_size`` (CPU seconds from the config to the first compiled
+#: training step of one model, 2-core machine): a non-separable H takes 3.8 s at 55 operations,
+#: 5.2 s at 500, 10.7 s at 2 005 (~3.4 ms per operation); a separable H, whose separability check
+#: differentiates it twice, 4.9 s at 35, 8.5 s at 500, 14.7 s at 1 205 (~8 ms per operation).
+#: 500 keeps both under ~10 s (a run with three models compiles the training three times).
+MAX_OPERATIONS = 500
 
 #: Deepest accepted nesting of operations. A left-to-right chain such as ``a + b - c + d``
 #: counts as one level however long it is; ``sin(sin(x))`` or ``-(-x)`` add one level each.
@@ -282,7 +294,28 @@ def _parse(src: _Source) -> ast.Expression:
         raise ExpressionError(f"expression cannot be parsed: {_one_line(str(exc))}") from None
     if not isinstance(tree, ast.Expression):  # pragma: no cover - mode="eval" guarantees it
         raise ExpressionError("expression cannot be parsed as a single expression")
+    _check_size(tree, len(text))
     return tree
+
+
+def _top_level_terms(node: ast.AST) -> int:
+    """The number of summands at the top: a + b - c has 3."""
+    n = 1
+    while isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub)):
+        n += 1
+        node = node.left
+    return n
+
+
+def _check_size(tree: ast.Expression, length: int) -> None:
+    """Refuse an expression with more than MAX_OPERATIONS operations, before anything is built."""
+    ops = sum(isinstance(n, (ast.BinOp, ast.UnaryOp, ast.Call)) for n in ast.walk(tree))
+    if ops > MAX_OPERATIONS:
+        raise ExpressionError(
+            f"expression is too large: {ops} operations in {_top_level_terms(tree.body)} terms ({length} "
+            f"characters); at most {MAX_OPERATIONS} operations are accepted (compiling a larger one takes "
+            "more than ~10 s); simplify it, e.g. collect equal terms"
+        )
 
 
 class _Compiler:

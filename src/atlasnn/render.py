@@ -31,16 +31,26 @@ def _tolerance(results: dict) -> float | None:
     return tol if tol else None
 
 
-def _histories(run_dir: Path, runs: list[dict]) -> dict[str, dict]:
-    """Loss and γ histories per (column, seed) from the checkpoints (read as plain arrays)."""
+def _histories(run_dir: Path, results: dict) -> dict[str, dict]:
+    """Loss and γ histories per (column, seed) from the checkpoints (read as plain arrays).
+
+    Every checkpoint must belong to the run: the system of ``results.json`` (identity, z0), the
+    record's interval, column, role and seed; anything else is refused with one line."""
     from atlasnn.checkpoint import load_checkpoint
+    from atlasnn.errors import CheckpointError
 
     out = {}
-    for r in runs:
+    for r in results["runs"]:
         path = run_dir / r["checkpoint"]
         if not path.exists():
             continue
         ck = load_checkpoint(path)
+        owner = f"the run in {run_dir}"
+        ck.require({"system": results.get("system"), "interval": r.get("interval")}, owner=owner)
+        for key in ("column", "role", "seed"):
+            if key in ck.extra and key in r and ck.extra[key] != r[key]:
+                raise CheckpointError(f"checkpoint {path}: not a model of {owner}: its {key} is "
+                                      f"{ck.extra[key]!r}, the run's record says {r[key]!r}")
         h = ck.history
         if h is None:
             continue
@@ -61,7 +71,7 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
     seed0 = seeds[0]
     runs = results["runs"]
     src_iv = tuple(results["source_interval"]) if results.get("source_interval") else None
-    hist = _histories(run_dir, runs)
+    hist = _histories(run_dir, results)
     written: list[Path] = []
 
     written += plots.plot_scaling_families(fig_dir / "scaling_families")
@@ -135,10 +145,22 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
     return written
 
 
+def _shown(results: dict) -> dict:
+    """``results`` without the columns that hold nothing to show: the symplectic-Euler column of a
+    non-separable system is planned but never run (no integrator row, no training runs)."""
+    filled = {e.get("column") for e in results.get("integrators") or []}
+    filled |= {r.get("column") for r in results.get("runs") or []}
+    columns = [c for c in results["columns"] if c in filled]
+    if columns == list(results["columns"]):
+        return results
+    labels = {c: v for c, v in (results.get("labels") or {}).items() if c in columns}
+    return {**results, "columns": columns, "labels": labels}
+
+
 def write_report(run_dir: str | Path) -> list[Path]:
     """Tables and figures of a finished run directory; returns the paths written."""
     run_dir = Path(run_dir)
-    results = load_results(run_dir)
+    results = _shown(load_results(run_dir))
     return list(write_tables(results, run_dir)) + write_figures(run_dir, results)
 
 
@@ -191,7 +213,7 @@ def summary_lines(results: dict | str | Path, run_dir: str | Path | None = None)
     """
     if run_dir is None and isinstance(results, (str, Path)):
         run_dir = Path(results) if Path(results).is_dir() else Path(results).parent
-    results = load_results(results)
+    results = _shown(load_results(results))
     s = summarize(results)
     states = list(results["state_names"])
     quick = is_quick(results)
