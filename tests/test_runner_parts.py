@@ -100,3 +100,66 @@ def test_the_lock_is_released_after_a_run_and_after_a_failure(tmp_path, monkeypa
         _run(tmp_path / "other", seed_batch=1)
     RunLock(tmp_path / "other").acquire().release()
     assert json.loads((tmp_path / "other" / "meta.json").read_text())["status"] == "failed"
+
+
+# ---------------------------------------------------------------- verdicts and limits
+DOUBLE_WELL = """\
+name = "double-well"
+models = ["atlas_exp"]
+seeds = [0]
+
+[system]
+hamiltonian = "p**2/2 - q**2/2 + q**4/4"
+coordinates = ["q"]
+momenta = ["p"]
+separable = true
+z0 = [0.5, 0.0]
+
+[interval]
+T = "4*pi"
+
+[train]
+epochs = 1500
+lr = 5e-3
+betas = [0.999, 0.9999]
+n_points = 200
+sigma_per_T = 0.03
+
+[evaluation]
+eval_points = 400
+fine_factor = 2
+"""
+
+
+def test_a_training_that_failed_is_flagged_in_results_tables_and_output(tmp_path, capsys):
+    """The issue's double well: too short a budget leaves ẑ across the separatrix (energy drift
+    about 100 %): exit status 0 (results were written), but the verdict says failed, with advice."""
+    toml = tmp_path / "dw.toml"
+    toml.write_text(DOUBLE_WELL)
+    out = tmp_path / "run"
+    assert main(["run", str(toml), "--out", str(out), "--no-progress"]) == 0
+    res = json.loads((out / "results.json").read_text())
+    (run,) = res["runs"]
+    assert run["quality"]["status"] == "failed"
+    assert any("energy drift" in reason for reason in run["quality"]["reasons"])
+    assert run["metrics"]["energy_drift"] > 0.1  # the verdict is right: the reference agrees
+    assert any("is failed" in w and "train.epochs" in w for w in res["warnings"])
+    printed = capsys.readouterr().out
+    assert "failed" in printed and "ATLAS-NN (exp) seed 0 is failed" in printed
+    assert "⚠" in (out / "tables.md").read_text()
+
+
+def test_a_run_that_cannot_fit_in_memory_is_refused_before_anything_is_written(tmp_path, capsys):
+    from atlasnn.limits import available_memory, estimate_training_memory
+
+    room = available_memory()
+    if room is None or estimate_training_memory(1_000_000, 1000, 2, 2) <= room:
+        pytest.skip("this machine's available memory is unknown or larger than the test's run needs")
+    toml = tmp_path / "big.toml"
+    # K = 10⁶ points of a 1000-wide network: tens of GiB (atlasnn.limits), more than any CI machine
+    toml.write_text(SHORT.replace("n_points = 16", "n_points = 1000000").replace("width = 8", "width = 1000"))
+    out = tmp_path / "run"
+    assert main(["run", str(toml), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("atlasnn: error: ") and "\n" not in err and "GiB" in err
+    assert not out.exists()

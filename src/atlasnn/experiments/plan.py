@@ -119,3 +119,26 @@ def eval_grid(stage: Stage, points: int | None) -> np.ndarray:
     """The evaluation grid of a stage: ``points`` (default K) equally spaced times."""
     n = points or stage.train.n_points
     return np.linspace(stage.t0, stage.T, n)
+
+
+def check_memory(cfg: ExperimentConfig, tasks: list[Task], state_dim: int) -> None:
+    """Refuse, as one line naming the key, a plan whose trainings or classical integrations will
+    not fit in the memory available (:mod:`atlasnn.limits`), before anything is written."""
+    from atlasnn.limits import check_integration_memory, check_training_memory
+
+    for task in tasks:
+        names = {"short": ["interval"], "baseline": ["target"], "transfer": ["source", "target"]}[task.role]
+        for name, st in zip(names, _stages(cfg, task.role)):
+            key = f"{name}.train.n_points" if "n_points" in ((cfg.raw.get(name) or {}).get("train") or {}) \
+                else "train.n_points"
+            check_training_memory(st.train.n_points, cfg.width, cfg.depth, state_dim, 1, key=key)
+            if len(task.seeds) > 1:
+                try:  # fits alone but not as a batch: say which setting to lower
+                    check_training_memory(st.train.n_points, cfg.width, cfg.depth, state_dim, len(task.seeds), key=key)
+                except ConfigError as exc:
+                    raise ConfigError(f"execution.seed_batch = {len(task.seeds)}: {exc}; lower execution.seed_batch "
+                                      "(or --seed-batch)") from None
+    ev = cfg.evaluation
+    steps = (ev.se_steps or cfg.eval_stage.train.n_points - 1) * ev.fine_factor
+    if cfg.system.separable or cfg.system.hamiltonian is None:  # built-ins are separable
+        check_integration_memory(steps, state_dim, value=ev.fine_factor)

@@ -37,7 +37,7 @@ from atlasnn.errors import ConfigError
 from atlasnn.experiments.config import MODEL_LABELS, ExperimentConfig
 from atlasnn.experiments.execute import NoGuard, SignalGuard, run_local
 from atlasnn.experiments.measure import energies, energy0, integrator_rows, reference_grids
-from atlasnn.experiments.plan import Task, plan_tasks, trainings
+from atlasnn.experiments.plan import Task, check_memory, plan_tasks, trainings
 from atlasnn.experiments.store import (
     RunLock,
     checkpoint_seconds,
@@ -52,7 +52,8 @@ from atlasnn.experiments.store import (
     write_json,
     write_npz,
 )
-from atlasnn.experiments.training import run_training, system_of
+from atlasnn.fileio import write_text
+from atlasnn.experiments.training import lr_key, run_training, system_of
 
 # the names earlier versions exported from here
 _system = system_of
@@ -76,22 +77,16 @@ class RunInterrupted(KeyboardInterrupt):
 
 def _json_round_trip(obj: Any) -> Any:
     """A JSON round trip (tuples become lists), to compare a config with a recorded one."""
-    from atlasnn.fileio import _json_default
+    from atlasnn.fileio import json_default
 
-    return json.loads(json.dumps(obj, default=_json_default, allow_nan=True))
-
-
-def _lr_key(cfg: ExperimentConfig, role: str) -> str:
-    stage = {"short": "interval", "source": "source", "target": "target"}.get(role, "interval")
-    per_stage = (cfg.raw.get(stage) or {}).get("train") if isinstance(cfg.raw.get(stage), dict) else None
-    return f"{stage}.train" if isinstance(per_stage, dict) and "lr" in per_stage else "train"
+    return json.loads(json.dumps(obj, default=json_default, allow_nan=True))
 
 
 def divergence_advice(cfg: ExperimentConfig, r: dict) -> str | None:
     """One line saying that a run diverged, what was kept, and what to change; None otherwise."""
     if r.get("stop_reason") != "diverged":
         return None
-    key = _lr_key(cfg, r.get("role", "short"))
+    key = lr_key(cfg, r.get("role", "short"))
     who = f"{r['label']}{' source' if r.get('role') == 'source' else ''} seed {r['seed']}"
     if r.get("best_epoch", -1) >= 0:
         kept = f"kept the parameters of epoch {r['best_epoch']} (loss {r['returned_loss']:.3e})"
@@ -106,15 +101,26 @@ def divergence_advice(cfg: ExperimentConfig, r: dict) -> str | None:
     return line
 
 
+def quality_warning(r: dict) -> str | None:
+    """One line for a training judged suspect or failed (its reasons and advice); None if ok, and
+    for a diverged training (:func:`divergence_advice` already says what happened and what to do)."""
+    q = r.get("quality") or {}
+    if q.get("status") in (None, "ok") or r.get("stop_reason") == "diverged":
+        return None
+    who = f"{r['label']}{' source' if r.get('role') == 'source' else ''} seed {r['seed']}"
+    advice = f" {q['advice']}" if q.get("advice") else ""
+    return f"{who} is {q['status']}: {'; '.join(q.get('reasons') or [])}.{advice}"
+
+
 def _log_done(log, i: int, n: int, output: dict, cfg: ExperimentConfig | None = None) -> None:
     for r in output["records"]:
         if r["role"] != "source":
+            status = (r.get("quality") or {}).get("status")
             log(f"  [{i}/{n}] {r['label']} seed {r['seed']}: {r['epochs']} epochs ({r['stop_reason']}), "
-                f"loss {r['returned_loss']:.3e}, {r['wall_time']:.1f} s")
-        if cfg is not None:
-            advice = divergence_advice(cfg, r)
-            if advice:
-                log(f"  {advice}")
+                f"loss {r['returned_loss']:.3e}, {r['wall_time']:.1f} s" + (f", {status}" if status else ""))
+        for line in (divergence_advice(cfg, r) if cfg is not None else None, quality_warning(r)):
+            if line:
+                log(f"  {line}")
     for note in output.get("notes", []):
         log(f"  note: {note}")
 
@@ -165,6 +171,7 @@ def run_experiment(
     else:
         meta = None
         tasks = plan_tasks(cfg, seeds, jobs=jobs, seed_batch=cfg.seed_batch if seed_batch is None else seed_batch)
+        check_memory(cfg, tasks, system_of(cfg).state_dim)
         lock = open_run_dir(out, overwrite)
     guard = SignalGuard() if handle_signals else NoGuard()
     try:
@@ -218,9 +225,15 @@ class _Run:
     def wall_total(self) -> float:
         return self.previous_wall + time.time() - self.started
 
-    def set_status(self, status: str, **more) -> None:
+    def set_status(self, status: str, *, quiet: bool = False, **more) -> None:
+        """Record the run's status in meta.json; ``quiet``: a failure to write it (a full disk)
+        is ignored, so that the error that stopped the run is the one reported."""
         self.meta.update(status=status, wall_time_total=self.wall_total(), **more)
-        write_json(self.out / "meta.json", self.meta)
+        try:
+            write_json(self.out / "meta.json", self.meta)
+        except OSError:
+            if not quiet:
+                raise
 
     def go(self, *, overwrite, config_text, quick, report, config_source) -> dict[str, Any]:
         from atlasnn.integrators import REFERENCE_DESCRIPTION
@@ -249,10 +262,10 @@ class _Run:
                 self.log(f"{cfg.name}: tables and figures written to {self.out}")
         except KeyboardInterrupt:
             finished = sum(1 for t in all_trainings if load_record(self.out, t, self.meta["run_id"]) is not None)
-            self.set_status("interrupted", finished_tasks=finished)
+            self.set_status("interrupted", quiet=True, finished_tasks=finished)
             raise RunInterrupted(self.out, finished, len(all_trainings)) from None
         except BaseException as exc:
-            self.set_status("failed", error=one_line(f"{type(exc).__name__}: {exc}"))
+            self.set_status("failed", quiet=True, error=one_line(f"{type(exc).__name__}: {exc}"))
             raise
         self.set_status("complete", finished_tasks=len(all_trainings))
         clear_states(self.out, all_trainings)
@@ -280,7 +293,7 @@ class _Run:
             if overwrite:  # this tool's own files of an earlier run into the same directory
                 forget_trainings(self.out, trainings(self.tasks))
             if config_text is not None:
-                (self.out / "config.toml").write_text(config_text, encoding="utf-8")
+                write_text(self.out / "config.toml", config_text)
             write_json(self.out / "config.json", {"resolved": cfg_dict, "as_given": self.cfg.raw})
             self.meta = {
                 "experiment": self.cfg.name, "profile": self.cfg.profile, "quick": quick,
@@ -332,6 +345,7 @@ class _Run:
         from atlasnn import metrics
 
         warnings = [w for w in (divergence_advice(cfg, r) for r in runs) if w]
+        warnings += [w for w in (quality_warning(r) for r in runs) if w]
         warnings += [n for o in ordered for n in o.get("notes", [])]
         return {
             "experiment": cfg.name, "profile": cfg.profile, "kind": cfg.kind, "description": cfg.description,

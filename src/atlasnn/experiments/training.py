@@ -72,6 +72,26 @@ def _host(state):
                       jax.device_get(state.track), int(state.epoch), state.history)
 
 
+def lr_key(cfg: ExperimentConfig, role: str) -> str:
+    """The config table that sets a training's lr: a stage's own ``train`` table, else ``train``."""
+    stage = {"short": "interval", "source": "source", "target": "target"}.get(role, "interval")
+    per_stage = (cfg.raw.get(stage) or {}).get("train") if isinstance(cfg.raw.get(stage), dict) else None
+    return f"{stage}.train" if isinstance(per_stage, dict) and "lr" in per_stage else "train"
+
+
+def verdict(cfg: ExperimentConfig, role: str, result, energy: np.ndarray, e0: float, stage: Stage) -> dict:
+    """The quality verdict of a finished training (:mod:`atlasnn.quality`), as JSON."""
+    from atlasnn.quality import judge_training
+
+    returned = float(result.history.loss[result.best_epoch]) if result.best_epoch >= 0 else result.final_loss
+    return judge_training(
+        result.history.loss, stop_reason=result.stop_reason, tolerance=result.config.tolerance, energy=energy,
+        energy0=e0, gamma={k: float(v) for k, v in result.model.scaling.gamma().items()}, returned_loss=returned,
+        interval=(stage.t0, stage.T), lr=result.config.lr, epochs_budget=result.config.epochs,
+        key=lr_key(cfg, role),
+    ).as_dict()
+
+
 def record(training: Task, role: str, column: str, result, metrics_: dict, ckpt: str, stage: Stage) -> dict:
     """The results.json entry of one finished training (or transfer source)."""
     gamma = {k: float(v) for k, v in result.model.scaling.gamma().items()}
@@ -212,6 +232,7 @@ class _TaskRun:
         sol = Solution(result.model, self.system, (stage.t0, stage.T))
         per, z, energy = measure_solution(sol, self.grids[t_key], self.grids[t_key + "_ref"], self.names, self.e0)
         rec = record(self.task.one(seed), role, column, result, per, self.save(result, column, role, stage, seed), stage)
+        rec["quality"] = verdict(self.cfg, role, result, energy, self.e0, stage)
         self.out[seed]["records"].append(rec)
         if role != "source":
             self.out[seed]["arrays"][f"pred_{column}_seed{seed}"] = z
