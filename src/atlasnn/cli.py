@@ -5,6 +5,7 @@
     atlasnn reproduce NAME [--quick] [--seeds K] [--jobs J] [--out DIR]
     atlasnn run CONFIG.toml [...]        a user's own experiment
     atlasnn run|reproduce --resume DIR   continue an interrupted run
+    atlasnn run|reproduce --scheduler ADDRESS   the trainings on a Dask cluster ($ATLASNN_SCHEDULER)
     atlasnn report DIR                   re-render tables and figures of a finished run
     atlasnn integrate [--system NAME]    reference vs classical integrators, an error table
 
@@ -69,7 +70,7 @@ def _run_config(cfg, args, config_text: str, default_out: str, config_source: st
     results = run_experiment(
         cfg, out, seeds=seeds, jobs=jobs, progress=not args.no_progress,
         overwrite=args.overwrite, config_text=config_text, quick=args.quick, config_source=config_source,
-        seed_batch=seed_batch,
+        seed_batch=seed_batch, scheduler=args.scheduler,
     )
     return _print_summary(results, out, start)
 
@@ -97,7 +98,7 @@ def _resume(args, check) -> int:
     start = time.perf_counter()
     results = run_experiment(
         cfg, out, seeds=seeds, jobs=jobs, progress=not args.no_progress, quick=bool(meta.get("quick")),
-        resume=True,
+        resume=True, scheduler=args.scheduler,
     )
     return _print_summary(results, out, start)
 
@@ -110,6 +111,8 @@ def _resume_command(args, run_dir) -> str:
     parts += ["--resume", str(run_dir)]
     if getattr(args, "jobs", 1) != 1:
         parts += ["--jobs", str(args.jobs)]
+    if getattr(args, "scheduler", None):
+        parts += ["--scheduler", args.scheduler]
     if getattr(args, "no_progress", False):
         parts.append("--no-progress")
     return " ".join(shlex.quote(p) for p in parts)
@@ -225,6 +228,10 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--quick", action="store_true", help="the config's quick variant (far fewer epochs)")
         s.add_argument("--seeds", type=int, default=None, metavar="K", help="repeat every training with seeds 0..K-1")
         s.add_argument("--jobs", type=int, default=1, metavar="J", help="independent trainings in J processes")
+        s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="run the trainings on the Dask cluster of this scheduler (e.g. tcp://host:8786; "
+                            "default $ATLASNN_SCHEDULER; needs atlasnn[dask] and a file system shared with "
+                            "the workers; see docs/SCALE.md)")
         s.add_argument("--seed-batch", default="auto", metavar="N",
                        help="seeds of one model trained together as one compiled program: a number, or auto "
                             "(batch where it measures faster; see docs/PERFORMANCE.md)")
