@@ -244,6 +244,15 @@ def connect_dask(address: str):
     return client
 
 
+def close_dask(client) -> None:
+    """Close a client; a scheduler that is already gone is not an error here (the run's own
+    outcome, or error, is what counts)."""
+    try:
+        client.close()
+    except Exception:
+        pass
+
+
 def dask_threads(client) -> int:
     """The number of worker threads of a Dask cluster now (at least 1)."""
     return max(1, sum(client.nthreads().values()))
@@ -383,4 +392,4 @@ def run_dask(tasks: Sequence[Task], work: Work, on_done: OnDone, address, *,
             raise
     finally:
         if own:
-            client.close()
+            close_dask(client)

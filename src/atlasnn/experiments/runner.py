@@ -42,6 +42,7 @@ from atlasnn.experiments.config import MODEL_LABELS, ExperimentConfig
 from atlasnn.experiments.execute import (
     NoGuard,
     SignalGuard,
+    close_dask,
     connect_dask,
     dask_threads,
     run_dask,
@@ -203,7 +204,7 @@ def run_experiment(
         if lock is not None:
             lock.release()
         if client is not None:
-            client.close()
+            close_dask(client)
 
 
 def _recorded_plan(meta: dict, cfg: ExperimentConfig, seeds: tuple[int, ...], out: Path) -> list[Task]:

@@ -41,7 +41,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.experiments.config import ExperimentConfig, parse_config
-from atlasnn.experiments.execute import connect_dask, scheduler_address
+from atlasnn.experiments.execute import close_dask, connect_dask, scheduler_address
 from atlasnn.experiments.store import RunLock, check_run_dir, one_line, write_json
 from atlasnn.metrics import METRIC_NAMES
 
@@ -195,7 +195,7 @@ def _check_scheduler(scheduler: str | None) -> None:
     """Connect once before anything is written: a bad address fails here, in one line."""
     address = scheduler_address(scheduler)
     if address is not None:
-        connect_dask(address).close()
+        close_dask(connect_dask(address))
 
 
 class _Sweep:
