@@ -5,7 +5,9 @@
     atlasnn reproduce NAME [--quick] [--seeds K] [--jobs J] [--out DIR]
     atlasnn run CONFIG.toml [...]        a user's own experiment
     atlasnn run|reproduce --resume DIR   continue an interrupted run
+    atlasnn run|reproduce --scheduler ADDRESS   the trainings on a Dask cluster ($ATLASNN_SCHEDULER)
     atlasnn report DIR                   re-render tables and figures of a finished run
+    atlasnn sweep CONFIG --set KEY=V1,V2 [--set ...] [--seeds K]   a grid of runs and one summary
     atlasnn integrate [CONFIG] [--system NAME] [--T 6.0|20*pi]
                                          reference vs classical integrators, an error table
     atlasnn init NAME.toml [--transfer]  a commented experiment template for your own system
@@ -83,7 +85,7 @@ def _run_config(cfg, args, config_text: str, default_out: str, config_source: st
     results = run_experiment(
         cfg, out, seeds=seeds, jobs=jobs, progress=not args.no_progress,
         overwrite=args.overwrite, config_text=config_text, quick=args.quick, config_source=config_source,
-        seed_batch=seed_batch,
+        seed_batch=seed_batch, scheduler=args.scheduler,
     )
     return _print_summary(results, out, start)
 
@@ -114,7 +116,7 @@ def _resume(args, check) -> int:
     start = time.perf_counter()
     results = run_experiment(
         cfg, out, seeds=seeds, jobs=jobs, progress=not args.no_progress, quick=bool(meta.get("quick")),
-        resume=True,
+        resume=True, scheduler=args.scheduler,
     )
     return _print_summary(results, out, start)
 
@@ -127,6 +129,8 @@ def _resume_command(args, run_dir) -> str:
     parts += ["--resume", str(run_dir)]
     if getattr(args, "jobs", 1) != 1:
         parts += ["--jobs", str(args.jobs)]
+    if getattr(args, "scheduler", None):
+        parts += ["--scheduler", args.scheduler]
     if getattr(args, "no_progress", False):
         parts.append("--no-progress")
     return " ".join(shlex.quote(p) for p in parts)
@@ -188,6 +192,52 @@ def cmd_run(args) -> int:
     cfg = load_config(args.config, quick=args.quick, profile=args.profile)
     return _run_config(cfg, args, Path(args.config).read_text(encoding="utf-8"), _default_out(cfg, args),
                        str(args.config))
+
+
+def _sweep_config(name: str) -> Path:
+    """A sweep's CONFIG: a TOML file, or the name of a built-in experiment."""
+    from atlasnn.experiments.config import builtin_config_path, builtin_experiments
+
+    path = Path(name)
+    if path.is_file() or name not in builtin_experiments():
+        return path
+    return builtin_config_path(name)
+
+
+def cmd_sweep(args) -> int:
+    from atlasnn.experiments.sweep import SweepInterrupted, resume_sweep, run_sweep
+
+    seeds, jobs = _seeds(args), _jobs(args)
+    seed_batch = None if args.seed_batch is None else _seed_batch(args)
+    common = dict(jobs=jobs, scheduler=args.scheduler, progress=not args.no_progress)
+    start = time.perf_counter()
+    try:
+        if args.resume is not None:
+            if args.overwrite:
+                raise AtlasError("--resume and --overwrite cannot be combined")
+            if args.out is not None and Path(args.out).resolve() != Path(args.resume).resolve():
+                raise AtlasError(f"--out {args.out} differs from --resume {args.resume}")
+            out, _ = resume_sweep(args.resume, config=None if args.config is None else _sweep_config(args.config),
+                                  sets=args.sets, seeds=seeds, quick=args.quick, metric=args.metric,
+                                  seed_batch=seed_batch, **common)
+        else:
+            if args.config is None:
+                raise AtlasError("sweep needs a CONFIG.toml (or a built-in experiment name), or --resume DIR")
+            out, _ = run_sweep(_sweep_config(args.config), args.sets, seeds=seeds, out=args.out, quick=args.quick,
+                               metric=args.metric or "l2_discrete", overwrite=args.overwrite,
+                               seed_batch=seed_batch or "auto", **common)
+    except SweepInterrupted as exc:
+        parts = ["atlasnn", "sweep", "--resume", str(exc.sweep_dir)]
+        if args.jobs != 1:
+            parts += ["--jobs", str(args.jobs)]
+        if args.scheduler:
+            parts += ["--scheduler", args.scheduler]
+        print(f"atlasnn: interrupted: {exc.complete} of {exc.total} sweep points complete; resume with: "
+              f"{' '.join(shlex.quote(p) for p in parts)}", file=sys.stderr)
+        return 130
+    print((out / "summary.md").read_text(encoding="utf-8").rstrip())
+    print(f"sweep done in {time.perf_counter() - start:.1f} s; see {out}/summary.md, summary.csv and sweep.png")
+    return 0
 
 
 def cmd_report(args) -> int:
@@ -332,6 +382,10 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--quick", action="store_true", help="the config's quick variant (far fewer epochs)")
         s.add_argument("--seeds", type=int, default=None, metavar="K", help="repeat every training with seeds 0..K-1")
         s.add_argument("--jobs", type=int, default=1, metavar="J", help="independent trainings in J processes")
+        s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="run the trainings on the Dask cluster of this scheduler (e.g. tcp://host:8786; "
+                            "default $ATLASNN_SCHEDULER; needs atlasnn[dask] and a file system shared with "
+                            "the workers; see docs/SCALE.md)")
         s.add_argument("--seed-batch", default=None, metavar="N",
                        help="seeds of one model trained together as one compiled program: a number, or auto "
                             "(batch where it measures faster; default: the config's execution.seed_batch, auto)")
@@ -353,6 +407,23 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("config", nargs="?", help="path to a TOML experiment file")
     add_run_options(s)
     s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("sweep", help="run a config at every point of a grid of settings, with one summary")
+    s.add_argument("config", nargs="?", help="a TOML experiment file or a built-in experiment name")
+    s.add_argument("--set", action="append", default=[], dest="sets", metavar="KEY=V1[,V2...]",
+                   help="a swept setting: a dotted config key and its values, read as TOML (repeatable)")
+    s.add_argument("--seeds", type=int, default=None, metavar="K", help="every point with seeds 0..K-1")
+    s.add_argument("--jobs", type=int, default=1, metavar="J", help="independent trainings in J processes")
+    s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the trainings on this Dask scheduler's cluster (default $ATLASNN_SCHEDULER)")
+    s.add_argument("--seed-batch", default=None, metavar="N", help="seeds per compiled program: a number or auto")
+    s.add_argument("--quick", action="store_true", help="the config's quick variant")
+    s.add_argument("--metric", default=None, help="the summary's metric (default l2_discrete)")
+    s.add_argument("--out", default=None, metavar="DIR", help="sweep directory (default runs/sweep-NAME[-quick])")
+    s.add_argument("--overwrite", action="store_true", help="reuse a non-empty sweep directory")
+    s.add_argument("--resume", default=None, metavar="DIR", help="continue the sweep in DIR")
+    s.add_argument("--no-progress", action="store_true", help="no progress bars")
+    s.set_defaults(func=cmd_sweep)
 
     s = sub.add_parser("report", help="re-render tables and figures of a finished run")
     s.add_argument("dir", help="a run directory written by reproduce or run")

@@ -18,6 +18,10 @@ current chunk of epochs, saves the training states of its unfinished trainings a
 (``atlasnn run|reproduce --resume DIR``) skips the finished trainings, continues the others from
 their states (bit-identical to an uninterrupted run on the CPU) and writes the results as usual.
 The run's plan (how seeds were batched) is recorded in ``meta.json`` and reused on resume.
+
+Executors: ``jobs`` local processes, or the workers of a Dask cluster (``scheduler``, or
+``$ATLASNN_SCHEDULER``; :func:`atlasnn.experiments.execute.run_dask`). This process holds the
+directory lock either way; Dask workers write into the directory over a shared file system.
 """
 
 from __future__ import annotations
@@ -35,11 +39,21 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.experiments.config import MODEL_LABELS, ExperimentConfig
-from atlasnn.experiments.execute import NoGuard, SignalGuard, run_local
+from atlasnn.experiments.execute import (
+    NoGuard,
+    SignalGuard,
+    close_dask,
+    connect_dask,
+    dask_threads,
+    run_dask,
+    run_local,
+    scheduler_address,
+)
 from atlasnn.experiments.measure import energies, energy0, integrator_rows, reference_grids
 from atlasnn.experiments.plan import Task, check_memory, plan_tasks, trainings
 from atlasnn.experiments.store import (
     RunLock,
+    check_run_dir,
     checkpoint_seconds,
     clear_states,
     forget_trainings,
@@ -142,12 +156,16 @@ def run_experiment(
     config_source: str | None = None,
     handle_signals: bool = True,
     seed_batch: int | str | None = None,
+    scheduler: str | None = None,
 ) -> dict[str, Any]:
     """Run every training of ``cfg`` and write the run directory ``out``; returns results.
 
     Nothing is written before the inputs are checked (``out`` must be new or empty unless
-    ``overwrite``). ``seed_batch``: seeds of a column trained as one program (an integer, or
-    ``"auto"``: see :mod:`atlasnn.experiments.plan`). ``resume=True`` continues an interrupted run
+    ``overwrite``) and, with a Dask scheduler, before it is connected. ``seed_batch``: seeds of a
+    column trained as one program (an integer, or ``"auto"``: see :mod:`atlasnn.experiments.plan`;
+    on Dask ``"auto"`` counts the cluster's worker threads as jobs). ``scheduler``: the address of a
+    Dask scheduler to run the trainings on (default ``$ATLASNN_SCHEDULER``; None or empty: local
+    processes, ``jobs`` of them). ``resume=True`` continues an interrupted run
     in ``out`` (use :func:`resume_experiment`, which reads the config from ``out``).
     ``handle_signals``: while running, SIGINT and SIGTERM stop training at the end of the current
     chunk (main thread only). Raises :class:`RunInterrupted` (a KeyboardInterrupt) when
@@ -156,6 +174,10 @@ def run_experiment(
     seeds = tuple(seeds if seeds is not None else cfg.seeds)
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"jobs must be an integer >= 1, got {jobs!r}")
+    address = scheduler_address(scheduler)
+    if address is not None and jobs != 1:
+        raise ConfigError(f"jobs = {jobs} and the Dask scheduler {address} cannot be combined: the "
+                          "scheduler's workers run the trainings (unset ATLASNN_SCHEDULER for local processes)")
     checkpoint_seconds()  # a bad ATLASNN_CHECKPOINT_SECONDS fails before anything is written
     out = Path(out)
     if resume:
@@ -166,21 +188,32 @@ def run_experiment(
             raise ConfigError(f"--resume {out}: the run was started with seeds {meta['seeds']} and "
                               f"quick={bool(meta.get('quick'))}, not seeds {list(seeds)} and quick={bool(quick)}")
         tasks = _recorded_plan(meta, cfg, seeds, out)
-        lock = RunLock(out).acquire()
-        meta = read_run_meta(out)  # as it is now, under the lock
     else:
         meta = None
-        tasks = plan_tasks(cfg, seeds, jobs=jobs, seed_batch=cfg.seed_batch if seed_batch is None else seed_batch)
-        check_memory(cfg, tasks, system_of(cfg).state_dim)
-        lock = open_run_dir(out, overwrite)
-    guard = SignalGuard() if handle_signals else NoGuard()
+        check_run_dir(out, overwrite)
+    client = connect_dask(address) if address is not None else None
+    lock = None
     try:
-        with guard:
-            return _Run(cfg, out, seeds, tasks, jobs, progress, log, meta).go(
-                overwrite=overwrite, config_text=config_text, quick=quick, report=report,
-                config_source=config_source)
+        if resume:
+            lock = RunLock(out).acquire()
+            meta = read_run_meta(out)  # as it is now, under the lock
+        else:
+            plan_jobs = dask_threads(client) if client is not None else jobs
+            tasks = plan_tasks(cfg, seeds, jobs=plan_jobs,
+                               seed_batch=cfg.seed_batch if seed_batch is None else seed_batch)
+            if client is None:  # Dask workers may be other machines: their memory is their own
+                check_memory(cfg, tasks, system_of(cfg).state_dim)
+            lock = open_run_dir(out, overwrite)
+        with SignalGuard() if handle_signals else NoGuard():
+            run = _Run(cfg, out, seeds, tasks, jobs, progress, log, meta)
+            run.client, run.scheduler = client, address
+            return run.go(overwrite=overwrite, config_text=config_text, quick=quick, report=report,
+                          config_source=config_source)
     finally:
-        lock.release()
+        if lock is not None:
+            lock.release()
+        if client is not None:
+            close_dask(client)
 
 
 def _recorded_plan(meta: dict, cfg: ExperimentConfig, seeds: tuple[int, ...], out: Path) -> list[Task]:
@@ -202,12 +235,14 @@ def resume_experiment(
     report: bool = True,
     log=print,
     handle_signals: bool = True,
+    scheduler: str | None = None,
 ) -> dict[str, Any]:
-    """Continue an interrupted run directory (see the module docstring); returns the results."""
+    """Continue an interrupted run directory (see the module docstring); returns the results.
+    It may run on other executors than the run started on (``jobs``, ``scheduler``)."""
     cfg, meta = load_run_config(out)
     return run_experiment(
         cfg, out, seeds=tuple(meta["seeds"]), jobs=jobs, progress=progress, quick=bool(meta.get("quick")),
-        report=report, log=log, resume=True, handle_signals=handle_signals,
+        report=report, log=log, resume=True, handle_signals=handle_signals, scheduler=scheduler,
     )
 
 
@@ -221,6 +256,7 @@ class _Run:
         self.started = time.time()
         self.previous_wall = float(meta.get("wall_time_total") or 0.0) if meta else 0.0
         self.outputs: dict[Task, dict] = {}  # per one-seed training
+        self.client, self.scheduler = None, None  # a Dask client and its scheduler's address
 
     def wall_total(self) -> float:
         return self.previous_wall + time.time() - self.started
@@ -287,7 +323,7 @@ class _Run:
             self.meta.setdefault("plan", plan)
             self.meta.setdefault("resumed", []).append(
                 {"at": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(self.started)),
-                 "command": " ".join(sys.argv), "jobs": self.jobs})
+                 "command": " ".join(sys.argv), "jobs": self.jobs, "scheduler": self.scheduler})
         else:
             (self.out / "models").mkdir(parents=True, exist_ok=True)
             if overwrite:  # this tool's own files of an earlier run into the same directory
@@ -297,7 +333,7 @@ class _Run:
             write_json(self.out / "config.json", {"resolved": cfg_dict, "as_given": self.cfg.raw})
             self.meta = {
                 "experiment": self.cfg.name, "profile": self.cfg.profile, "quick": quick,
-                "seeds": list(self.seeds), "jobs": self.jobs,
+                "seeds": list(self.seeds), "jobs": self.jobs, "scheduler": self.scheduler,
                 "versions": versions(),
                 "started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(self.started)),
                 "command": " ".join(sys.argv), "reference": reference, "status": "running",
@@ -322,18 +358,28 @@ class _Run:
             if left:
                 todo.append(Task(task.role, task.model, left))
         batches = sorted({len(t.seeds) for t in self.tasks})
+        where = f"jobs={self.jobs}" if self.client is None else \
+            f"Dask scheduler {self.scheduler} ({dask_threads(self.client)} worker threads)"
         self.log(f"{self.cfg.name}: {len(all_trainings)} training(s) "
                  f"({', '.join(sorted({t.column for t in self.tasks}))}) x seeds {list(self.seeds)}, "
-                 f"jobs={self.jobs}, seeds per program: {'/'.join(map(str, batches))}")
+                 f"{where}, seeds per program: {'/'.join(map(str, batches))}")
+        # On Dask a task is run again when its worker dies; resume=True makes that attempt continue
+        # from the states the earlier one saved. It only ever reads states and sources recorded with
+        # this run's run_id, and a new run's directory holds none until its tasks write them.
+        dask = self.client is not None
         work = functools.partial(run_training, self.cfg, run_dir=str(self.out), grids=grids,
-                                 progress=self.progress and self.jobs == 1, run_id=run_id, resume=self.resume)
+                                 progress=self.progress and self.jobs == 1 and not dask, run_id=run_id,
+                                 resume=self.resume or dask)
 
         def on_done(task: Task, output: dict[int, dict]) -> None:
             for seed in task.seeds:
                 self.outputs[task.one(seed)] = output[seed]
                 _log_done(self.log, len(self.outputs), len(all_trainings), output[seed], self.cfg)
 
-        run_local(todo, work, on_done, jobs=self.jobs)
+        if dask:
+            run_dask(todo, work, on_done, self.client, shared_dir=self.out)
+        else:
+            run_local(todo, work, on_done, jobs=self.jobs)
 
     def collect(self, system, e0, grids, arrays, int_rows, quick, reference) -> dict[str, Any]:
         """results.json's content from the outputs of every training (in plan order)."""
