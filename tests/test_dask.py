@@ -187,3 +187,20 @@ def test_the_environment_names_the_scheduler_and_the_option_wins(tmp_path, capsy
     with pytest.raises(ConfigError, match="jobs = 2 and the Dask scheduler tcp://127.0.0.1:1 cannot be combined"):
         _run(SHORT, tmp_path / "run", jobs=2)
     assert not (tmp_path / "run").exists()
+
+
+def test_the_config_names_the_scheduler_below_the_environment(tmp_path, capsys, monkeypatch):
+    import dask
+
+    monkeypatch.delenv("ATLASNN_SCHEDULER", raising=False)
+    assert scheduler_address(None, "tcp://from-config:8786") == "tcp://from-config:8786"
+    monkeypatch.setenv("ATLASNN_SCHEDULER", "tcp://from-env:8786")
+    assert scheduler_address(None, "tcp://from-config:8786") == "tcp://from-env:8786"
+    assert scheduler_address("", "tcp://from-config:8786") is None  # the option: local processes
+    monkeypatch.delenv("ATLASNN_SCHEDULER")
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text(SHORT + '\n[execution]\nscheduler = "tcp://127.0.0.1:1"\n')
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        assert main(["run", str(cfg), "--out", str(tmp_path / "run"), "--no-progress"]) == 2
+    assert "tcp://127.0.0.1:1" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()

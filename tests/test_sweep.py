@@ -164,3 +164,21 @@ def test_a_bad_scheduler_or_metric_is_refused_before_anything_is_written(tmp_pat
         parse_sets([])
     with pytest.raises(ConfigError, match="--set train.lr is given twice"):
         parse_sets(["train.lr=1e-3", "train.lr=2e-3"])
+
+
+def test_a_sweep_of_a_profile_puts_the_overrides_over_the_profile(tmp_path, capsys):
+    from test_profiles import PROFILED
+
+    toml = tmp_path / "p.toml"
+    toml.write_text(PROFILED)
+    out = tmp_path / "sweep"
+    assert main(["sweep", str(toml), "--profile", "release", "--quick", "--set", "source.train.lr=0.004,0.006",
+                 "--seeds", "1", "--out", str(out), "--no-progress"]) == 0
+    spec = json.loads((out / "sweep.json").read_text())
+    assert spec["profile"] == "release"
+    for point, lr in zip(spec["points"], (0.004, 0.006)):
+        res = json.loads((out / point["dir"] / "results.json").read_text())
+        assert res["profile"] == "release"
+        by_role = {r["role"]: r for r in res["runs"]}
+        assert by_role["source"]["lr"] == by_role["target"]["lr"] == lr  # the profile's lr_from_source
+        assert by_role["target"]["epochs"] == 150  # [quick] over the profile

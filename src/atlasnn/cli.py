@@ -225,7 +225,7 @@ def cmd_sweep(args) -> int:
                 raise AtlasError("sweep needs a CONFIG.toml (or a built-in experiment name), or --resume DIR")
             out, _ = run_sweep(_sweep_config(args.config), args.sets, seeds=seeds, out=args.out, quick=args.quick,
                                metric=args.metric or "l2_discrete", overwrite=args.overwrite,
-                               seed_batch=seed_batch or "auto", **common)
+                               seed_batch=seed_batch or "auto", profile=args.profile, **common)
     except SweepInterrupted as exc:
         parts = ["atlasnn", "sweep", "--resume", str(exc.sweep_dir)]
         if args.jobs != 1:
@@ -418,6 +418,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run the trainings on this Dask scheduler's cluster (default $ATLASNN_SCHEDULER)")
     s.add_argument("--seed-batch", default=None, metavar="N", help="seeds per compiled program: a number or auto")
     s.add_argument("--quick", action="store_true", help="the config's quick variant")
+    s.add_argument("--profile", default=None, metavar="NAME", help="a named variant of the config (e.g. release)")
     s.add_argument("--metric", default=None, help="the summary's metric (default l2_discrete)")
     s.add_argument("--out", default=None, metavar="DIR", help="sweep directory (default runs/sweep-NAME[-quick])")
     s.add_argument("--overwrite", action="store_true", help="reuse a non-empty sweep directory")

@@ -149,6 +149,7 @@ class ExperimentConfig:
     follows: dict[str, str] = field(default_factory=dict)
     profile: str = "default"
     seed_batch: int | str = "auto"
+    scheduler: str = ""
     raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -278,7 +279,7 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: expected a table at the top level")
     _table("", data, {k.name for k in SCHEMA[""].keys})
-    data = _apply_profile(data, profile, source)
+    data = apply_profile(data, profile, source)
     if quick:
         q = data.get("quick")
         if q is None:
@@ -311,7 +312,7 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     return cfg
 
 
-def _apply_profile(data: dict[str, Any], profile: str | None, source: str) -> dict[str, Any]:
+def apply_profile(data: dict[str, Any], profile: str | None, source: str) -> dict[str, Any]:
     """The file with the named profile merged over it (its ``profile`` key set to that name)."""
     own = data.get("profile", "default")
     variants = SCHEMA[""].key("profiles").type.parse("profiles", data.get("profiles", {}))

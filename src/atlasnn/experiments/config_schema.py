@@ -258,6 +258,9 @@ SCHEMA: dict[str, TableSpec] = {
     "execution": TableSpec("How the trainings are run; results do not depend on these beyond rounding.", (
         Key("seed_batch", CountOrAuto(1024), "auto", "Seeds of one model trained together as one compiled "
             "program: a number, or auto (batch where it measures faster; --seed-batch overrides it)."),
+        Key("scheduler", String(), "", "The address of a Dask scheduler whose workers run the trainings "
+            "(e.g. \"tcp://host:8786\"; docs/SCALE.md); empty: local processes. --scheduler and "
+            "$ATLASNN_SCHEDULER override it."),
     )),
     "evaluation": TableSpec("Errors against a reference solution (SciPy DOP853, float64) on an evaluation grid.", (
         Key("eval_points", Integer(2, MAX_POINTS), None, "Number of equally spaced times of the evaluation grid.",

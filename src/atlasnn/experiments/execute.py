@@ -186,11 +186,15 @@ DASK_STOP_WAIT = 60.0
 _POLL_SECONDS = 0.25
 
 
-def scheduler_address(scheduler: str | None = None) -> str | None:
-    """The Dask scheduler of a run: ``scheduler`` when given, else ``$ATLASNN_SCHEDULER``; None
-    (also for an empty text) means the local executors."""
+def scheduler_address(scheduler: str | None = None, configured: str | None = None) -> str | None:
+    """The Dask scheduler of a run: ``scheduler`` (the command line) when given, else
+    ``$ATLASNN_SCHEDULER``, else ``configured`` (the config's ``execution.scheduler``); None (also
+    for an empty text) means the local executors. The machine's setting (the environment) wins
+    over the experiment file's, so one file runs anywhere."""
     if scheduler is None:
         scheduler = os.environ.get(SCHEDULER_ENV)
+    if scheduler is None:
+        scheduler = configured
     text = (scheduler or "").strip()
     return text or None
 

@@ -174,7 +174,7 @@ def run_experiment(
     seeds = tuple(seeds if seeds is not None else cfg.seeds)
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
         raise ConfigError(f"jobs must be an integer >= 1, got {jobs!r}")
-    address = scheduler_address(scheduler)
+    address = scheduler_address(scheduler, cfg.scheduler)
     if address is not None and jobs != 1:
         raise ConfigError(f"jobs = {jobs} and the Dask scheduler {address} cannot be combined: the "
                           "scheduler's workers run the trainings (unset ATLASNN_SCHEDULER for local processes)")

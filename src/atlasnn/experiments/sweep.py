@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config import ExperimentConfig, parse_config
+from atlasnn.experiments.config import ExperimentConfig, apply_profile, parse_config
 from atlasnn.experiments.execute import close_dask, connect_dask, scheduler_address
 from atlasnn.experiments.store import RunLock, check_run_dir, one_line, write_json
 from atlasnn.metrics import METRIC_NAMES
@@ -211,6 +211,7 @@ class _Sweep:
 
     def point_config(self, point: dict) -> tuple[ExperimentConfig, str]:
         data = tomllib.loads((self.out / "config.toml").read_text(encoding="utf-8"))
+        data = apply_profile(data, self.spec.get("profile"), self.spec["config_source"])
         pdata = point_data(data, point["set"], self.spec["quick"])
         import tomli_w
 
@@ -263,11 +264,13 @@ def _lock(out: Path) -> RunLock:
 def run_sweep(config: str | Path, sets: list[str], *, seeds: tuple[int, ...] | None = None,
               out: str | Path | None = None, jobs: int = 1, scheduler: str | None = None,
               quick: bool = False, metric: str = "l2_discrete", overwrite: bool = False,
-              seed_batch: int | str = "auto", progress: bool = True, log=print) -> tuple[Path, list[dict]]:
+              seed_batch: int | str = "auto", progress: bool = True, log=print,
+              profile: str | None = None) -> tuple[Path, list[dict]]:
     """Run ``config`` at every point of the grid ``sets`` (``KEY=V1,V2,...`` each) with ``seeds``
     (default: each point's config seeds), one run directory per point under ``out`` (default
-    ``runs/sweep-NAME[-quick]``); returns the sweep directory and the summary rows. Every point is validated and the
-    scheduler connected before anything is written."""
+    ``runs/sweep-NAME[-PROFILE][-quick]``); returns the sweep directory and the summary rows.
+    ``profile``: a named variant of the config, merged first (the overrides go over it). Every
+    point is validated and the scheduler connected before anything is written."""
     config = Path(config)
     try:
         text = config.read_text(encoding="utf-8")
@@ -279,13 +282,15 @@ def run_sweep(config: str | Path, sets: list[str], *, seeds: tuple[int, ...] | N
     if metric not in METRICS:
         raise ConfigError(f"--metric {metric}: choose one of {list(METRICS)}")
     axes = parse_sets(sets)
-    points = plan_points(data, axes, quick, str(config))
-    base = parse_config(data, quick=quick, source=str(config))
-    out = Path(out or f"runs/sweep-{base.name}{'-quick' if quick else ''}")
+    merged = apply_profile(data, profile, str(config))
+    points = plan_points(merged, axes, quick, str(config))
+    base = parse_config(merged, quick=quick, source=str(config))
+    named = f"-{base.profile}" if profile is not None else ""
+    out = Path(out or f"runs/sweep-{base.name}{named}{'-quick' if quick else ''}")
     check_run_dir(out, overwrite)
     _check_scheduler(scheduler)
     spec = {
-        "config_source": str(config), "experiment": base.name, "quick": bool(quick),
+        "config_source": str(config), "experiment": base.name, "quick": bool(quick), "profile": profile,
         "seeds": None if seeds is None else [int(s) for s in seeds], "metric": metric,
         "axes": [{"key": a.key, "values": list(a.values)} for a in axes],
         "points": [{"name": p["name"], "dir": p["dir"], "set": p["set"], "status": "pending"} for p in points],
