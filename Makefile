@@ -3,7 +3,7 @@ PY ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: quick test reproduce-all bench clean-venv
+.PHONY: quick test reproduce-all reproduce-release reproduction-doc bench clean-venv
 
 $(BIN)/atlasnn: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -17,10 +17,22 @@ quick: $(BIN)/atlasnn
 test: $(BIN)/atlasnn
 	$(BIN)/python -m pytest -q
 
-# The paper's four experiments at full settings (see docs/REPRODUCTION.md for seeds and timings).
+# The paper's four experiments at full settings, 5 seeds, both profiles (docs/REPRODUCTION.md).
+# `make reproduce-all` is the paper profile; its wall time goes to runs/paper/timing.json.
+SEEDS ?= 5
+JOBS ?= 2
+PAPER := oscillator-short oscillator-transfer henon-heiles-short henon-heiles-transfer
+
 reproduce-all: $(BIN)/atlasnn
-	for e in oscillator-short oscillator-transfer henon-heiles-short henon-heiles-transfer; do \
-	  $(BIN)/atlasnn reproduce $$e --seeds 3 --out runs/$$e --overwrite || exit 1; done
+	$(BIN)/python scripts/timed.py runs/paper/timing.json -- $(foreach e,$(PAPER),\
+	  "$(BIN)/atlasnn reproduce $(e) --seeds $(SEEDS) --jobs $(JOBS) --out runs/paper/$(e) --overwrite --no-progress")
+
+reproduce-release: $(BIN)/atlasnn
+	$(BIN)/python scripts/timed.py runs/release/timing.json -- $(foreach e,$(PAPER),\
+	  "$(BIN)/atlasnn reproduce $(e) --profile release --seeds $(SEEDS) --jobs $(JOBS) --out runs/release/$(e) --overwrite --no-progress")
+
+reproduction-doc: $(BIN)/atlasnn
+	$(BIN)/python scripts/reproduction_doc.py $(foreach e,$(PAPER),runs/paper/$(e) runs/release/$(e))
 
 bench: $(BIN)/atlasnn
 	$(BIN)/pip install -q 'torch==2.13.0'

@@ -1,35 +1,73 @@
-"""Collect finished full-setting runs into docs/REPRODUCTION_RESULTS.md and docs/figures/.
+"""Collect finished full-setting runs into the reproduction docs. Nothing here is typed by hand:
+re-run the script after re-running the experiments.
 
-    python scripts/reproduction_doc.py runs/oscillator-short runs/oscillator-transfer ...
+    python scripts/reproduction_doc.py runs/paper/* runs/release/*
 
-For each run directory: the command and wall time (from meta.json), the tables atlasnn wrote
-(tables.md), and the main figures copied into docs/figures/<experiment>/. Nothing here is typed
-by hand: re-run the script after re-running the experiments.
+For each run directory (any profile):
+
+- its small summaries go to ``docs/runs/PROFILE/EXPERIMENT/`` (results.json, summary.json,
+  tables.csv, meta.json; no checkpoints or arrays);
+- a section in docs/REPRODUCTION_RESULTS.md: command, wall time, the tables atlasnn wrote, and
+  the main figures (copied to ``docs/figures/PROFILE/EXPERIMENT/``);
+
+and over all of them:
+
+- per transfer experiment, the loss–accuracy figure (final target loss against L2(x) for every
+  model × seed × profile, the paper's run marked): ``docs/figures/EXPERIMENT/loss_vs_accuracy.png``;
+- the generated parts of docs/REPRODUCTION.md, each between ``<!-- generated:NAME -->`` and
+  ``<!-- /generated:NAME -->`` markers: ``headline`` (median [min–max] L2(x) per experiment, model
+  and profile, the paper's value beside it) and ``claims`` (how many seeds each of the paper's
+  claims holds in, per profile; :mod:`atlasnn.claims`).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import shutil
+import sys
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from atlasnn.claims import experiment_claims, markdown as claims_markdown  # noqa: E402
+from atlasnn.report import load_paper  # noqa: E402
+from atlasnn.table_text import format_number  # noqa: E402
+
 FIGURES = ["overview", "trajectories", "errors", "energy", "loss", "target_loss_comparison", "loss_source", "gamma",
-           "seed_spread_l2_x"]
+           "seed_spread_l2_x", "work_precision"]
+SUMMARY_FILES = ["results.json", "summary.json", "tables.csv", "meta.json", "workprecision.json"]
+
+
+def _profile(run: Path, res: dict) -> str:
+    if res.get("profile"):
+        return str(res["profile"])
+    meta = json.loads((run / "meta.json").read_text())
+    return str(meta.get("profile") or "paper")
+
+
+def _command(run: Path, meta: dict) -> str:
+    argv = meta.get("command", "").split()
+    return " ".join(["atlasnn"] + [a.replace(str(run.parent) + "/", "runs/") for a in argv[1:]])
 
 
 def section(run: Path, docs: Path) -> str:
     meta = json.loads((run / "meta.json").read_text())
     res = json.loads((run / "results.json").read_text())
-    name = res["experiment"]
-    fig_dir = docs / "figures" / name
+    name, profile = res["experiment"], _profile(run, res)
+    keep = docs / "runs" / profile / name
+    keep.mkdir(parents=True, exist_ok=True)
+    for f in SUMMARY_FILES:
+        if (run / f).exists():
+            shutil.copyfile(run / f, keep / f)
+    fig_dir = docs / "figures" / profile / name
     fig_dir.mkdir(parents=True, exist_ok=True)
-    lines = [f"## {name}", ""]
-    argv = meta.get("command", "").split()
-    cmd = " ".join(["atlasnn"] + [a.replace(str(run.parent) + "/", "runs/") for a in argv[1:]])
-    lines.append(f"Command: `{cmd}` — seeds {meta['seeds']}, jobs {meta['jobs']}, "
+    lines = [f"## {name} — profile {profile}", ""]
+    lines.append(f"Command: `{_command(run, meta)}` — seeds {meta['seeds']}, jobs {meta['jobs']}, "
                  f"wall time {meta.get('wall_time_total', float('nan')) / 60:.1f} min on this machine "
-                 f"(atlasnn {meta['versions']['atlasnn']}, JAX {meta['versions']['jax']}, {meta['versions']['backend']}).")
+                 f"(atlasnn {meta['versions']['atlasnn']}, JAX {meta['versions']['jax']}, {meta['versions']['backend']}). "
+                 f"Summaries: [docs/runs/{profile}/{name}/](runs/{profile}/{name}/).")
     lines.append("")
     tables = (run / "tables.md").read_text().replace("\n# ", "\n### ").replace("\n## ", "\n### ")
     if tables.startswith("# "):
@@ -39,23 +77,83 @@ def section(run: Path, docs: Path) -> str:
         src = run / "figures" / f"{stem}.png"
         if src.exists():
             shutil.copyfile(src, fig_dir / f"{stem}.png")
-            lines.append(f"![{name} {stem}](figures/{name}/{stem}.png)")
+            lines.append(f"![{name} {profile} {stem}](figures/{profile}/{name}/{stem}.png)")
     lines.append("")
     return "\n".join(lines)
 
 
+def headline(runs: dict[str, dict[str, dict]]) -> str:
+    """Median [min–max] L2 of the first state per model, per experiment and profile."""
+    out = ["| experiment | profile | seeds | " + "model: median [min–max] (paper) |" , "|---|---|---|---|"]
+    for name, by_profile in runs.items():
+        try:
+            paper = load_paper(name)["rows"]
+        except Exception:
+            paper = {}
+        for profile, res in by_profile.items():
+            state = res["state_names"][0]
+            cells = []
+            for column in res["columns"]:
+                vals = sorted(r["metrics"]["l2_discrete"][state] for r in res["runs"]
+                              if r["column"] == column and r.get("role", "short") in ("short", "target"))
+                if column == "se":
+                    se = next((i for i in res.get("integrators") or [] if i["column"] == "se"), None)
+                    vals = [se["metrics"]["l2_discrete"][state]] if se else []
+                if not vals:
+                    continue
+                med = vals[len(vals) // 2] if len(vals) % 2 else (vals[len(vals) // 2 - 1] + vals[len(vals) // 2]) / 2
+                text = format_number(med) if len(vals) == 1 else \
+                    f"{format_number(med)} [{format_number(vals[0])}–{format_number(vals[-1])}]"
+                p = paper.get(f"l2_{state}", {}).get(column)
+                label = res.get("labels", {}).get(column, column)
+                cells.append(f"{label}: {text}" + (f" ({format_number(p)})" if isinstance(p, (int, float)) else ""))
+            out.append(f"| {name} | {profile} | {len(res['seeds'])} | " + "; ".join(cells) + " |")
+    return "\n".join(out)
+
+
+def replace_generated(text: str, name: str, body: str) -> str:
+    start, end = f"<!-- generated:{name} -->", f"<!-- /generated:{name} -->"
+    pattern = re.compile(re.escape(start) + r".*?" + re.escape(end), re.S)
+    if not pattern.search(text):
+        raise SystemExit(f"docs/REPRODUCTION.md has no {start} ... {end} markers")
+    return pattern.sub(lambda _: f"{start}\n{body.strip()}\n{end}", text)
+
+
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", type=Path)
     ap.add_argument("--docs", type=Path, default=Path("docs"))
     args = ap.parse_args()
+    by_exp: dict[str, dict[str, dict]] = {}
+    dirs: dict[str, list[Path]] = {}
     parts = ["# Reproduction results (generated)", "",
              "Written by `scripts/reproduction_doc.py` from the run directories; the discussion is in "
              "[REPRODUCTION.md](REPRODUCTION.md).", ""]
     for run in args.runs:
+        res = json.loads((run / "results.json").read_text())
         parts.append(section(run, args.docs))
+        by_exp.setdefault(res["experiment"], {})[_profile(run, res)] = res
+        dirs.setdefault(res["experiment"], []).append(run)
     (args.docs / "REPRODUCTION_RESULTS.md").write_text("\n".join(parts), encoding="utf-8")
     print(f"wrote {args.docs / 'REPRODUCTION_RESULTS.md'}")
+
+    import loss_accuracy
+
+    for name, runs in dirs.items():
+        if by_exp[name][next(iter(by_exp[name]))]["kind"] != "transfer":
+            continue
+        stem = args.docs / "figures" / name / "loss_vs_accuracy"
+        stem.parent.mkdir(parents=True, exist_ok=True)
+        loss_accuracy.main([*map(str, runs), "--out", str(stem)])
+
+    profiles = sorted({p for v in by_exp.values() for p in v}, key=lambda p: (p != "paper", p))
+    claims = [experiment_claims(v) for v in by_exp.values()]
+    doc = args.docs / "REPRODUCTION.md"
+    text = doc.read_text(encoding="utf-8")
+    text = replace_generated(text, "headline", headline(by_exp))
+    text = replace_generated(text, "claims", claims_markdown(claims, profiles))
+    doc.write_text(text, encoding="utf-8")
+    print(f"updated the generated sections of {doc}")
 
 
 if __name__ == "__main__":
