@@ -49,7 +49,7 @@ def test_a_training_that_cannot_fit_in_24_gib_is_refused():
         check_training_memory(1_000_000, 1000, 2, 2, available=MACHINE_24_GIB)
     msg = str(info.value)
     assert msg == ("train.n_points = 1000000: a training needs about 39.7 GiB, more than the 24 GiB available "
-                   "(network 1000x2, 2d = 2); lower train.n_points or network.width")
+                   "(K = 1000000, network 1000x2, 2d = 2); lower train.n_points or network.width")
     with pytest.raises(ConfigError, match=r"^target\.train\.n_points = 500000: a training of 4 seeds together"):
         check_training_memory(500_000, 80, 2, 4, seeds=4, key="target.train.n_points", available=2 * GIB)
 

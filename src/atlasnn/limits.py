@@ -158,10 +158,13 @@ def _gib(n: int) -> str:
 
 
 def check_training_memory(n_points: int, width: int, depth: int, state_dim: int, seeds: int = 1, *,
-                          dtype_bytes: int = 4, key: str = "train.n_points", available: int | None = None) -> int:
+                          dtype_bytes: int = 4, key: str = "train.n_points", available: int | None = None,
+                          value=None, advice: str | None = None) -> int:
     """Refuse a training that will not fit in memory; return its estimated bytes.
 
     ``available`` defaults to :func:`available_memory` (nothing is refused when that is unknown).
+    ``value`` and ``advice`` replace the message's value of ``key`` and its last clause (the
+    runner names the seed batch this way).
 
     Raises:
         ConfigError: ``"train.n_points = 1000000: a training needs about 42 GiB, more than the
@@ -172,8 +175,10 @@ def check_training_memory(n_points: int, width: int, depth: int, state_dim: int,
     room = available_memory() if available is None else available
     if room is not None and need > room:
         who = "a training" if seeds == 1 else f"a training of {seeds} seeds together"
-        raise ConfigError(f"{key} = {n_points}: {who} needs about {_gib(need)}, more than the {_gib(room)} "
-                          f"available (network {width}x{depth}, 2d = {state_dim}); lower {key} or network.width")
+        shown = n_points if value is None else value
+        raise ConfigError(f"{key} = {shown}: {who} needs about {_gib(need)}, more than the {_gib(room)} "
+                          f"available (K = {n_points}, network {width}x{depth}, 2d = {state_dim}); "
+                          f"{advice or f'lower {key} or network.width'}")
     return need
 
 

@@ -242,7 +242,7 @@ def summary_lines(results: dict | str | Path, run_dir: str | Path | None = None)
     if quick:
         lines.append(f"{results['experiment']}: {QUICK_BANNER}")
     spread = f"median over {n} seeds, [min–max] for L2({states[0]})" if n > 1 else f"seed {results['seeds'][0]}"
-    profile = f" (profile {results['profile']})" if results.get("profile") else ""
+    profile = f" (profile {results['profile']})" if results.get("profile") not in (None, "default") else ""
     lines += textwrap.wrap(f"{results['experiment']}{profile}: L2 (release form, {results.get('eval_points', '?')} "
                            f"points), {spread}", SUMMARY_WIDTH, subsequent_indent="  ")
 

@@ -336,7 +336,7 @@ def _stop_text(d: dict) -> str:
 def _profile_text(summary: dict) -> str:
     """", profile release" for a run of a named profile (runs of older versions have none)."""
     profile = summary.get("profile")
-    return f", profile {profile}" if profile else ""
+    return f", profile {profile}" if profile not in (None, "default") else ""
 
 
 def _header_lines(summary: dict, paper: dict | None) -> list[str]:
