@@ -218,7 +218,7 @@ def _record(k: int, edges: np.ndarray, z_start, res: TrainResult, pol: PolishRes
         polish_steps=0 if pol is None else pol.steps,
         polish_stop_reason="" if pol is None else pol.stop_reason,
         polish_initial_loss=float("nan") if pol is None else pol.initial_loss,
-        loss=float("nan") if pol is None else pol.final_loss,
+        loss=res.best_loss if pol is None else pol.final_loss,
         wall_time=wall, compile_time=res.compile_time + (0.0 if pol is None else pol.compile_time),
         history=np.asarray(res.history.loss), polish_history=None if pol is None else pol.loss,
     )

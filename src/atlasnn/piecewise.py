@@ -63,8 +63,8 @@ class WindowRecord:
 
     ``epochs``/``stop_reason``/``final_loss``/``best_loss`` are Adam's; ``polish_*`` the L-BFGS
     phase's (zeros and "" when there was none); ``loss`` is the physics loss of the window's
-    returned model (after polishing, on the polishing grid, when there was one); ``wall_time``
-    and ``compile_time`` cover training and polishing.
+    returned model: on the polishing grid when it was polished, else Adam's ``best_loss``;
+    ``wall_time`` (compilation excluded) and ``compile_time`` cover training and polishing.
     """
 
     index: int
