@@ -155,26 +155,33 @@ class MLP(eqx.Module):
 
     ``depth`` hidden layers of ``width`` units with activation ``activation`` (sin by default, as in
     the authors' release) and a linear output layer. Initialisation as PyTorch's ``nn.Linear``:
-    weights and biases uniform in ±1/sqrt(fan_in).
+    weights and biases uniform in ±1/sqrt(fan_in); ``first_layer_scale`` c multiplies the first
+    layer's weights after that draw (so its features sin(c·w·t + b) start with angular frequencies
+    up to c instead of 1, as SIREN's ω0 does; c = 1 is the plain initialisation).
     """
 
     weights: list[jax.Array]
     biases: list[jax.Array]
     activation: str = eqx.field(static=True)
 
-    def __init__(self, out_size: int, width: int, depth: int, key: jax.Array, activation: str = "sin"):
+    def __init__(self, out_size: int, width: int, depth: int, key: jax.Array, activation: str = "sin",
+                 first_layer_scale: float = 1.0):
         for name, v in (("width", width), ("depth", depth), ("out_size", out_size)):
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ConfigError(f"network {name} must be a positive integer, got {v!r}")
         if activation not in ACTIVATIONS:
             raise ConfigError(f"unknown activation {activation!r}; choose one of {sorted(ACTIVATIONS)}")
+        c = first_layer_scale
+        if isinstance(c, bool) or not isinstance(c, (int, float, np.integer, np.floating)) or not np.isfinite(c) or c <= 0:
+            raise ConfigError(f"network first_layer_scale must be a finite number > 0, got {c!r}")
         sizes = [1] + [int(width)] * int(depth) + [int(out_size)]
         keys = jax.random.split(key, 2 * (len(sizes) - 1))
         dtype = default_float()
         self.weights, self.biases = [], []
         for i, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
             bound = 1.0 / np.sqrt(fan_in)
-            self.weights.append(jax.random.uniform(keys[2 * i], (fan_out, fan_in), dtype, -bound, bound))
+            w = jax.random.uniform(keys[2 * i], (fan_out, fan_in), dtype, -bound, bound)
+            self.weights.append(w * jnp.asarray(c, dtype) if (i == 0 and c != 1) else w)
             self.biases.append(jax.random.uniform(keys[2 * i + 1], (fan_out,), dtype, -bound, bound))
         self.activation = activation
 
@@ -273,12 +280,15 @@ def make_model(
     gamma: dict[str, float] | None = None,
     activation: str = "sin",
     seed: int | jax.Array = 0,
+    first_layer_scale: float = 1.0,
 ) -> TrialSolution:
     """Build a trial solution for initial state z0 (length 2d) at time t0.
 
     ``scaling`` is a scaling instance or a name: ``"exp_decay"`` (HNN baseline), ``"tanh"`` or
     ``"rational_exp"`` (ATLAS-NN); paper model names ``"hnn"``, ``"atlas_tanh"``, ``"atlas_exp"``
     are accepted too. ``gamma`` gives the initial γ (default 1.0 for each, as in the paper).
+    ``first_layer_scale`` scales the first layer's initial weights (see :class:`MLP`); it is an
+    initialisation choice only (a checkpoint stores the weights, not the scale).
     """
     z0 = np.asarray(z0, dtype=np.float64).reshape(-1)
     if z0.size < 2 or z0.size % 2 or not np.all(np.isfinite(z0)):
@@ -288,5 +298,5 @@ def make_model(
     elif gamma:
         raise ConfigError("give gamma only together with a scaling name, not with a scaling instance")
     key = seed if isinstance(seed, jax.Array) else jax.random.PRNGKey(int(seed))
-    net = MLP(z0.size, width, depth, key, activation)
+    net = MLP(z0.size, width, depth, key, activation, first_layer_scale)
     return TrialSolution(net, scaling, jnp.asarray(z0, dtype=default_float()), float(t0))
