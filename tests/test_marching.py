@@ -170,3 +170,48 @@ def test_first_layer_scale_multiplies_the_initial_first_layer_only():
     for bad in (0.0, -1.0, float("nan"), True):
         with pytest.raises(ConfigError, match="first_layer_scale"):
             make_model((1.0, 0.0), width=16, depth=2, first_layer_scale=bad)
+
+
+def test_seeds_marched_together_are_their_lone_marches(ho):
+    from atlasnn.marching import march_batch
+
+    cfgs = [CFG.replace(train=CFG.train.replace(seed=s)) for s in (0, 1)]
+    together = march_batch([_model(0), _model(1)], ho, T_END, cfgs)
+    t = np.linspace(0.0, T_END, 200)
+    for s, sol in enumerate(together):
+        alone = march(_model(s), ho, T_END, cfgs[s])
+        assert [r.epochs for r in sol.windows] == [r.epochs for r in alone.windows]
+        np.testing.assert_allclose(sol(t), alone(t), rtol=0, atol=2e-4)  # rounding, grown over windows
+        assert sol.info["batch_size"] == 2
+    assert not np.allclose(together[0](t), together[1](t), atol=1e-6)
+
+
+def test_outside_the_interval_warns_once_or_raises(marched):
+    import warnings as w
+
+    from atlasnn.solution import ExtrapolationError, ExtrapolationWarning
+
+    sol = PiecewiseSolution(marched.models, marched.system, marched.edges)
+    with pytest.warns(ExtrapolationWarning, match="outside its training interval"):
+        sol(np.array([0.0, T_END + 1.0]))
+    with w.catch_warnings():
+        w.simplefilter("error")
+        sol(np.array([T_END + 2.0]))  # once per solution
+        sol(np.linspace(0.0, T_END, 7))  # inside: silent
+    strict = PiecewiseSolution(marched.models, marched.system, marched.edges, outside="raise")
+    with pytest.raises(ExtrapolationError, match="PiecewiseSolution"):
+        strict(np.array([-1.0]))
+
+
+def test_load_piecewise_refuses_another_problem(marched, ho, tmp_path):
+    from atlasnn.checkpoint import load_piecewise, save_piecewise
+    from atlasnn.errors import CheckpointError
+    from atlasnn.systems import nonlinear_oscillator
+
+    path = tmp_path / "pw.npz"
+    save_piecewise(path, marched)
+    load_piecewise(path, expect={"system": ho, "interval": [0.0, T_END]})  # its own problem
+    with pytest.raises(CheckpointError, match="not a model of the run X"):
+        load_piecewise(path, expect={"system": nonlinear_oscillator()}, owner="the run X")
+    with pytest.raises(CheckpointError, match="not a model of"):
+        load_piecewise(path, expect={"interval": [0.0, 2 * T_END]})

@@ -708,13 +708,16 @@ def _window_records(path: str, records: Any, arrays: Mapping[str, np.ndarray]) -
     return out
 
 
-def load_piecewise(path: str | os.PathLike, system: HamiltonianSystem | None = None):
+def load_piecewise(path: str | os.PathLike, system: HamiltonianSystem | None = None, *,
+                   expect: Mapping[str, Any] | None = None, owner: str = "the expected problem"):
     """Load a :class:`~atlasnn.piecewise.PiecewiseSolution` written by :func:`save_piecewise`.
 
     The hash is verified, the stacked leaves are checked against a skeleton of the stored
     architecture (number, shapes, dtypes) and split into the window models; the system is
     rebuilt from its spec unless given (as for :func:`load_checkpoint`). The loaded solution
     predicts bit-identically to the saved one. ``meta`` and the path are in its ``info``.
+    ``expect`` (keys ``"system"`` and ``"interval"``, as for :func:`load_checkpoint`) refuses a
+    solution of another problem with one line naming ``owner``.
     """
     from atlasnn.piecewise import PiecewiseSolution, stack_models, unstack_models
 
@@ -729,6 +732,15 @@ def load_piecewise(path: str | os.PathLike, system: HamiltonianSystem | None = N
     edges = arrays.get("piecewise_edges")
     if edges is None or edges.dtype != np.float64 or edges.shape != (n + 1,) or not np.all(np.diff(edges) > 0):
         raise _fail(p, f"piecewise_edges must be {n + 1} increasing float64 times")
+    for key in sorted(set(expect or {}) - {"system", "interval"}):
+        raise TypeError(f"expect has unknown key {key!r} (known: interval, system)")
+    why = None
+    if (expect or {}).get("system") is not None and isinstance(meta.get("system"), dict):
+        why = system_mismatch(meta["system"], expect["system"], meta.get("system_probes"))
+    if why is None and "interval" in (expect or {}):
+        why = interval_mismatch((float(edges[0]), float(edges[-1])), expect["interval"])
+    if why:
+        raise _fail(p, f"not a model of {owner}: {why}")
     try:
         arch, dtype = meta["architecture"], meta["dtype"]
         if dtype not in _FLOAT_DTYPES:

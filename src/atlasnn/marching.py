@@ -45,10 +45,10 @@ from atlasnn.model import TrialSolution
 from atlasnn.piecewise import PiecewiseSolution, WindowRecord, window_edges
 from atlasnn.polish import PolishConfig, PolishResult, polish
 from atlasnn.systems import HamiltonianSystem
-from atlasnn.train import TrainConfig, TrainResult, train
+from atlasnn.train import TrainConfig, TrainResult, train_batch
 from atlasnn.transfer import restrict_opt_state
 
-__all__ = ["MarchConfig", "march", "n_windows_for", "window_model", "end_state", "window_seed"]
+__all__ = ["MarchConfig", "march", "march_batch", "n_windows_for", "window_model", "end_state", "window_seed"]
 
 WINDOW_STARTS = ("initial", "previous", "features")
 
@@ -195,11 +195,13 @@ def end_state(model: TrialSolution, length: float) -> jax.Array:
 
 
 # ------------------------------------------------------------- trainer calls
-def _train_window(model: TrialSolution, system: HamiltonianSystem, length: float, config: TrainConfig,
-                  opt_state: Any, energy0: float, desc: str) -> TrainResult:
-    """Adam on one window [0, length]: the only call into the trainer (a seed-batched trainer
-    can replace this function)."""
-    return train(model, system, length, config, opt_state=opt_state, energy0=energy0, desc=desc)
+def _train_windows(models: list[TrialSolution], system: HamiltonianSystem, length: float,
+                   configs: list[TrainConfig], opt_states: list[Any], energy0: float, desc: str,
+                   on_chunk: Callable | None) -> list[TrainResult]:
+    """Adam on one window [0, length] for every model of the batch, as one compiled program:
+    the only call into the trainer."""
+    return train_batch(models, system, length, configs, opt_states=opt_states, energy0=energy0, desc=desc,
+                       on_chunk=on_chunk)
 
 
 def _polish_window(model: TrialSolution, system: HamiltonianSystem, length: float,
@@ -232,6 +234,7 @@ def march(
     config: MarchConfig = MarchConfig(),
     *,
     on_window: Callable[[WindowRecord], None] | None = None,
+    on_chunk: Callable | None = None,
 ) -> PiecewiseSolution:
     """Train a time-marching ATLAS-NN on [model.t0, T] and return the piecewise solution.
 
@@ -242,40 +245,75 @@ def march(
         T: the end of the interval.
         config: windows, per-window training, γ freezing, Adam carrying, polishing.
         on_window: called with each window's :class:`WindowRecord` when it is done.
+        on_chunk: passed to the trainer (called after every chunk of epochs with the list of
+            current training states); raising KeyboardInterrupt there stops the march.
     """
-    if model.state_dim != system.state_dim:
-        raise ConfigError(
-            f"model state dimension {model.state_dim} does not match system {system.name!r} "
-            f"(2d = {system.state_dim})"
-        )
-    t0 = float(model.t0)
-    edges = window_edges(t0, float(T), n_windows_for(t0, T, config))
+    callback = None if on_window is None else (lambda i, record: on_window(record))
+    return march_batch([model], system, T, [config], on_window=callback, on_chunk=on_chunk)[0]
+
+
+def march_batch(
+    models: list[TrialSolution],
+    system: HamiltonianSystem,
+    T: float,
+    configs: list[MarchConfig],
+    *,
+    on_window: Callable[[int, WindowRecord], None] | None = None,
+    on_chunk: Callable | None = None,
+) -> list[PiecewiseSolution]:
+    """:func:`march` for several models at once (typically the seeds of one config: the same
+    windows, the configs differing in their ``train.seed``): every window trains all of them as
+    one compiled program (:func:`atlasnn.train.train_batch`). ``on_window(i, record)`` names the
+    model. A training stopped by KeyboardInterrupt raises it (the march is not resumable mid-way).
+    """
+    if not models or len(configs) != len(models):
+        raise ConfigError(f"march_batch needs one config per model, got {len(models)} models and {len(configs)} configs")
+    for model in models:
+        if model.state_dim != system.state_dim:
+            raise ConfigError(
+                f"model state dimension {model.state_dim} does not match system {system.name!r} "
+                f"(2d = {system.state_dim})"
+            )
+    t0 = float(models[0].t0)
+    counts = {n_windows_for(t0, T, c) for c in configs}
+    if len(counts) != 1 or len({float(m.t0) for m in models}) != 1:
+        raise ConfigError("models marched together must share t0 and the windows")
+    edges = window_edges(t0, float(T), counts.pop())
     length = float(edges[1] - edges[0])
     with jax.enable_x64(True):
-        energy0 = float(system.energy(jnp.asarray(np.asarray(model.z0, np.float64))))
-    current = local_model(model)
-    opt_state = None
-    models, records = [], []
-    for k in range(len(edges) - 1):
-        cfg = window_config(config, k)
-        start = None
-        if k > 0 and config.carry_adam:
-            start = restrict_opt_state(opt_state, current, cfg.freeze_gamma)
+        energy0 = [float(system.energy(jnp.asarray(np.asarray(m.z0, np.float64)))) for m in models]
+    initial = [local_model(m) for m in models]
+    current = list(initial)
+    opt_states: list[Any] = [None] * len(models)
+    trained_all: list[list[TrialSolution]] = [[] for _ in models]
+    records_all: list[list[WindowRecord]] = [[] for _ in models]
+    n = len(edges) - 1
+    for k in range(n):
+        cfgs = [window_config(c, k) for c in configs]
+        starts = [restrict_opt_state(o, m, c.freeze_gamma) if (k > 0 and conf.carry_adam) else None
+                  for o, m, c, conf in zip(opt_states, current, cfgs, configs)]
         t_start = time.perf_counter()
-        res = _train_window(current, system, length, cfg, start, energy0, desc=f"window {k + 1}/{len(edges) - 1}")
-        trained, pol = res.model, None
-        pcfg = window_polish(config, cfg)
-        if pcfg is not None:
-            pol = _polish_window(trained, system, length, pcfg, energy0)
-            trained = pol.model
-        wall = time.perf_counter() - t_start - res.compile_time - (0.0 if pol is None else pol.compile_time)
-        record = _record(k, edges, current.z0, res, pol, trained, wall)
-        models.append(trained)
-        records.append(record)
-        if on_window is not None:
-            on_window(record)
-        opt_state = res.opt_state
-        current = next_window_model(config.start, local_model(model), trained, end_state(trained, length))
-    info = {"scheme": "time-marching", "n_windows": len(models), "window": length,
-            "thaw": config.thaw, "carry_adam": config.carry_adam, "energy0": energy0}
-    return PiecewiseSolution(models, system, edges, records, info)
+        results = _train_windows(current, system, length, cfgs, starts, energy0, f"window {k + 1}/{n}", on_chunk)
+        if any(r.stop_reason == "interrupted" for r in results):
+            raise KeyboardInterrupt
+        adam_wall = (time.perf_counter() - t_start - results[0].compile_time) / len(models)
+        for i, (res, cfg, conf) in enumerate(zip(results, cfgs, configs)):
+            trained, pol, t_pol = res.model, None, time.perf_counter()
+            pcfg = window_polish(conf, cfg)
+            if pcfg is not None:
+                pol = _polish_window(trained, system, length, pcfg, energy0[i])
+                trained = pol.model
+            wall = adam_wall + (time.perf_counter() - t_pol - (0.0 if pol is None else pol.compile_time))
+            record = _record(k, edges, current[i].z0, res, pol, trained, wall)
+            trained_all[i].append(trained)
+            records_all[i].append(record)
+            if on_window is not None:
+                on_window(i, record)
+            opt_states[i] = res.opt_state
+            current[i] = next_window_model(conf.start, initial[i], trained, end_state(trained, length))
+    out = []
+    for i, conf in enumerate(configs):
+        info = {"scheme": "time-marching", "n_windows": n, "window": length, "thaw": conf.thaw,
+                "carry_adam": conf.carry_adam, "energy0": energy0[i], "batch_size": len(models)}
+        out.append(PiecewiseSolution(trained_all[i], system, edges, records_all[i], info))
+    return out

@@ -26,6 +26,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.model import TrialSolution
+from atlasnn.solution import OUTSIDE_MODES, check_inside
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["WindowRecord", "PiecewiseSolution", "stack_models", "unstack_models", "window_edges"]
@@ -103,6 +104,8 @@ class PiecewiseSolution:
         edges: the window edges t_0..t_n (float64).
         windows: one :class:`WindowRecord` per window (may be empty for a bare solution).
         info: free-form record (scheme settings, training summary).
+        outside: what evaluating outside [t0, T] does, as for :class:`~atlasnn.solution.Solution`:
+            ``"warn"`` (once), ``"raise"`` or ``"allow"`` (the first or last window extrapolates).
     """
 
     models: list[TrialSolution]
@@ -110,8 +113,12 @@ class PiecewiseSolution:
     edges: np.ndarray
     windows: list[WindowRecord] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
+    outside: str = "warn"
+    _warned: bool = field(default=False, init=False, repr=False)
 
     def __post_init__(self) -> None:
+        if self.outside not in OUTSIDE_MODES:
+            raise ValueError(f"outside must be one of {list(OUTSIDE_MODES)}, got {self.outside!r}")
         self.edges = np.asarray(self.edges, dtype=np.float64)
         n = len(self.models)
         if n < 1 or self.edges.shape != (n + 1,) or not np.all(np.diff(self.edges) > 0):
@@ -133,6 +140,7 @@ class PiecewiseSolution:
             raise ValueError("times must be finite")
         shape = arr.shape
         flat = arr.reshape(-1)
+        check_inside(self, self.interval, flat)
         k = self.window_index(flat)
         s = flat - self.edges[k]  # local time, in float64 before the cast
         n = len(self.models)

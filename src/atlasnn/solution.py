@@ -40,6 +40,26 @@ class ExtrapolationError(AtlasError, ValueError):
     """A Solution with ``outside="raise"`` was evaluated outside its training interval."""
 
 
+def check_inside(owner: Any, interval: tuple[float, float] | None, arr: np.ndarray) -> None:
+    """The extrapolation rule (module docstring) for the times ``arr`` (finite) of a solution
+    ``owner`` with attributes ``outside`` and ``_warned`` (a Solution or a PiecewiseSolution)."""
+    if interval is None or owner.outside == "allow" or arr.size == 0:
+        return
+    t0, T = interval
+    slack = INTERVAL_SLACK * (T - t0)
+    lo, hi = float(arr.min()), float(arr.max())
+    if lo >= t0 - slack and hi <= T + slack:
+        return
+    kind = type(owner).__name__
+    msg = (f"evaluating the solution at times in [{lo:.6g}, {hi:.6g}], outside its training interval "
+           f"[{t0:.6g}, {T:.6g}]: values there are an extrapolation")
+    if owner.outside == "raise":
+        raise ExtrapolationError(msg + f" ({kind}(..., outside='allow') permits it)")
+    if not owner._warned:
+        owner._warned = True
+        warnings.warn(msg + f" (warned once per {kind})", ExtrapolationWarning, stacklevel=5)
+
+
 @jax.jit
 def _evaluate(model: TrialSolution, t: jax.Array):
     return model.value_and_rate(t)
@@ -78,21 +98,7 @@ class Solution:
             self.interval = (t0, T)
 
     def _check_inside(self, arr: np.ndarray) -> None:
-        """The extrapolation rule (module docstring) for the times ``arr`` (finite, non-empty)."""
-        if self.interval is None or self.outside == "allow" or arr.size == 0:
-            return
-        t0, T = self.interval
-        slack = INTERVAL_SLACK * (T - t0)
-        lo, hi = float(arr.min()), float(arr.max())
-        if lo >= t0 - slack and hi <= T + slack:
-            return
-        msg = (f"evaluating the solution at times in [{lo:.6g}, {hi:.6g}], outside its training interval "
-               f"[{t0:.6g}, {T:.6g}]: values there are an extrapolation")
-        if self.outside == "raise":
-            raise ExtrapolationError(msg + " (Solution(..., outside='allow') permits it)")
-        if not self._warned:
-            self._warned = True
-            warnings.warn(msg + " (warned once per Solution)", ExtrapolationWarning, stacklevel=4)
+        check_inside(self, self.interval, arr)
 
     def _times(self, t) -> tuple[jax.Array, tuple[int, ...]]:
         arr = np.asarray(t, dtype=np.float64)
