@@ -95,7 +95,7 @@ def headline(runs: dict[str, dict[str, dict]]) -> str:
             cells = []
             for column in res["columns"]:
                 vals = sorted(r["metrics"]["l2_discrete"][state] for r in res["runs"]
-                              if r["column"] == column and r.get("role", "short") in ("short", "target"))
+                              if r["column"] == column and r.get("role", "short") in ("short", "target", "march"))
                 if column == "se":
                     se = next((i for i in res.get("integrators") or [] if i["column"] == "se"), None)
                     vals = [se["metrics"]["l2_discrete"][state]] if se else []

@@ -22,7 +22,7 @@ from typing import Any, Mapping
 
 from atlasnn.report import load_paper, load_results
 
-TABLE_ROLES = ("short", "target")
+TABLE_ROLES = ("short", "target", "march")
 
 
 def _by_seed(results: dict, column: str, state: str) -> dict[Any, float]:

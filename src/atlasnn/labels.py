@@ -9,4 +9,7 @@ MODEL_LABELS = {
     "hnn_transfer": "HNN (transfer)",
     "atlas_tanh_transfer": "ATLAS-NN (tanh, transfer)",
     "atlas_exp_transfer": "ATLAS-NN (exp, transfer)",
+    "hnn_march": "HNN (time-marching)",
+    "atlas_tanh_march": "ATLAS-NN (tanh, time-marching)",
+    "atlas_exp_march": "ATLAS-NN (exp, time-marching)",
 }

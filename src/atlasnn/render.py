@@ -36,27 +36,34 @@ def _histories(run_dir: Path, results: dict) -> dict[str, dict]:
 
     Every checkpoint must belong to the run: the system of ``results.json`` (identity, z0), the
     record's interval, column, role and seed; anything else is refused with one line."""
-    from atlasnn.checkpoint import load_checkpoint
+    from atlasnn.checkpoint import load_checkpoint, load_piecewise
     from atlasnn.errors import CheckpointError
 
     out = {}
+    owner = f"the run in {run_dir}"
     for r in results["runs"]:
         path = run_dir / r["checkpoint"]
         if not path.exists():
             continue
-        ck = load_checkpoint(path)
-        owner = f"the run in {run_dir}"
-        ck.require({"system": results.get("system"), "interval": r.get("interval")}, owner=owner)
+        expect = {"system": results.get("system"), "interval": r.get("interval")}
+        if r.get("role") == "march":  # one file of all windows; its loss: the windows' one after the other
+            sol = load_piecewise(path, expect=expect, owner=owner)
+            extra, gam = sol.info.get("extra") or {}, {}
+            loss = np.concatenate([np.asarray(w.history) for w in sol.windows if w.history is not None])
+        else:
+            ck = load_checkpoint(path)
+            ck.require(expect, owner=owner)
+            extra, h = ck.extra, ck.history
+            if h is None:
+                continue
+            gam = {name: h.gamma[:, i] for i, name in enumerate(h.gamma_names)}
+            loss = h.loss
         for key in ("column", "role", "seed"):
-            if key in ck.extra and key in r and ck.extra[key] != r[key]:
+            if key in extra and key in r and extra[key] != r[key]:
                 raise CheckpointError(f"checkpoint {path}: not a model of {owner}: its {key} is "
-                                      f"{ck.extra[key]!r}, the run's record says {r[key]!r}")
-        h = ck.history
-        if h is None:
-            continue
-        gam = {name: h.gamma[:, i] for i, name in enumerate(h.gamma_names)}
+                                      f"{extra[key]!r}, the run's record says {r[key]!r}")
         key = r["column"] + (":source" if r["role"] == "source" else "")
-        out[(key, r["seed"])] = {"loss": h.loss, "gamma": gam}
+        out[(key, r["seed"])] = {"loss": loss, "gamma": gam}
     return out
 
 
@@ -129,6 +136,16 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
     written += plots.plot_trajectories(fig_dir / "trajectories", series, names, src_iv, title=title)
     written += plots.plot_errors(fig_dir / "errors", series, names, src_iv, title=title)
     written += plots.plot_energy(fig_dir / "energy", [ref] + series, results["energy0"], src_iv, title=title)
+
+    # ---- cost against accuracy, when the run measured it
+    if results.get("work_precision"):
+        from atlasnn import workprecision as wp
+
+        wpr = results["work_precision"]
+        pts = [wp.WorkPoint(**p) for p in wpr["points"]]
+        written += wp.plot_work_precision(fig_dir / "work_precision", pts, first_name=wpr.get("first_state", "x"),
+                                          title=f"{results['experiment']}: cost against accuracy "
+                                                f"({wpr.get('grid_points', '?')}-point grid)")
 
     # ---- per-seed spread of the headline metric, paper value beside it
     try:

@@ -36,7 +36,7 @@ STATE_METRICS = ("l2_discrete", "mse", "l2_integral", "max_abs")
 #: scalar metrics
 SCALAR_METRICS = ("energy_drift",)
 
-_TABLE_ROLES = ("short", "target")
+_TABLE_ROLES = ("short", "target", "march")
 
 
 # ============================================================================ loading

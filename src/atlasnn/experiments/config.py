@@ -125,6 +125,21 @@ class Stage:
 
 
 @dataclass(frozen=True)
+class MarchSettings:
+    """The ``[march]`` table: which models are marched, their network, and the scheme."""
+
+    models: tuple[str, ...]
+    width: int
+    depth: int
+    activation: str
+    first_layer_scale: float
+    scheme: Any  # atlasnn.marching.MarchConfig (progress and seed are set per training)
+
+    def columns(self) -> list[str]:
+        return [f"{m}_march" for m in self.models]
+
+
+@dataclass(frozen=True)
 class ExperimentConfig:
     """One experiment: a short run (``interval``) or a transfer run (``source`` → ``target``)."""
 
@@ -147,6 +162,9 @@ class ExperimentConfig:
     seeds: tuple[int, ...] = (0,)
     description: str = ""
     follows: dict[str, str] = field(default_factory=dict)
+    first_layer_scale: float = 1.0
+    march: MarchSettings | None = None
+    polish: Any = None  # atlasnn.polish.PolishConfig, or None
     profile: str = "default"
     seed_batch: int | str = "auto"
     scheduler: str = ""
@@ -159,10 +177,11 @@ class ExperimentConfig:
 
     def columns(self) -> list[str]:
         """Table columns: SE, then the models (transfer: baseline HNN and the transferred models)."""
+        marched = self.march.columns() if self.march is not None else []
         if self.kind == "short":
-            return ["se", *self.models]
+            return ["se", *self.models, *marched]
         cols = ["se"] + (["hnn_baseline"] if self.baseline else [])
-        return cols + [f"{m}_transfer" for m in self.models]
+        return cols + [f"{m}_transfer" for m in self.models] + marched
 
     def baseline_column(self) -> str:
         """The column improvements are measured against: the (baseline) HNN when there is one,
@@ -304,9 +323,12 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     # take its value; the rest are built above
     fields = {f.name for f in dataclasses.fields(ExperimentConfig)}
     by_name = {k: x for k, x in {**v, **v["network"], **v["transfer"], **v["execution"]}.items() if k in fields}
+    eval_stage = stages["interval" if kind == "short" else "target"]
     cfg = ExperimentConfig(**{
         **by_name, "name": _default_name(v, source), "kind": kind, "system": system, "stage": stages.get("interval"),
         "source": stages.get("source"), "target": stages.get("target"), "evaluation": evaluation, "raw": raw,
+        "march": None if v["march"] is None else _march_settings(v["march"], data["march"], eval_stage),
+        "polish": None if v["polish"] is None else _polish_config("polish", v["polish"]),
     })
     _check_system_builds(system)
     return cfg
@@ -324,6 +346,45 @@ def apply_profile(data: dict[str, Any], profile: str | None, source: str) -> dic
     merged = _deep_merge({k: v for k, v in data.items() if k != "profiles"}, variants[profile])
     merged["profile"] = profile  # (the profile's follows notes are merged over the file's, key by key)
     return merged
+
+
+def _polish_config(path: str, v: dict[str, Any]):
+    from atlasnn.polish import PolishConfig
+
+    return PolishConfig(**{k: v[k] for k in ("steps", "n_points", "memory", "patience", "precision")})
+
+
+def _window_train(path: str, given: dict[str, Any], base, length: float):
+    """A window's TrainConfig: ``base`` with the keys given in the table at ``path`` (sigma_per_T
+    is in units of the window length, as the stages' is of their T)."""
+    if "sigma" in given and "sigma_per_T" in given:
+        _fail(f"{path}.sigma", given["sigma"], "give either sigma or sigma_per_T, not both")
+    fields = {f.name for f in dataclasses.fields(type(base))}
+    changes = {k: (tuple(x) if isinstance(x, list) else x) for k, x in given.items() if k in fields}
+    if "sigma_per_T" in given:
+        changes["sigma"] = given["sigma_per_T"] * length
+    out = base.replace(**changes)
+    return out.replace(chunk=min(out.chunk, out.epochs))  # a longer chunk would only run masked epochs
+
+
+def _march_settings(v: dict[str, Any], given: dict[str, Any], stage: Stage) -> MarchSettings:
+    """The [march] table as a MarchSettings (the scheme's train configs over the measured defaults)."""
+    from atlasnn.marching import DEFAULT_WINDOW_TRAIN, MarchConfig, n_windows_for
+
+    if v.get("window") is not None and v.get("n_windows") is not None:
+        _fail("march.window", given.get("window"), "give window or n_windows, not both")
+    scheme = MarchConfig(n_windows=v.get("n_windows"), window=v.get("window"), thaw=v["thaw"],
+                         carry_adam=v["carry_adam"], start=v["start"],
+                         polish=None if v["polish"] is None else _polish_config("march.polish", v["polish"]))
+    length = (stage.T - stage.t0) / n_windows_for(stage.t0, stage.T, scheme)
+    train = _window_train("march.train", given.get("train") or {}, DEFAULT_WINDOW_TRAIN, length)
+    first = None
+    if given.get("first_train"):
+        first = _window_train("march.first_train", given["first_train"], train, length)
+    net = v["network"]
+    return MarchSettings(models=tuple(v["models"]), width=net["width"], depth=net["depth"],
+                         activation=net["activation"], first_layer_scale=net["first_layer_scale"],
+                         scheme=scheme.replace(train=train, first=first))
 
 
 def _check_system_builds(system: SystemConfig) -> None:

@@ -161,6 +161,11 @@ SCHEMA: dict[str, TableSpec] = {
             "trained once per seed (a list, or a count K for seeds 0 to K−1)."),
         Key("follows", TextTable("expected a table of strings (notes on paper vs release choices)"), {},
             "Notes saying which choices follow the paper and which the authors' release; kept with the results."),
+        Key("march", Sub("march"), None, "Time-marching ATLAS-NN on the experiment's interval (a transfer run's "
+            "target): the interval cut into windows, each trained from the previous window's end state, γ "
+            "learned in the first (docs/METHOD.md); adds a column per model.", default_text="none"),
+        Key("polish", Sub("polish"), None, "L-BFGS after Adam on every training whose errors are tabulated "
+            "(short runs, targets, the baseline); none by default.", default_text="none"),
         Key("execution", Sub("execution"), {}, "How the trainings are run (not what they compute)."),
         Key("profile", String(r"[A-Za-z0-9_-]+", "use letters, digits, '-' and '_' only",
                               "letters, digits, '-', '_'"), "default",
@@ -193,6 +198,48 @@ SCHEMA: dict[str, TableSpec] = {
         Key("width", Integer(1, MAX_WIDTH), 50, "Neurons per hidden layer."),
         Key("depth", Integer(1, MAX_DEPTH), 2, "Number of hidden layers."),
         Key("activation", Choice(lambda: tuple(sorted(ACTIVATIONS))), "sin", "Activation of the hidden layers."),
+        Key("first_layer_scale", Number(low=0, low_open=True, high=1e3), 1.0, "The first layer's initial weights "
+            "are multiplied by this (higher initial frequencies of the sin network; 1 is PyTorch's init)."),
+    )),
+    "march": TableSpec("Time-marching ATLAS-NN (atlasnn.marching): windows [t_k, t_k+1] of equal length, window "
+                       "k exact at its own start z_k = the previous window's end state.", (
+        Key("models", NameList(f"expected a non-empty list drawn from {list(MODEL_NAMES)}", MODEL_NAMES,
+                               MODEL_ALIASES, unique=True), ["atlas_exp"],
+            "The models marched (their initial γ from [gamma_init]); one column each, e.g. atlas_exp_march."),
+        Key("window", Number(low=0, low_open=True, high=MAX_TIME, pi=True), None, "The longest window: the "
+            "interval is cut into ⌈(T − t0)/window⌉ equal windows; give window or n_windows.",
+            default_text="4*pi (measured on the paper's systems)"),
+        Key("n_windows", Integer(1, 100_000), None, "The number of equal windows, instead of window.",
+            default_text="from window"),
+        Key("start", Choice(("initial", "previous", "features")), "initial", "Where window k ≥ 1 starts its "
+            "network: the initial weights (measured best), the previous window's trained ones (the paper's "
+            "transfer, window to window), or its hidden layers with a zeroed output layer."),
+        Key("thaw", Bool(), False, "Keep γ trainable after the first window (false: frozen, as in the paper's transfer)."),
+        Key("carry_adam", Bool(), True, "Start each window's Adam from the previous window's moments."),
+        Key("network", Sub("march.network"), {}, "The marched models' network (its own: the defaults were measured "
+            "for time-marching)."),
+        Key("train", Sub("train", sparse=True), {}, "Each window's training, key by key over the measured defaults "
+            "(16 000 epochs, K = 100, lr 5e-3 cosine to 5e-5, Adam betas (0.9, 0.999), sigma 0.5, causal_eps 10, "
+            "best_rule lowest, lam_reg 1); n_points and epochs are per window; [train] is not inherited."),
+        Key("first_train", Sub("train", sparse=True), {}, "The first window's training, key by key over march.train "
+            "(e.g. more epochs while γ is learned)."),
+        Key("polish", Sub("polish"), None, "L-BFGS after Adam in every window.", default_text="none"),
+    )),
+    "march.network": TableSpec("The network of the marched models.", (
+        Key("width", Integer(1, MAX_WIDTH), 48, "Neurons per hidden layer."),
+        Key("depth", Integer(1, MAX_DEPTH), 2, "Number of hidden layers."),
+        Key("activation", Choice(lambda: tuple(sorted(ACTIVATIONS))), "sin", "Activation of the hidden layers."),
+        Key("first_layer_scale", Number(low=0, low_open=True, high=1e3), 4.0, "The first layer's initial weights "
+            "are multiplied by this (measured: 3–8 lowers a window's error 2–9×)."),
+    )),
+    "polish": TableSpec("L-BFGS (optax.lbfgs, zoom line search) on fixed collocation times after Adam; the best "
+                        "parameters are kept, so it never makes a model worse.", (
+        Key("steps", Integer(1, MAX_EPOCHS), 1000, "L-BFGS step budget."),
+        Key("n_points", Integer(2, MAX_POINTS), 400, "Fixed collocation times (a uniform grid, ends included)."),
+        Key("memory", Integer(1, 1000), 20, "Curvature pairs L-BFGS keeps."),
+        Key("patience", Integer(1, MAX_EPOCHS), 100, "Stop when the best loss has not dropped by 0.1 % in this many steps."),
+        Key("precision", Choice(("model", "float64")), "model", "Polish in the model's float type, or a float64 "
+            "copy rounded back (slower; float32 line searches stall near losses of 1e-7)."),
     )),
     "train": TableSpec("Adam on the physics loss L = residual of Hamilton's equations + λ_reg·energy "
                        "penalty, at K jittered collocation times.", (
@@ -273,6 +320,9 @@ SCHEMA: dict[str, TableSpec] = {
             "More classical integrators to tabulate beside SE."),
         Key("reference_rtol", Number(low=0, low_open=True, high=1e-6), 1e-12, "Relative tolerance of the reference solution."),
         Key("reference_atol", Number(low=0, low_open=True, high=1e-6), 1e-12, "Absolute tolerance of the reference solution."),
+        Key("work_precision", Bool(), False, "Also measure the classical methods' cost against accuracy on the same "
+            "grid (symplectic Euler, Störmer–Verlet, Yoshida-4 at several step counts, DOP853 at several "
+            "tolerances) beside each network's training time: results.json and figures/work_precision.png."),
     )),
 }
 

@@ -108,3 +108,44 @@ def integrator_rows(cfg: ExperimentConfig, system, z0: np.ndarray, e0: float,
         arrays.update({f"int_t_{column}": t, f"int_z_{column}": z, f"int_zref_{column}": z_ref,
                        f"int_energy_{column}": energy})
     return rows, arrays
+
+
+def work_precision(cfg: ExperimentConfig, system, z0: np.ndarray, grids: dict[str, np.ndarray], runs: list[dict],
+                   run_dir, log: Callable[[str], None]) -> dict[str, Any]:
+    """The run's work–precision comparison (:mod:`atlasnn.workprecision`): the classical methods
+    measured now on the table's grid, every tabulated training as a point (its training wall time
+    and its errors on that grid), the time to evaluate one solution per network column at 10⁴
+    times, and one line per training saying which classical setting is as accurate, at what cost."""
+    from pathlib import Path
+
+    from atlasnn import workprecision as wp
+    from atlasnn.checkpoint import load_checkpoint, load_piecewise
+
+    t, z_ref = grids["eval"], grids["eval_ref"]
+    names = list(system.state_names)
+    log(f"{cfg.name}: measuring the classical methods' cost against accuracy (work–precision)")
+    points = wp.dop853_points(system, z0, t, z_ref)
+    if system.separable:
+        points = wp.symplectic_points(system, z0, t, z_ref) + points
+    evaluation = {}
+    source_wall = {(r["model"], r["seed"]): float(r["wall_time"]) for r in runs if r.get("role") == "source"}
+    for r in runs:
+        if r.get("role") not in ("short", "target", "march"):
+            continue
+        m = r["metrics"]
+        wall = float(r["wall_time"])
+        if r["column"].endswith("_transfer"):  # a transfer's cost is its source's and its target's
+            wall += source_wall.get((r["model"], r["seed"]), 0.0)
+        points.append(wp.WorkPoint(r["label"], f"seed {r['seed']}", wall,
+                                   max(float(m["max_abs"][n]) for n in names), float(m["l2_discrete"][names[0]]),
+                                   float(m["energy_drift"]), kind="network"))
+        if r["label"] not in evaluation:
+            path = Path(run_dir) / r["checkpoint"]
+            sol = load_piecewise(path) if r["role"] == "march" else load_checkpoint(path).solution(outside="allow")
+            evaluation[r["label"]] = wp.evaluation_seconds(sol, float(t[0]), float(t[-1]))
+    return {"points": wp.to_json(points), "verdicts": wp.verdicts(points),
+            "verdicts_l2": wp.verdicts(points, "l2_first"), "evaluation_seconds_1e4": evaluation,
+            "first_state": names[0], "grid_points": int(t.size),
+            "note": "classical: one solve, after compilation, median of repeats; networks: training wall time per "
+                    "seed as the run measured it (its --jobs and batching; a transfer's source included), "
+                    "compilation excluded"}

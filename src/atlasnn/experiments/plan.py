@@ -37,7 +37,7 @@ AUTO_BATCH_MAX = 8
 class Task:
     """The trainings of one column (role and model) for a batch of seeds."""
 
-    role: str  # "short" | "transfer" | "baseline"
+    role: str  # "short" | "transfer" | "baseline" | "march"
     model: str  # "hnn" | "atlas_tanh" | "atlas_exp"
     seeds: tuple[int, ...]
 
@@ -48,6 +48,8 @@ class Task:
             return self.model
         if self.role == "baseline":
             return "hnn_baseline"
+        if self.role == "march":
+            return f"{self.model}_march"
         return f"{self.model}_transfer"
 
     @property
@@ -67,9 +69,10 @@ class Task:
 
 def columns_of(cfg: ExperimentConfig) -> list[tuple[str, str]]:
     """(role, model) of every trained column, in table order."""
+    marched = [("march", m) for m in cfg.march.models] if cfg.march is not None else []
     if cfg.kind == "short":
-        return [("short", m) for m in cfg.models]
-    return ([("baseline", "hnn")] if cfg.baseline else []) + [("transfer", m) for m in cfg.models]
+        return [("short", m) for m in cfg.models] + marched
+    return ([("baseline", "hnn")] if cfg.baseline else []) + [("transfer", m) for m in cfg.models] + marched
 
 
 def _stages(cfg: ExperimentConfig, role: str) -> list[Stage]:
@@ -81,7 +84,10 @@ def _stages(cfg: ExperimentConfig, role: str) -> list[Stage]:
 
 
 def epoch_work(cfg: ExperimentConfig, role: str) -> float:
-    """K · width² of the largest stage of a column: the size of one epoch, roughly."""
+    """K · width² of the largest stage of a column (a window for time-marching): the size of one
+    epoch, roughly."""
+    if role == "march":
+        return cfg.march.scheme.train.n_points * float(cfg.march.width) ** 2
     return max(st.train.n_points for st in _stages(cfg, role)) * float(cfg.width) ** 2
 
 
@@ -127,6 +133,11 @@ def check_memory(cfg: ExperimentConfig, tasks: list[Task], state_dim: int) -> No
     from atlasnn.limits import check_integration_memory, check_training_memory
 
     for task in tasks:
+        if task.role == "march":
+            m = cfg.march
+            check_training_memory(m.scheme.train.n_points, m.width, m.depth, state_dim, len(task.seeds),
+                                  key="march.train.n_points")
+            continue
         names = {"short": ["interval"], "baseline": ["target"], "transfer": ["source", "target"]}[task.role]
         for name, st in zip(names, _stages(cfg, task.role)):
             key = f"{name}.train.n_points" if "n_points" in ((cfg.raw.get(name) or {}).get("train") or {}) \

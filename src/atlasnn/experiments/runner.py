@@ -49,7 +49,7 @@ from atlasnn.experiments.execute import (
     run_local,
     scheduler_address,
 )
-from atlasnn.experiments.measure import energies, energy0, integrator_rows, reference_grids
+from atlasnn.experiments.measure import energies, energy0, integrator_rows, reference_grids, work_precision
 from atlasnn.experiments.plan import Task, check_memory, plan_tasks, trainings
 from atlasnn.experiments.store import (
     RunLock,
@@ -288,6 +288,9 @@ class _Run:
         try:
             self.train(grids)
             results = self.collect(system, e0, grids, arrays, int_rows, quick, reference)
+            if cfg.evaluation.work_precision:
+                results["work_precision"] = work_precision(cfg, system, z0, grids,
+                                                           results["runs"], self.out, self.log)
             write_npz(self.out / "arrays.npz", arrays)
             write_json(self.out / "results.json", results)
             self.log(f"{cfg.name}: trainings done in {results['wall_time_total']:.1f} s; results in {self.out}")

@@ -111,6 +111,38 @@ def record(training: Task, role: str, column: str, result, metrics_: dict, ckpt:
     }
 
 
+def march_record(training: Task, sol, scheme, metrics_: dict, ckpt: str, stage: Stage) -> dict:
+    """The results.json entry of a time-marching training: the worst window's loss is its loss."""
+    windows = sol.windows
+    losses = [float(r.loss) for r in windows]
+    reasons = {r.stop_reason for r in windows}
+    stop = "diverged" if "diverged" in reasons else ("tolerance" if reasons == {"tolerance"} else "budget")
+    first = scheme.first or scheme.train
+    return {
+        "column": training.column, "label": MODEL_LABELS.get(training.column, training.column),
+        "model": training.model, "seed": training.seed, "role": "march", "interval": [stage.t0, stage.T],
+        "metrics": metrics_, "gamma": sol.gamma, "epochs": int(sum(r.epochs for r in windows)),
+        "tolerance_met": stop == "tolerance", "stop_reason": stop, "best_epoch": -1, "diverged_epoch": None,
+        "wall_time": float(sum(r.wall_time for r in windows)), "compile_time": float(sum(r.compile_time for r in windows)),
+        "batch_size": int(sol.info.get("batch_size", 1)), "final_loss": losses[-1], "best_loss": min(losses),
+        "returned_loss": max(losses), "lr": scheme.train.lr,
+        "epochs_budget": first.epochs + scheme.train.epochs * (len(windows) - 1),
+        "resumed_from_epoch": None, "checkpoint": ckpt, "n_windows": len(windows), "window": sol.window_length,
+        "window_losses": losses, "window_epochs": [int(r.epochs) for r in windows],
+    }
+
+
+def march_verdict(sol, rec: dict, energy: np.ndarray, e0: float, stage: Stage) -> dict:
+    """The quality verdict of a time-marching training: its windows' loss histories one after the
+    other, the worst window's loss as the returned one."""
+    from atlasnn.quality import judge_training
+
+    history = np.concatenate([np.asarray(r.history, np.float64) for r in sol.windows if r.history is not None])
+    return judge_training(history, stop_reason=rec["stop_reason"], tolerance=None, energy=energy, energy0=e0,
+                          gamma=rec["gamma"], returned_loss=rec["returned_loss"], interval=(stage.t0, stage.T),
+                          lr=rec["lr"], epochs_budget=rec["epochs_budget"], key="march.train").as_dict()
+
+
 class _TaskRun:
     """The trainings of one task while they run: system, grids, unsaved states, outputs."""
 
@@ -203,7 +235,7 @@ class _TaskRun:
         cfg = self.cfg
         return [make_model(self.z0, scaling=MODEL_SCALINGS[model_name], width=cfg.width, depth=cfg.depth,
                            t0=stage.t0, gamma=cfg.gamma_init.get(model_name), activation=cfg.activation,
-                           seed=s) for s in seeds]
+                           first_layer_scale=cfg.first_layer_scale, seed=s) for s in seeds]
 
     def configs(self, stage: Stage, seeds: list[int], freeze_gamma: bool = False) -> list:
         return [stage.train.to_train_config(stage.T, s, self.progress, freeze_gamma=freeze_gamma) for s in seeds]
@@ -226,13 +258,44 @@ class _TaskRun:
         )
         return rel
 
+    def polished(self, result, stage: Stage) -> None:
+        """L-BFGS after Adam ([polish]): the result's model is replaced by the polished one (never
+        worse) and the phase is recorded in ``result.info["polish"]``."""
+        from atlasnn.polish import polish
+
+        pol = polish(result.model, self.system, stage.T, self.cfg.polish.replace(lam_reg=result.config.lam_reg),
+                     energy0=self.e0)
+        result.info["polish"] = {"steps": pol.steps, "stop_reason": pol.stop_reason,
+                                 "initial_loss": pol.initial_loss, "final_loss": pol.final_loss}
+        result.model = pol.model
+
+    def finish_march(self, sol, scheme, stage: Stage, seed: int) -> None:
+        from atlasnn.checkpoint import save_piecewise
+
+        column = self.task.column
+        rel = f"models/{column}_seed{seed}.npz"
+        save_piecewise(self.run_dir / rel, sol, train_config=dataclasses.asdict(scheme),
+                       extra={"experiment": self.cfg.name, "column": column, "model": self.task.model,
+                              "role": "march", "seed": seed, "interval": [stage.t0, stage.T]})
+        per, z, energy = measure_solution(sol, self.grids["eval"], self.grids["eval_ref"], self.names, self.e0)
+        rec = march_record(self.task.one(seed), sol, scheme, per, rel, stage)
+        rec["quality"] = march_verdict(sol, rec, energy, self.e0, stage)
+        self.out[seed]["records"].append(rec)
+        self.out[seed]["arrays"][f"pred_{column}_seed{seed}"] = z
+        self.out[seed]["arrays"][f"energy_{column}_seed{seed}"] = energy
+
     def finish(self, result, column: str, role: str, stage: Stage, t_key: str, seed: int) -> dict:
         from atlasnn.solution import Solution
+
+        if self.cfg.polish is not None and role != "source":
+            self.polished(result, stage)
 
         sol = Solution(result.model, self.system, (stage.t0, stage.T))
         per, z, energy = measure_solution(sol, self.grids[t_key], self.grids[t_key + "_ref"], self.names, self.e0)
         rec = record(self.task.one(seed), role, column, result, per, self.save(result, column, role, stage, seed), stage)
         rec["quality"] = verdict(self.cfg, role, result, energy, self.e0, stage)
+        if "polish" in result.info:
+            rec["polish"] = result.info["polish"]
         self.out[seed]["records"].append(rec)
         if role != "source":
             self.out[seed]["arrays"][f"pred_{column}_seed{seed}"] = z
@@ -335,6 +398,28 @@ def _train_chain(run: _TaskRun) -> None:
         run.finish(res, task.column, "target", tgt, "eval", seed)
 
 
+def _train_march(run: _TaskRun) -> None:
+    """Time-marching on the experiment's interval: every window trains the task's seeds as one
+    batch (:func:`atlasnn.marching.march_batch`). Interrupted, it keeps no state: on resume the
+    task starts again (a march of the paper's problems takes seconds per seed)."""
+    from atlasnn.marching import march_batch
+    from atlasnn.model import MODEL_SCALINGS, make_model
+
+    task, cfg, seeds = run.task, run.cfg, list(run.task.seeds)
+    m, st = cfg.march, cfg.eval_stage
+    models = [make_model(run.z0, scaling=MODEL_SCALINGS[task.model], width=m.width, depth=m.depth, t0=st.t0,
+                         gamma=cfg.gamma_init.get(task.model), activation=m.activation,
+                         first_layer_scale=m.first_layer_scale, seed=s) for s in seeds]
+
+    def seeded(tc, s):
+        return None if tc is None else tc.replace(seed=s, progress=run.progress)
+
+    schemes = [m.scheme.replace(train=seeded(m.scheme.train, s), first=seeded(m.scheme.first, s)) for s in seeds]
+    solutions = march_batch(models, run.system, st.T, schemes, on_chunk=lambda states: _interrupt_check())
+    for seed, sol, scheme in zip(seeds, solutions, schemes):
+        run.finish_march(sol, scheme, st, seed)
+
+
 def run_training(cfg: ExperimentConfig, task: Task, run_dir: str, grids: dict[str, np.ndarray],
                  progress: bool, *, run_id: str | None = None, resume: bool = False) -> dict[int, dict]:
     """Train one task (a batch of seeds of one column), save and measure every seed; returns
@@ -345,6 +430,8 @@ def run_training(cfg: ExperimentConfig, task: Task, run_dir: str, grids: dict[st
     try:
         if task.role in ("short", "baseline"):
             _train_alone(run)
+        elif task.role == "march":
+            _train_march(run)
         else:
             _train_chain(run)
         for seed in task.seeds:
