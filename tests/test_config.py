@@ -21,8 +21,28 @@ def raw(name):
     return tomllib.loads(builtin_config_path(name).read_text())
 
 
-def test_the_four_paper_experiments_ship():
-    assert builtin_experiments() == PAPER
+LONG = ["henon-heiles-long", "oscillator-long"]
+
+
+def test_the_four_paper_experiments_and_the_two_long_ones_ship():
+    assert builtin_experiments() == sorted(PAPER + LONG)
+
+
+@pytest.mark.parametrize("name, paper", [("oscillator-long", "oscillator-transfer"),
+                                         ("henon-heiles-long", "henon-heiles-transfer")])
+def test_long_experiments_compare_the_papers_transfer_with_time_marching(name, paper):
+    """Same system, z0, interval, transfer settings and evaluation grid as the paper's transfer
+    experiment; the HNN baseline and ATLAS-NN (exp) transferred, and ATLAS-NN (exp) marched."""
+    long, ref = load_config(builtin_config_path(name)), load_config(builtin_config_path(paper))
+    assert long.paper_experiment == paper
+    assert long.columns() == ["se", "hnn_baseline", "atlas_exp_transfer", "atlas_exp_march"]
+    assert (long.system, long.width, long.depth) == (ref.system, ref.width, ref.depth)
+    assert (long.source, long.target, long.evaluation.eval_points) == (ref.source, ref.target, ref.evaluation.eval_points)
+    m = long.march
+    assert (m.width, m.depth, m.first_layer_scale) == (48, 2, 4.0)
+    assert m.scheme.window == pytest.approx(4 * math.pi) and m.scheme.train.epochs == 16000
+    assert m.scheme.train.lam_reg == ref.target.train.lam_reg  # the paper's energy weight
+    assert long.evaluation.work_precision
 
 
 @pytest.mark.parametrize("name", PAPER)
@@ -129,6 +149,7 @@ def test_transfer_needs_source_and_target():
 @pytest.mark.parametrize("name, points, per_k", [
     ("oscillator-short", 2000, 10), ("oscillator-transfer", 5000, 10),
     ("henon-heiles-short", 500, 1), ("henon-heiles-transfer", 1000, 1),
+    ("oscillator-long", 5000, 10), ("henon-heiles-long", 1000, 1),
 ])
 @pytest.mark.parametrize("quick", [False, True])
 def test_evaluation_grids_are_the_papers(name, points, per_k, quick):

@@ -162,6 +162,7 @@ class ExperimentConfig:
     seeds: tuple[int, ...] = (0,)
     description: str = ""
     follows: dict[str, str] = field(default_factory=dict)
+    paper_experiment: str = ""
     first_layer_scale: float = 1.0
     march: MarchSettings | None = None
     polish: Any = None  # atlasnn.polish.PolishConfig, or None

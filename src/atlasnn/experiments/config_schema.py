@@ -134,6 +134,8 @@ SCHEMA: dict[str, TableSpec] = {
             default_text="the file's name without .toml"),
         Key("description", String(), "", "One line saying what the experiment is, shown by `atlasnn experiments` "
             "and in the results."),
+        Key("paper_experiment", String(), "", "The paper experiment whose printed numbers the tables show beside this "
+            "run's (columns of the same name); empty: the experiment's own name, if the paper has it."),
         Key("kind", Choice(("short", "transfer")), None,
             "A short run trains every model on one interval; a transfer run trains on a short source "
             "interval, then transfers the network to a long target interval with the time scaling's γ frozen.",

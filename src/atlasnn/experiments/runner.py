@@ -397,7 +397,8 @@ class _Run:
         warnings += [w for w in (quality_warning(r) for r in runs) if w]
         warnings += [n for o in ordered for n in o.get("notes", [])]
         return {
-            "experiment": cfg.name, "profile": cfg.profile, "kind": cfg.kind, "description": cfg.description,
+            "experiment": cfg.name, "paper_experiment": cfg.paper_experiment or None, "profile": cfg.profile,
+            "kind": cfg.kind, "description": cfg.description,
             "quick": quick,
             "system": system.describe(), "state_names": list(system.state_names), "energy0": e0,
             "seeds": list(self.seeds), "tolerance": st.train.tolerance, "columns": cfg.columns(),
