@@ -7,17 +7,19 @@ of seeds, trained together as one compiled program (:func:`atlasnn.train.train_b
 training keeps its own records, checkpoints and state files, so how seeds are batched never
 changes what a run directory holds.
 
-How many seeds go in one batch (``seed_batch``): an integer, or ``"auto"`` — batching pays on
-this kind of CPU only while one epoch is small (its fixed per-operation cost is shared by the
-batch), while a large epoch already keeps the core busy with matrix products and a batch only
-adds work (measured by ``python -m benchmarks.seed_batch``, docs/PERFORMANCE.md). ``"auto"``
-batches the seeds of a column when one epoch is below :data:`AUTO_BATCH_WORK` (collocation points
-× width²) and never makes fewer tasks than there are parallel jobs.
+How many seeds go in one batch (``seed_batch``): an integer, or ``"auto"``. Measured on a 2-core
+CPU (``python -m benchmarks.seed_batch``, docs/PERFORMANCE.md): on one core a batch pays only while
+one epoch is small (its fixed per-operation cost is shared; about 1.2×), because a large epoch
+already keeps the core busy with matrix products; a batch in a process that has a second core to
+itself gains 1.1–1.4× more by running on both. So ``"auto"`` batches the seeds of a column when
+one epoch is below :data:`AUTO_BATCH_WORK` (collocation points × width²), pairs them when it is
+larger but the machine has more cores than parallel jobs, and never makes fewer tasks than jobs.
 """
 
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -98,7 +100,7 @@ def batch_size(cfg: ExperimentConfig, role: str, n_seeds: int, jobs: int, seed_b
             raise ConfigError(f"seed_batch must be an integer >= 1 or \"auto\", got {seed_batch!r}")
         return min(seed_batch, n_seeds)
     if epoch_work(cfg, role) > AUTO_BATCH_WORK:
-        return 1
+        return 2 if (os.cpu_count() or 1) > jobs and n_seeds > 1 else 1
     columns = len(columns_of(cfg))
     # keep at least `jobs` tasks so that every process has work
     per_column = max(1, math.ceil(jobs / columns))
