@@ -121,6 +121,17 @@ def _integrators() -> tuple[str, ...]:
     return tuple(sorted(INTEGRATORS))
 
 
+def _network_keys(width: int, scale: float, why: str) -> tuple[Key, ...]:
+    """The keys of a network table ([network], [march.network]): their defaults differ."""
+    return (
+        Key("width", Integer(1, MAX_WIDTH), width, "Neurons per hidden layer."),
+        Key("depth", Integer(1, MAX_DEPTH), 2, "Number of hidden layers."),
+        Key("activation", Choice(lambda: tuple(sorted(ACTIVATIONS))), "sin", "Activation of the hidden layers."),
+        Key("first_layer_scale", Number(low=0, low_open=True, high=1e3), scale,
+            f"The first layer's initial weights are multiplied by this ({why})."),
+    )
+
+
 _STAGE_TIME = Number(low=-MAX_TIME, high=MAX_TIME, pi=True)
 _GAMMA = Number(low=0, low_open=True)
 
@@ -196,13 +207,8 @@ SCHEMA: dict[str, TableSpec] = {
         Key("z0", NumberList(Number()), None, "The initial state z0 = (q, p) at t0, coordinates first.",
             default_text="the built-in's own"),
     )),
-    "network": TableSpec("The fully connected network N(t; θ) from the time t to R^(2d).", (
-        Key("width", Integer(1, MAX_WIDTH), 50, "Neurons per hidden layer."),
-        Key("depth", Integer(1, MAX_DEPTH), 2, "Number of hidden layers."),
-        Key("activation", Choice(lambda: tuple(sorted(ACTIVATIONS))), "sin", "Activation of the hidden layers."),
-        Key("first_layer_scale", Number(low=0, low_open=True, high=1e3), 1.0, "The first layer's initial weights "
-            "are multiplied by this (higher initial frequencies of the sin network; 1 is PyTorch's init)."),
-    )),
+    "network": TableSpec("The fully connected network N(t; θ) from the time t to R^(2d).", _network_keys(
+        50, 1.0, "higher initial frequencies of the sin network; 1 is PyTorch's init")),
     "march": TableSpec("Time-marching ATLAS-NN (atlasnn.marching): windows [t_k, t_k+1] of equal length, window "
                        "k exact at its own start z_k = the previous window's end state.", (
         Key("models", NameList(f"expected a non-empty list drawn from {list(MODEL_NAMES)}", MODEL_NAMES,
@@ -227,13 +233,8 @@ SCHEMA: dict[str, TableSpec] = {
             "(e.g. more epochs while γ is learned)."),
         Key("polish", Sub("polish"), None, "L-BFGS after Adam in every window.", default_text="none"),
     )),
-    "march.network": TableSpec("The network of the marched models.", (
-        Key("width", Integer(1, MAX_WIDTH), 48, "Neurons per hidden layer."),
-        Key("depth", Integer(1, MAX_DEPTH), 2, "Number of hidden layers."),
-        Key("activation", Choice(lambda: tuple(sorted(ACTIVATIONS))), "sin", "Activation of the hidden layers."),
-        Key("first_layer_scale", Number(low=0, low_open=True, high=1e3), 4.0, "The first layer's initial weights "
-            "are multiplied by this (measured: 3–8 lowers a window's error 2–9×)."),
-    )),
+    "march.network": TableSpec("The network of the marched models.", _network_keys(
+        48, 4.0, "measured: 3–8 lowers a window's error 2–9×")),
     "polish": TableSpec("L-BFGS (optax.lbfgs, zoom line search) on fixed collocation times after Adam; the best "
                         "parameters are kept, so it never makes a model worse.", (
         Key("steps", Integer(1, MAX_EPOCHS), 1000, "L-BFGS step budget."),
