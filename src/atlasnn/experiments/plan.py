@@ -12,8 +12,9 @@ CPU (``python -m benchmarks.seed_batch``, docs/PERFORMANCE.md): on one core a ba
 one epoch is small (its fixed per-operation cost is shared; about 1.2×), because a large epoch
 already keeps the core busy with matrix products; a batch in a process that has a second core to
 itself gains 1.1–1.4× more by running on both. So ``"auto"`` batches the seeds of a column when
-one epoch is below :data:`AUTO_BATCH_WORK` (collocation points × width²), pairs them when it is
-larger but the machine has more cores than parallel jobs, and never makes fewer tasks than jobs.
+one epoch is below :data:`AUTO_BATCH_WORK` (collocation points × width²) — in the batch size whose
+tasks, spread over the parallel jobs, are estimated to finish first — and pairs them when it is
+larger but the machine has more cores than parallel jobs.
 """
 
 from __future__ import annotations
@@ -33,6 +34,20 @@ from atlasnn.experiments.config import ExperimentConfig, Stage
 AUTO_BATCH_WORK = 1.0e6
 #: at most this many seeds in one program ("auto"), so one batch never holds a whole long run
 AUTO_BATCH_MAX = 8
+#: the per-seed speed-up of a batch of two or more small-epoch seeds on one core (measured, about
+#: 1.2×: benchmarks/seed_batch.py run pinned to one core; docs/PERFORMANCE.md)
+ONE_CORE_BATCH_GAIN = 1.2
+
+
+def _makespan(size: int, n_seeds: int, columns: int, jobs: int) -> float:
+    """Estimated wall time, in lone-seed trainings, of ``columns`` columns of ``n_seeds`` seeds cut
+    into batches of ``size`` and spread over ``jobs`` processes (longest task first)."""
+    batches = [min(size, n_seeds - i) for i in range(0, n_seeds, size)] * columns
+    cost = sorted((b / (ONE_CORE_BATCH_GAIN if b > 1 else 1.0) for b in batches), reverse=True)
+    loads = [0.0] * jobs
+    for c in cost:
+        loads[loads.index(min(loads))] += c
+    return max(loads)
 
 
 @dataclass(frozen=True)
@@ -102,9 +117,8 @@ def batch_size(cfg: ExperimentConfig, role: str, n_seeds: int, jobs: int, seed_b
     if epoch_work(cfg, role) > AUTO_BATCH_WORK:
         return 2 if (os.cpu_count() or 1) > jobs and n_seeds > 1 else 1
     columns = len(columns_of(cfg))
-    # keep at least `jobs` tasks so that every process has work
-    per_column = max(1, math.ceil(jobs / columns))
-    return max(1, min(AUTO_BATCH_MAX, math.ceil(n_seeds / per_column)))
+    sizes = range(1, min(AUTO_BATCH_MAX, n_seeds) + 1)  # the fastest plan; ties: larger batches
+    return min(sizes, key=lambda size: (round(_makespan(size, n_seeds, columns, jobs), 9), -size))
 
 
 def plan_tasks(cfg: ExperimentConfig, seeds: tuple[int, ...], *, jobs: int = 1,
