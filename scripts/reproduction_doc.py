@@ -16,8 +16,11 @@ and over all of them:
   model × seed × profile, the paper's run marked): ``docs/figures/EXPERIMENT/loss_vs_accuracy.png``;
 - the generated parts of docs/REPRODUCTION.md, each between ``<!-- generated:NAME -->`` and
   ``<!-- /generated:NAME -->`` markers: ``headline`` (median [min–max] L2(x) per experiment, model
-  and profile, the paper's value beside it) and ``claims`` (how many seeds each of the paper's
-  claims holds in, per profile; :mod:`atlasnn.claims`).
+  and profile, the paper's value beside it), ``claims`` (how many seeds each of the paper's
+  claims holds in, per profile; :mod:`atlasnn.claims`) and ``long`` (the long-time experiments:
+  accuracy in every seed and the cost against classical integrators, from their work–precision
+  records) and ``timing`` (the wall times ``scripts/timed.py`` recorded beside the runs, e.g.
+  runs/paper/timing.json from ``make reproduce-all``).
 """
 
 from __future__ import annotations
@@ -86,11 +89,11 @@ def headline(runs: dict[str, dict[str, dict]]) -> str:
     """Median [min–max] L2 of the first state per model, per experiment and profile."""
     out = ["| experiment | profile | seeds | " + "model: median [min–max] (paper) |" , "|---|---|---|---|"]
     for name, by_profile in runs.items():
-        try:
-            paper = load_paper(name)["rows"]
-        except Exception:
-            paper = {}
         for profile, res in by_profile.items():
+            try:
+                paper = load_paper(res.get("paper_experiment") or name)["rows"]
+            except Exception:
+                paper = {}
             state = res["state_names"][0]
             cells = []
             for column in res["columns"]:
@@ -109,6 +112,70 @@ def headline(runs: dict[str, dict[str, dict]]) -> str:
                 cells.append(f"{label}: {text}" + (f" ({format_number(p)})" if isinstance(p, (int, float)) else ""))
             out.append(f"| {name} | {profile} | {len(res['seeds'])} | " + "; ".join(cells) + " |")
     return "\n".join(out)
+
+
+def _median(vals: list[float]) -> float:
+    vals = sorted(vals)
+    n = len(vals)
+    return vals[n // 2] if n % 2 else (vals[n // 2 - 1] + vals[n // 2]) / 2
+
+
+def long_time(runs: dict[str, dict[str, dict]]) -> str:
+    """Per long-time experiment (one with a work–precision record): each network column's L2 of
+    the first state and max error over seeds (median and worst), worst energy drift, training
+    seconds per seed, and the cheapest classical setting as accurate as its *worst* seed."""
+    from atlasnn.workprecision import WorkPoint, SYMPLECTIC, cheapest_match
+
+    out = []
+    for name, by_profile in runs.items():
+        for profile, res in by_profile.items():
+            wp = res.get("work_precision")
+            if not wp:
+                continue
+            points = [WorkPoint(**p) for p in wp["points"]]
+            state = wp["first_state"]
+            out += [f"**{name}** (profile {profile}, {len(res['seeds'])} seeds, {wp['grid_points']} evaluation points)", "",
+                    f"| model | L2({state}) median [worst] | max abs error median [worst] | energy drift, worst | "
+                    "training s/seed, median | evaluate 10⁴ times | cheapest classical as accurate as the worst seed |",
+                    "|---|---|---|---|---|---|---|"]
+            for label in dict.fromkeys(p.method for p in points if p.kind == "network"):
+                mine = [p for p in points if p.method == label]
+                worst = max(mine, key=lambda p: p.max_error)
+                match = cheapest_match(points, worst)
+                cheap = "none measured" if match is None else (
+                    f"{SYMPLECTIC.get(match.method, 'DOP853')} {match.setting}: {format_number(match.max_error)} "
+                    f"in {match.seconds:.3g} s ({worst.seconds / max(match.seconds, 1e-12):.3g}x cheaper)")
+                ev = (wp.get("evaluation_seconds_1e4") or {}).get(label)
+                out.append(f"| {label} | {format_number(_median([p.l2_first for p in mine]))} "
+                           f"[{format_number(max(p.l2_first for p in mine))}] | "
+                           f"{format_number(_median([p.max_error for p in mine]))} [{format_number(worst.max_error)}] | "
+                           f"{format_number(max(p.energy_drift for p in mine))} | "
+                           f"{_median([p.seconds for p in mine]):.3g} | "
+                           f"{'' if ev is None else f'{ev * 1e3:.3g} ms'} | {cheap} |")
+            out.append("")
+    return "\n".join(out) or "(no long-time run given)"
+
+
+def timing(run_dirs: list[Path], docs: Path) -> str:
+    """The wall time of each batch of runs that ``scripts/timed.py`` recorded (a ``timing.json``
+    beside the run directories, e.g. runs/paper/timing.json from ``make reproduce-all``); the
+    record is copied to docs/runs/PROFILE/."""
+    out = ["| record | command | wall time |", "|---|---|---|"]
+    for parent in dict.fromkeys(run.parent for run in run_dirs):
+        for record in sorted(parent.glob("*timing.json")):
+            data = json.loads(record.read_text())
+            keep = docs / "runs" / parent.name / record.name
+            keep.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(record, keep)
+            link = f"[{parent.name}/{record.name}](runs/{parent.name}/{record.name})"
+            for c in data["commands"]:
+                cmd = c["command"].replace(".venv/bin/", "")
+                state = "" if c["status"] == 0 else f" (exit {c['status']})"
+                out.append(f"| {link} | `{cmd}` | {c['seconds'] / 60:.1f} min{state} |")
+            load = ", ".join(f"{x:.1f}" for x in data.get("load_before", [])[:1] + data.get("load_after", [])[:1])
+            out.append(f"| {link} | **total** ({data.get('cpu_count')} cores; 1-min load before, after: {load}) | "
+                       f"**{data['total_seconds'] / 60:.1f} min** |")
+    return "\n".join(out) if len(out) > 2 else "(no timing record found beside the runs)"
 
 
 def replace_generated(text: str, name: str, body: str) -> str:
@@ -152,6 +219,8 @@ def main() -> None:
     text = doc.read_text(encoding="utf-8")
     text = replace_generated(text, "headline", headline(by_exp))
     text = replace_generated(text, "claims", claims_markdown(claims, profiles))
+    text = replace_generated(text, "long", long_time(by_exp))
+    text = replace_generated(text, "timing", timing(args.runs, args.docs))
     doc.write_text(text, encoding="utf-8")
     print(f"updated the generated sections of {doc}")
 

@@ -56,3 +56,13 @@ def test_a_claim_the_paper_makes_negatively_counts_the_agreeing_seeds():
     rows = {r["claim"]: r for r in experiment_claims({"paper": hh})["rows"]}
     worse = rows["ATLAS_TANH_TRANSFER not better than HNN_BASELINE (L2(x))"]
     assert worse["paper"] is False and worse["profiles"]["paper"] == {"k": 2, "n": 3}
+
+
+def test_a_long_experiment_is_checked_against_its_paper_table_under_its_own_name():
+    res = _results({"hnn_baseline": [0.5, 0.6], "atlas_exp_transfer": [0.05, 0.9]}, se=27.2, kind="transfer")
+    res["experiment"], res["paper_experiment"] = "oscillator-long", res["experiment"]
+    out = experiment_claims({"paper": res})
+    assert out["experiment"] == "oscillator-long" and out["paper_experiment"] == res["paper_experiment"]
+    rows = {r["claim"]: r for r in out["rows"]}  # the paper's oscillator-transfer numbers are used
+    assert rows["ATLAS_EXP_TRANSFER reaches the paper's L2(x) = 0.0973"]["profiles"]["paper"] == {"k": 1, "n": 2}
+    assert f"against the paper's {res['paper_experiment']}" in markdown([out], ["paper"])

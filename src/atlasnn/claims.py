@@ -55,7 +55,7 @@ def experiment_claims(runs: Mapping[str, Any]) -> dict:
     """The claims of one paper experiment, checked in each run: ``runs`` maps a profile name to
     a run directory or results dict (all of the same experiment).
 
-    Returns ``{"experiment", "state", "baseline", "rows": [...]}``; each row has the model's
+    Returns ``{"experiment", "paper_experiment", "state", "baseline", "rows": [...]}``; each row has the model's
     ``column`` and ``label``, the ``claim`` in words, the paper's ``paper`` finding (True/False,
     or None when it makes none) with its numbers in ``paper_text``, and ``profiles``: per profile
     ``{"k": seeds where it holds, "n": seeds}``.
@@ -97,7 +97,8 @@ def experiment_claims(runs: Mapping[str, Any]) -> dict:
             rows.append({"column": column, "label": label, "claim": claim if finding is not False
                          else claim.replace(" better than ", " not better than ").replace(" fewer ", " not fewer "),
                          "paper": finding, "paper_text": text, "profiles": counts})
-    return {"experiment": name, "state": state, "baseline": base, "rows": rows}
+    return {"experiment": first["experiment"], "paper_experiment": name, "state": state, "baseline": base,
+            "rows": rows}
 
 
 def _beats(res: dict, column: str, base: str, state: str) -> list[bool]:
@@ -119,7 +120,9 @@ def markdown(claims: list[dict], profiles: list[str]) -> str:
     """One table per experiment: claim, the paper's numbers, and k/n seeds per profile."""
     out = []
     for exp in claims:
-        out += [f"**{exp['experiment']}** (L2 in the release's form, our seeds vs the paper's single run)", "",
+        against = "" if exp.get("paper_experiment", exp["experiment"]) == exp["experiment"] else \
+            f", against the paper's {exp['paper_experiment']}"
+        out += [f"**{exp['experiment']}** (L2 in the release's form, our seeds vs the paper's single run{against})", "",
                 "| claim (as the paper finds it) | paper | " + " | ".join(f"{p} profile: seeds where it holds"
                                                                for p in profiles) + " |",
                 "|---|---|" + "---|" * len(profiles)]
