@@ -4,8 +4,9 @@ For each size, in a fresh process: the config checks (parse, H and J∇H finite 
 separability check for a separable H), the compiled reference solver, symplectic Euler (separable
 only) and the first compiled training step of one HNN (8×1 network, K = 8). Wall and CPU seconds
 are printed per phase; on a busy machine the CPU seconds are the figure to trust (they are what
-an idle machine's wall clock would show). The limit atlasnn.expression.MAX_OPERATIONS is lifted
-inside the measurement so that sizes beyond it can be timed.
+an idle machine's wall clock would show). The limit MAX_OPERATIONS is lifted inside the
+measurement (in atlasnn.expression_parse, where the parser reads it) so that sizes beyond it can be
+timed.
 
     python -m benchmarks.expression_size                   # default sizes (~5 min)
     python -m benchmarks.expression_size --terms 100 200 --kind nonsep
@@ -38,9 +39,9 @@ def measure(n: int, separable: bool) -> dict:
     """Run in the current process (call it in a fresh one)."""
     import numpy as np
 
-    import atlasnn.expression
+    import atlasnn.expression_parse
 
-    atlasnn.expression.MAX_OPERATIONS = 10**9
+    atlasnn.expression_parse.MAX_OPERATIONS = 10**9
     text = expression(n, separable)
     out = {"terms": n, "operations": operations(text), "characters": len(text), "separable": separable}
     clock = [time.perf_counter(), time.process_time()]

@@ -150,7 +150,7 @@ def test_a_full_disk_mid_run_for_real(tmp_path, config, capsys):
 
 
 def test_a_full_disk_mid_run_simulated(tmp_path, config, capsys, monkeypatch):
-    import atlasnn.checkpoint as ck
+    import atlasnn.checkpoint_format as ck  # where _write_atomic looks up write_atomic
 
     real = ck.write_atomic
 
