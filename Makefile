@@ -32,7 +32,7 @@ reproduce-release: $(BIN)/atlasnn
 	  "$(BIN)/atlasnn reproduce $(e) --profile release --seeds $(SEEDS) --jobs $(JOBS) --out runs/release/$(e) --overwrite --no-progress")
 
 reproduction-doc: $(BIN)/atlasnn
-	$(BIN)/python scripts/reproduction_doc.py $(foreach e,$(PAPER),runs/paper/$(e) runs/release/$(e))
+	$(BIN)/python scripts/reproduction_doc.py $(foreach e,$(PAPER),runs/paper/$(e) runs/release/$(e)) runs/paper/oscillator-long runs/paper/henon-heiles-long
 
 bench: $(BIN)/atlasnn
 	$(BIN)/pip install -q 'torch==2.13.0'

@@ -103,7 +103,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         points, experiment, quick = collect_points(args.runs, args.state, overrides)
         labels = {p["column"]: p["model"] for p in points}
-        title = f"{experiment}: final training loss against L2({args.state})"
+        names = sorted({load_results(r)["experiment"] for r in args.runs} - {experiment})
+        shown = f"{', '.join(names)} (the paper's {experiment})" if names else experiment
+        title = f"{shown}: final training loss against L2({args.state})"
         paths = plot_loss_vs_accuracy(args.out, points, paper_points(experiment, labels, args.state),
                                       ylabel=f"L2({args.state}), release form (the paper's tables)",
                                       title=f"{QUICK_TAG}\n{title}" if quick else title)

@@ -38,8 +38,8 @@ from atlasnn.claims import experiment_claims, markdown as claims_markdown  # noq
 from atlasnn.report import load_paper  # noqa: E402
 from atlasnn.table_text import format_number  # noqa: E402
 
-FIGURES = ["overview", "trajectories", "errors", "energy", "loss", "target_loss_comparison", "loss_source", "gamma",
-           "seed_spread_l2_x", "work_precision"]
+# the overview already shows trajectories, errors and energy; the run directory keeps the full set
+FIGURES = ["overview", "loss", "target_loss_comparison", "loss_source", "gamma", "seed_spread_l2_x", "work_precision"]
 SUMMARY_FILES = ["results.json", "summary.json", "tables.csv", "meta.json", "workprecision.json"]
 
 
@@ -53,6 +53,15 @@ def _profile(run: Path, res: dict) -> str:
 def _command(run: Path, meta: dict) -> str:
     argv = meta.get("command", "").split()
     return " ".join(["atlasnn"] + [a.replace(str(run.parent) + "/", "runs/") for a in argv[1:]])
+
+
+def _copy_figure(src: Path, dst: Path) -> None:
+    """A PNG for the docs, reduced to a 128-colour palette (about a quarter of the bytes; the line
+    plots lose nothing visible), so that the repository does not grow by tens of MB per rerun."""
+    from PIL import Image
+
+    with Image.open(src) as im:
+        im.convert("RGB").quantize(colors=128, method=Image.Quantize.MEDIANCUT).save(dst, optimize=True)
 
 
 def section(run: Path, docs: Path) -> str:
@@ -79,7 +88,7 @@ def section(run: Path, docs: Path) -> str:
     for stem in FIGURES:
         src = run / "figures" / f"{stem}.png"
         if src.exists():
-            shutil.copyfile(src, fig_dir / f"{stem}.png")
+            _copy_figure(src, fig_dir / f"{stem}.png")
             lines.append(f"![{name} {profile} {stem}](figures/{profile}/{name}/{stem}.png)")
     lines.append("")
     return "\n".join(lines)
@@ -191,6 +200,9 @@ def main() -> None:
     ap.add_argument("runs", nargs="+", type=Path)
     ap.add_argument("--docs", type=Path, default=Path("docs"))
     args = ap.parse_args()
+    args.runs = [r for r in args.runs if (r / "results.json").is_file()]  # `runs/paper/*` also matches timing.json
+    if not args.runs:
+        raise SystemExit("no run directory with a results.json among the paths given")
     by_exp: dict[str, dict[str, dict]] = {}
     dirs: dict[str, list[Path]] = {}
     parts = ["# Reproduction results (generated)", "",

@@ -65,4 +65,6 @@ def test_a_long_experiment_is_checked_against_its_paper_table_under_its_own_name
     assert out["experiment"] == "oscillator-long" and out["paper_experiment"] == res["paper_experiment"]
     rows = {r["claim"]: r for r in out["rows"]}  # the paper's oscillator-transfer numbers are used
     assert rows["ATLAS_EXP_TRANSFER reaches the paper's L2(x) = 0.0973"]["profiles"]["paper"] == {"k": 1, "n": 2}
-    assert f"against the paper's {res['paper_experiment']}" in markdown([out], ["paper"])
+    text = markdown([out], ["paper", "release"])
+    assert f"against the paper's {res['paper_experiment']}" in text
+    assert "release profile" not in text  # only the profiles the experiment was run in get a column

@@ -196,6 +196,15 @@ def test_transfer_summary():
     assert cs["hnn_transfer"]["metrics"]["l2_discrete"]["x"]["n"] == 3
 
 
+def test_a_tolerance_stop_has_no_best_loss_rather_than_a_non_finite_one():
+    r = _short_results()
+    for x in r["runs"]:
+        if x["column"] == "hnn" and x["seed"] in (0, 1):
+            x["best_loss"] = float("inf")  # stopped at the tolerance before the best-parameter window
+    st = summarize(r)["columns_summary"]["hnn"]["training"]["best_loss"]
+    assert st["n"] == 1 and st["n_nonfinite"] == 0 and st["values"][:2] == [None, None]
+
+
 def test_missing_baseline_seed_is_not_paired():
     r = _short_results()
     r["runs"] = [x for x in r["runs"] if not (x["column"] == "hnn" and x["seed"] == 2)]

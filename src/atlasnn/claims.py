@@ -117,18 +117,20 @@ def _fewer_epochs(res: dict, column: str, base: str) -> list[bool]:
 
 
 def markdown(claims: list[dict], profiles: list[str]) -> str:
-    """One table per experiment: claim, the paper's numbers, and k/n seeds per profile."""
+    """One table per experiment: claim, the paper's numbers, and k/n seeds per profile (of
+    ``profiles``, those the experiment was run in)."""
     out = []
     for exp in claims:
+        present = [p for p in profiles if any(p in row["profiles"] for row in exp["rows"])] or profiles
         against = "" if exp.get("paper_experiment", exp["experiment"]) == exp["experiment"] else \
             f", against the paper's {exp['paper_experiment']}"
         out += [f"**{exp['experiment']}** (L2 in the release's form, our seeds vs the paper's single run{against})", "",
                 "| claim (as the paper finds it) | paper | " + " | ".join(f"{p} profile: seeds where it holds"
-                                                               for p in profiles) + " |",
-                "|---|---|" + "---|" * len(profiles)]
+                                                               for p in present) + " |",
+                "|---|---|" + "---|" * len(present)]
         for row in exp["rows"]:
             cells = []
-            for p in profiles:
+            for p in present:
                 c = row["profiles"].get(p)
                 cells.append(f"{c['k']}/{c['n']}" if c and c["n"] else "–")
             out.append(f"| {row['claim']} | {row['paper_text']} | " + " | ".join(cells) + " |")

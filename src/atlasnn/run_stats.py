@@ -221,7 +221,9 @@ def _training_stats(runs: list[dict]) -> dict:
         "stop_reasons": dict(Counter(str(r["stop_reason"]) for r in runs if r.get("stop_reason") is not None)),
         "wall_time": _stats([r.get("wall_time") for r in runs], seeds),
         "final_loss": _stats([r.get("final_loss") for r in runs], seeds),
-        "best_loss": _stats([r.get("best_loss") for r in runs], seeds),
+        # +inf: no epoch of the best-parameter window was reached (a tolerance stop), not a bad loss
+        "best_loss": _stats([None if _f(r.get("best_loss")) == math.inf else r.get("best_loss") for r in runs],
+                            seeds),
         "gamma": {p: _stats([(r.get("gamma") or {}).get(p) for r in runs], seeds) for p in gamma_params},
         "checkpoints": [r.get("checkpoint") for r in runs],
     }

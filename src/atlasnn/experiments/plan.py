@@ -7,12 +7,13 @@ of seeds, trained together as one compiled program (:func:`atlasnn.train.train_b
 training keeps its own records, checkpoints and state files, so how seeds are batched never
 changes what a run directory holds.
 
-How many seeds go in one batch (``seed_batch``): an integer, or ``"auto"``. Measured on a 2-core
-CPU (``python -m benchmarks.seed_batch``, docs/PERFORMANCE.md): on one core a batch pays only while
-one epoch is small (its fixed per-operation cost is shared; about 1.2×), because a large epoch
-already keeps the core busy with matrix products; a batch in a process that has a second core to
-itself gains 1.1–1.4× more by running on both. So ``"auto"`` batches the seeds of a column when
-one epoch is below :data:`AUTO_BATCH_WORK` (collocation points × width²) — in the batch size whose
+How many seeds go in one batch (``seed_batch``): an integer, or ``"auto"``. Measured on this 2-core
+CPU (``python -m benchmarks.seed_batch``, docs/PERFORMANCE.md): pinned to one core, a batch trains
+no faster per seed than one seed alone (0.88–1.06× on the paper's configurations: an epoch already
+keeps the core busy); given both cores, a batch of small epochs gains 1.3–1.4× because XLA spreads
+its larger operations over them, which a lone small training does not. A batch still saves the
+compilation of one program per seed. So ``"auto"`` batches the seeds of a column when one epoch is
+below :data:`AUTO_BATCH_WORK` (collocation points × width²) — in the largest batch size whose
 tasks, spread over the parallel jobs, are estimated to finish first — and pairs them when it is
 larger but the machine has more cores than parallel jobs.
 """
@@ -34,16 +35,19 @@ from atlasnn.experiments.config import ExperimentConfig, Stage
 AUTO_BATCH_WORK = 1.0e6
 #: at most this many seeds in one program ("auto"), so one batch never holds a whole long run
 AUTO_BATCH_MAX = 8
-#: the per-seed speed-up of a batch of two or more small-epoch seeds on one core (measured, about
-#: 1.2×: benchmarks/seed_batch.py run pinned to one core; docs/PERFORMANCE.md)
-ONE_CORE_BATCH_GAIN = 1.2
+#: the per-seed speed-up of a batch of small-epoch seeds in a process with one core to itself
+#: (measured 0.97–1.06×: docs/benchmarks/seed_batch_one_core.json) and with a second core free
+#: (measured 1.29–1.39× at the batch sizes auto picks: docs/benchmarks/seed_batch.json)
+ONE_CORE_BATCH_GAIN = 1.0
+SPARE_CORE_BATCH_GAIN = 1.3
 
 
 def _makespan(size: int, n_seeds: int, columns: int, jobs: int) -> float:
     """Estimated wall time, in lone-seed trainings, of ``columns`` columns of ``n_seeds`` seeds cut
     into batches of ``size`` and spread over ``jobs`` processes (longest task first)."""
+    gain = SPARE_CORE_BATCH_GAIN if (os.cpu_count() or 1) > jobs else ONE_CORE_BATCH_GAIN
     batches = [min(size, n_seeds - i) for i in range(0, n_seeds, size)] * columns
-    cost = sorted((b / (ONE_CORE_BATCH_GAIN if b > 1 else 1.0) for b in batches), reverse=True)
+    cost = sorted((b / (gain if b > 1 else 1.0) for b in batches), reverse=True)
     loads = [0.0] * jobs
     for c in cost:
         loads[loads.index(min(loads))] += c
