@@ -33,8 +33,10 @@ from atlasnn.experiments.runner import RunInterrupted, resume_experiment, run_ex
 
 from test_resume import SHORT, _cfg, _quiet, assert_same_runs  # noqa: E402
 
-# 6000 epochs in chunks of 100: long enough to be caught mid-way (a few seconds per seed)
-LONGER = SHORT.replace("epochs = 600", "epochs = 6000").replace('name = "resume-short"', 'name = "dask-long"')
+# 15000 epochs in chunks of 100: long enough to be caught mid-way even when the stop takes a
+# while to reach the workers (6000 were once finished before it did, in a full-suite run)
+LONGER_EPOCHS = 15000
+LONGER = SHORT.replace("epochs = 600", f"epochs = {LONGER_EPOCHS}").replace('name = "resume-short"', 'name = "dask-long"')
 
 
 def _run(text, out, **kw):
@@ -150,7 +152,7 @@ def test_a_worker_killed_mid_run_and_dask_finishes_the_run(tmp_path, cluster, re
         os.kill(killed["pid"], 0)
     # seed 1 ran again and continued from the dead worker's last state, not from epoch 0
     seed1 = next(r for r in results["runs"] if r["seed"] == 1)
-    assert seed1["resumed_from_epoch"] and 0 < seed1["resumed_from_epoch"] < 6000
+    assert seed1["resumed_from_epoch"] and 0 < seed1["resumed_from_epoch"] < LONGER_EPOCHS
     assert assert_same_runs(out, reference / "longer") == 2
 
 
