@@ -33,10 +33,8 @@ from atlasnn.experiments.runner import RunInterrupted, resume_experiment, run_ex
 
 from test_resume import SHORT, _cfg, _quiet, assert_same_runs  # noqa: E402
 
-# 15000 epochs in chunks of 100: long enough to be caught mid-way even when the stop takes a
-# while to reach the workers (6000 were once finished before it did, in a full-suite run)
-LONGER_EPOCHS = 15000
-LONGER = SHORT.replace("epochs = 600", f"epochs = {LONGER_EPOCHS}").replace('name = "resume-short"', 'name = "dask-long"')
+# 6000 epochs in chunks of 100: long enough to be caught mid-way (a few seconds per seed)
+LONGER = SHORT.replace("epochs = 600", "epochs = 6000").replace('name = "resume-short"', 'name = "dask-long"')
 
 
 def _run(text, out, **kw):
@@ -103,7 +101,19 @@ def test_a_run_on_the_cluster_equals_a_local_run(tmp_path, cluster, reference):
 
 
 # ------------------------------------------------------------------------------ (b)
-def test_sigint_stops_the_workers_and_the_run_resumes_on_the_cluster(tmp_path, capsys, cluster, reference):
+@pytest.fixture
+def python_sigint():
+    """Python's usual Ctrl-C handler for one test: a shell starts background jobs (e.g. a test
+    suite started with `&`) with SIGINT ignored, and a run leaves an ignored signal ignored."""
+    old = signal.getsignal(signal.SIGINT)
+    if old is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
+
+
+def test_sigint_stops_the_workers_and_the_run_resumes_on_the_cluster(tmp_path, capsys, cluster, reference,
+                                                                       python_sigint):
     address, client = cluster
     out = tmp_path / "run"
     states = out / "state"
@@ -152,7 +162,7 @@ def test_a_worker_killed_mid_run_and_dask_finishes_the_run(tmp_path, cluster, re
         os.kill(killed["pid"], 0)
     # seed 1 ran again and continued from the dead worker's last state, not from epoch 0
     seed1 = next(r for r in results["runs"] if r["seed"] == 1)
-    assert seed1["resumed_from_epoch"] and 0 < seed1["resumed_from_epoch"] < LONGER_EPOCHS
+    assert seed1["resumed_from_epoch"] and 0 < seed1["resumed_from_epoch"] < 6000
     assert assert_same_runs(out, reference / "longer") == 2
 
 
