@@ -27,30 +27,25 @@ from typing import Any, Mapping
 import equinox as eqx
 import numpy as np
 
-# the format's pieces, and the piecewise functions, are also re-exported under their old names
+# the format's pieces this module uses, and the piecewise API, importable from here as before
 from atlasnn.checkpoint_format import (  # noqa: F401
     _FLOAT_DTYPES,
     FORMAT,
     FORMAT_VERSION,
     _build_meta,
     _canonical,
-    _config_dict,
     _content_hash,
     _describe_exc,
     _fail,
     _leaf_arrays,
-    _one_line,
     _read,
     _resolve_system,
     _restore_leaves,
-    _to_json,
     _write_atomic,
     _x64,
 )
 from atlasnn.checkpoint_piecewise import (  # noqa: F401
-    _WINDOW_RECORD_FIELDS,
     KIND_PIECEWISE,
-    _window_records,
     load_piecewise,
     save_piecewise,
 )

@@ -26,7 +26,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.model import TrialSolution
-from atlasnn.solution import OUTSIDE_MODES, check_inside
+from atlasnn.solution import check_inside, check_outside_mode
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["WindowRecord", "PiecewiseSolution", "stack_models", "unstack_models", "window_edges"]
@@ -117,8 +117,7 @@ class PiecewiseSolution:
     _warned: bool = field(default=False, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if self.outside not in OUTSIDE_MODES:
-            raise ValueError(f"outside must be one of {list(OUTSIDE_MODES)}, got {self.outside!r}")
+        check_outside_mode(self.outside)
         self.edges = np.asarray(self.edges, dtype=np.float64)
         n = len(self.models)
         if n < 1 or self.edges.shape != (n + 1,) or not np.all(np.diff(self.edges) > 0):

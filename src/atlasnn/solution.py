@@ -28,6 +28,12 @@ from atlasnn.model import TrialSolution
 from atlasnn.systems import HamiltonianSystem
 
 OUTSIDE_MODES = ("warn", "raise", "allow")
+
+
+def check_outside_mode(outside: str) -> None:
+    """Refuse an ``outside=`` option that is not one of :data:`OUTSIDE_MODES`."""
+    if outside not in OUTSIDE_MODES:
+        raise ValueError(f"outside must be one of {list(OUTSIDE_MODES)}, got {outside!r}")
 #: Relative slack at the interval's ends (times within it count as inside).
 INTERVAL_SLACK = 1e-9
 
@@ -86,8 +92,7 @@ class Solution:
     _warned: bool = field(default=False, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if self.outside not in OUTSIDE_MODES:
-            raise ValueError(f"outside must be one of {list(OUTSIDE_MODES)}, got {self.outside!r}")
+        check_outside_mode(self.outside)
         if self.interval is not None:
             try:
                 t0, T = (float(x) for x in self.interval)
