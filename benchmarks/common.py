@@ -49,7 +49,7 @@ CONFIGS = {
 
 
 def atlas_system(name: str):
-    from atlasnn import systems
+    from atlasnn.systems import _hamiltonian as systems
 
     return getattr(systems, name)()
 

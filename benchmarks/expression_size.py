@@ -5,7 +5,7 @@ separability check for a separable H), the compiled reference solver, symplectic
 only) and the first compiled training step of one HNN (8×1 network, K = 8). Wall and CPU seconds
 are printed per phase; on a busy machine the CPU seconds are the figure to trust (they are what
 an idle machine's wall clock would show). The limit MAX_OPERATIONS is lifted inside the
-measurement (in atlasnn.expression_parse, where the parser reads it) so that sizes beyond it can be
+measurement (in atlasnn.systems._parse, where the parser reads it) so that sizes beyond it can be
 timed.
 
     python -m benchmarks.expression_size                   # default sizes (~5 min)
@@ -39,9 +39,9 @@ def measure(n: int, separable: bool) -> dict:
     """Run in the current process (call it in a fresh one)."""
     import numpy as np
 
-    import atlasnn.expression_parse
+    import atlasnn.systems._parse
 
-    atlasnn.expression_parse.MAX_OPERATIONS = 10**9
+    atlasnn.systems._parse.MAX_OPERATIONS = 10**9
     text = expression(n, separable)
     out = {"terms": n, "operations": operations(text), "characters": len(text), "separable": separable}
     clock = [time.perf_counter(), time.process_time()]
@@ -51,10 +51,10 @@ def measure(n: int, separable: bool) -> dict:
         out[name] = [round(now[0] - clock[0], 2), round(now[1] - clock[1], 2)]
         clock[:] = now
 
-    from atlasnn.experiments.config import parse_config
-    from atlasnn.integrators import integrate, reference_solution
-    from atlasnn.model import make_model
-    from atlasnn.train import TrainConfig, train
+    from atlasnn.experiments.config._config import parse_config
+    from atlasnn.evaluation._integrators import integrate, reference_solution
+    from atlasnn.nn._trial import make_model
+    from atlasnn.training._train import TrainConfig, train
 
     lap("import")
     data = {"system": {"hamiltonian": text, "coordinates": ["q"], "momenta": ["p"], "separable": separable,

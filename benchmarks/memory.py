@@ -32,7 +32,7 @@ def _system(d: int):
     import jax.numpy as jnp
     import numpy as np
 
-    from atlasnn.systems import HamiltonianSystem, henon_heiles, nonlinear_oscillator
+    from atlasnn.systems._hamiltonian import HamiltonianSystem, henon_heiles, nonlinear_oscillator
 
     if d == 1:
         return nonlinear_oscillator()
@@ -44,8 +44,8 @@ def _system(d: int):
 def one_training(K: int, width: int, depth: int, d: int) -> dict:
     import numpy as np
 
-    from atlasnn.model import make_model
-    from atlasnn.train import TrainConfig, train
+    from atlasnn.nn._trial import make_model
+    from atlasnn.training._train import TrainConfig, train
 
     system = _system(d)
     model = make_model(system.z0, scaling="rational_exp", width=width, depth=depth)
@@ -58,8 +58,8 @@ def one_integration(n: int, d: int) -> dict:
     import jax.numpy as jnp
     import numpy as np
 
-    from atlasnn import metrics
-    from atlasnn.integrators import integrate, reference_solution
+    from atlasnn.evaluation import _metrics as metrics
+    from atlasnn.evaluation._integrators import integrate, reference_solution
 
     system = _system(d)
     before = _peak_mib()

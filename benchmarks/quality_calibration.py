@@ -1,4 +1,4 @@
-"""Calibration of the quality verdict (atlasnn.quality): train the cases its docstring cites and
+"""Calibration of the quality verdict (atlasnn.evaluation._quality): train the cases its docstring cites and
 print, per training, what the rules look at (loss ratio, energy drift, γ), the verdict, and the
 maximum error against the reference solution (which the verdict does not see).
 
@@ -16,12 +16,12 @@ import time
 import jax.numpy as jnp
 import numpy as np
 
-from atlasnn.integrators import reference_solution
-from atlasnn.model import make_model
-from atlasnn.quality import judge_training
-from atlasnn.solution import Solution
-from atlasnn.systems import HamiltonianSystem, nonlinear_oscillator
-from atlasnn.train import TrainConfig, train
+from atlasnn.evaluation._integrators import reference_solution
+from atlasnn.nn._trial import make_model
+from atlasnn.evaluation._quality import judge_training
+from atlasnn.solutions._solution import Solution
+from atlasnn.systems._hamiltonian import HamiltonianSystem, nonlinear_oscillator
+from atlasnn.training._train import TrainConfig, train
 
 SCALINGS = ("exp_decay", "tanh", "rational_exp")
 RELEASE_BETAS = (0.999, 0.9999)

@@ -3,8 +3,8 @@
 For each of the paper's four training configurations (ATLAS-NN exp model, SPEC §4; see
 ``benchmarks/common.py``) and each batch size S, one round trains
 
-- one seed alone with :func:`atlasnn.train.train` (the time per epoch of that one seed), and
-- S seeds together with :func:`atlasnn.train.train_batch` (the batch's time per epoch / S),
+- one seed alone with :func:`atlasnn.training._train.train` (the time per epoch of that one seed), and
+- S seeds together with :func:`atlasnn.training._train.train_batch` (the batch's time per epoch / S),
 
 both after compilation, in one process; rounds are interleaved so that load from other processes
 hits both alike. The speed-up is (lone ms per epoch) / (batched ms per epoch per seed), medians
@@ -28,20 +28,20 @@ from benchmarks.common import BETAS, CONFIGS, atlas_system, machine_info
 
 
 def _config(cfg, epochs: int, seed: int):
-    from atlasnn.train import TrainConfig
+    from atlasnn.training._train import TrainConfig
 
     return TrainConfig(epochs=epochs, lr=cfg.lr, betas=BETAS, lam_reg=cfg.lam_reg, n_points=cfg.n_points,
                        sigma=cfg.sigma, progress=False, chunk=min(epochs, 1000), seed=seed)
 
 
 def _models(cfg, system, seeds):
-    from atlasnn.model import make_model
+    from atlasnn.nn._trial import make_model
 
     return [make_model(system.z0, scaling="atlas_exp", width=cfg.width, depth=cfg.depth, seed=s) for s in seeds]
 
 
 def _lone_ms(cfg, system, epochs: int) -> float:
-    from atlasnn.train import train
+    from atlasnn.training._train import train
 
     (model,) = _models(cfg, system, [0])
     r = train(model, system, cfg.T, _config(cfg, epochs, 0))
@@ -50,7 +50,7 @@ def _lone_ms(cfg, system, epochs: int) -> float:
 
 def _batch_ms(cfg, system, epochs: int, size: int) -> float:
     """Milliseconds per epoch per seed of a batch of ``size`` seeds."""
-    from atlasnn.train import train_batch
+    from atlasnn.training._train import train_batch
 
     seeds = list(range(size))
     res = train_batch(_models(cfg, system, seeds), system, cfg.T, [_config(cfg, epochs, s) for s in seeds])

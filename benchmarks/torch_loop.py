@@ -1,6 +1,6 @@
 """A PINN training loop in PyTorch, written the way such code usually is: the comparator.
 
-It solves the same problem as ``atlasnn.train.train`` with the same mathematics, one Python
+It solves the same problem as ``atlasnn.training._train.train`` with the same mathematics, one Python
 iteration per epoch:
 
 - network: input t (scalar), ``depth`` hidden ``nn.Linear`` layers of ``width`` with sin

@@ -1,7 +1,7 @@
 """Solve a user-defined Hamiltonian with ATLAS-NN: the simple pendulum H = p²/2 − cos q.
 
 Nothing in the package knows about the pendulum: the Hamiltonian is a plain JAX-traceable Python
-function handed to :class:`atlasnn.systems.HamiltonianSystem`. The trained network is compared
+function handed to :class:`atlasnn.systems._hamiltonian.HamiltonianSystem`. The trained network is compared
 with the high-accuracy reference solution (SciPy DOP853, rtol = atol = 1e-12).
 
     python examples/pendulum.py                 # default budget
@@ -17,11 +17,11 @@ import time
 import jax.numpy as jnp
 import numpy as np
 
-from atlasnn.integrators import reference_solution
-from atlasnn.model import make_model
-from atlasnn.solution import Solution
-from atlasnn.systems import HamiltonianSystem
-from atlasnn.train import TrainConfig, train
+from atlasnn.evaluation._integrators import reference_solution
+from atlasnn.nn._trial import make_model
+from atlasnn.solutions._solution import Solution
+from atlasnn.systems._hamiltonian import HamiltonianSystem
+from atlasnn.training._train import TrainConfig, train
 
 
 def pendulum_hamiltonian(q, p):

@@ -17,7 +17,7 @@ and over all of them:
 - the generated parts of docs/REPRODUCTION.md, each between ``<!-- generated:NAME -->`` and
   ``<!-- /generated:NAME -->`` markers: ``headline`` (median [min–max] L2(x) per experiment, model
   and profile, the paper's value beside it), ``claims`` (how many seeds each of the paper's
-  claims holds in, per profile; :mod:`atlasnn.claims`) and ``long`` (the long-time experiments:
+  claims holds in, per profile; :mod:`atlasnn.report._claims`) and ``long`` (the long-time experiments:
   accuracy in every seed and the cost against classical integrators, from their work–precision
   records) and ``timing`` (the wall times ``scripts/timed.py`` recorded beside the runs, e.g.
   runs/paper/timing.json from ``make reproduce-all``).
@@ -34,9 +34,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from atlasnn.claims import experiment_claims, markdown as claims_markdown  # noqa: E402
-from atlasnn.report import load_paper  # noqa: E402
-from atlasnn.table_text import format_number  # noqa: E402
+from atlasnn.report._claims import experiment_claims, markdown as claims_markdown  # noqa: E402
+from atlasnn.report._tables import load_paper  # noqa: E402
+from atlasnn.report._text import format_number  # noqa: E402
 
 # the overview already shows trajectories, errors and energy; the run directory keeps the full set
 FIGURES = ["overview", "loss", "target_loss_comparison", "loss_source", "gamma", "seed_spread_l2_x", "work_precision"]
@@ -133,7 +133,7 @@ def long_time(runs: dict[str, dict[str, dict]]) -> str:
     """Per long-time experiment (one with a work–precision record): each network column's L2 of
     the first state and max error over seeds (median and worst), worst energy drift, training
     seconds per seed, and the cheapest classical setting as accurate as its *worst* seed."""
-    from atlasnn.workprecision import WorkPoint, SYMPLECTIC, cheapest_match
+    from atlasnn.evaluation._workprecision import WorkPoint, SYMPLECTIC, cheapest_match
 
     out = []
     for name, by_profile in runs.items():

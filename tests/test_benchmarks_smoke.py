@@ -64,7 +64,7 @@ def test_torch_half(quick_run):
 
 
 def test_package_does_not_import_torch():
-    code = "import sys, atlasnn.train, atlasnn.transfer, atlasnn.solution; print('torch' in sys.modules)"
+    code = "import sys, atlasnn.training._train, atlasnn.training._transfer, atlasnn.solutions._solution; print('torch' in sys.modules)"
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert proc.stdout.strip() == "False"

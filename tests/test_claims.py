@@ -1,8 +1,8 @@
-"""The paper's claims counted seed by seed (atlasnn.claims), on hand-made results."""
+"""The paper's claims counted seed by seed (atlasnn.report._claims), on hand-made results."""
 
 from __future__ import annotations
 
-from atlasnn.claims import experiment_claims, markdown
+from atlasnn.report._claims import experiment_claims, markdown
 
 
 def _run(column, seed, l2, epochs=100, role="short"):

@@ -16,8 +16,8 @@ import random
 import pytest
 
 from atlasnn import fileio
-from atlasnn.cli import main
-from atlasnn.experiments.store import RunLock
+from atlasnn.cli._main import main
+from atlasnn.experiments._store import RunLock
 
 from test_reliability_fs import TINY
 

@@ -7,7 +7,7 @@ import tomllib
 import pytest
 
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config import (
+from atlasnn.experiments.config._config import (
     builtin_config_path,
     builtin_experiments,
     load_config,
@@ -155,7 +155,7 @@ def test_transfer_needs_source_and_target():
 def test_evaluation_grids_are_the_papers(name, points, per_k, quick):
     """The paper's tables are on 10·K points (oscillator) or K points (Hénon–Heiles), K the
     collocation count of the tabulated interval; L2 in the release's form depends on it."""
-    from atlasnn.experiments.plan import eval_grid
+    from atlasnn.experiments._plan import eval_grid
 
     cfg = load_config(builtin_config_path(name), quick=quick)
     st = cfg.eval_stage

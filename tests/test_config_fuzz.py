@@ -21,13 +21,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from atlasnn.cli import main
+from atlasnn.cli._main import main
 from atlasnn.errors import AtlasError
-from atlasnn.experiments import runner, training
-from atlasnn.experiments.config import parse_config
-from atlasnn.model import MODEL_SCALINGS, make_model
-from atlasnn.train import train
-from atlasnn.transfer import transfer
+from atlasnn.experiments import _runner as runner
+from atlasnn.experiments import _task as training
+from atlasnn.experiments.config._config import parse_config
+from atlasnn.nn._trial import MODEL_SCALINGS, make_model
+from atlasnn.training._train import train
+from atlasnn.training._transfer import transfer
 
 MAX_EXAMPLES = int(os.environ.get("ATLASNN_FUZZ_EXAMPLES", "500"))
 MAX_COMPILES = 6  # distinct compiled training steps the fuzz test may build (a few seconds each)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config import (
+from atlasnn.experiments.config._config import (
     EvaluationConfig,
     SystemConfig,
     TrainSettings,
@@ -18,10 +18,10 @@ from atlasnn.experiments.config import (
     load_config,
     parse_config,
 )
-from atlasnn.experiments.config_schema import MODEL_ALIASES, SCHEMA, key_spec
-from atlasnn.model import MODEL_SCALINGS, make_model
-from atlasnn.scaling import SCALINGS, make_scaling
-from atlasnn.train import TrainConfig
+from atlasnn.experiments.config._schema import MODEL_ALIASES, SCHEMA, key_spec
+from atlasnn.nn._trial import MODEL_SCALINGS, make_model
+from atlasnn.nn._scaling import SCALINGS, make_scaling
+from atlasnn.training._train import TrainConfig
 
 
 def raw(name):

@@ -8,7 +8,7 @@ What each kind of block must do:
   other lines are output. ``atlasnn ...`` and ``.venv/bin/atlasnn ...`` run through the CLI in
   this process; ``python ...`` and ``.venv/bin/python ...`` in a fresh process. Any other command
   (``make``, ``pip``, shell pipes) cannot run here: its block needs the skip marker;
-* ```toml — a config: parsed with :func:`atlasnn.experiments.config.parse_config`, and with
+* ```toml — a config: parsed with :func:`atlasnn.experiments.config._config.parse_config`, and with
   ``quick=True`` too when it has a ``[quick]`` table;
 * ```json — parsed;
 * ```text — an output sample: not run. A fence without a language is an error (say ``text``).
@@ -174,8 +174,8 @@ def _capped(cfg):
 @pytest.fixture
 def epoch_cap(monkeypatch):
     """Cap the trainings of in-process CLI runs (and draw their figures at a lower resolution)."""
-    import atlasnn.experiments.config as config
-    import atlasnn.plotkit as plotkit
+    import atlasnn.experiments.config._config as config
+    import atlasnn.report._plotkit as plotkit
 
     real = config.load_config
     monkeypatch.setattr(config, "load_config", lambda *a, **k: _capped(real(*a, **k)))
@@ -195,7 +195,7 @@ def _check_cap(workspace: Path, since: float) -> None:
 
 # ------------------------------------------------------------------------------ runners
 def _run_atlasnn(words: list[str], workspace: Path) -> None:
-    from atlasnn.cli import main
+    from atlasnn.cli._main import main
 
     out, err = io.StringIO(), io.StringIO()
     start = time.time()
@@ -218,8 +218,8 @@ def _run_python(args: list[str], workspace: Path, what: str) -> None:
 
 def _check_atlasnn_command(words: list[str]) -> None:
     """A command that is not run: its options must parse and its config must load."""
-    from atlasnn.cli import build_parser
-    from atlasnn.experiments.config import builtin_config_path, load_config
+    from atlasnn.cli._main import build_parser
+    from atlasnn.experiments.config._config import builtin_config_path, load_config
 
     err = io.StringIO()
     with contextlib.redirect_stderr(err):
@@ -261,7 +261,7 @@ def run_block(block: Block, workspace: Path) -> None:
 
 
 def _check_toml(block: Block) -> None:
-    from atlasnn.experiments.config import parse_config
+    from atlasnn.experiments.config._config import parse_config
 
     data = tomllib.loads(block.code)
     parse_config(data, source=block.id)

@@ -8,9 +8,9 @@ import tomllib
 
 import pytest
 
-from atlasnn.cli import main
-from atlasnn.experiments.config import load_config
-from atlasnn.experiments.config_schema import key_spec
+from atlasnn.cli._main import main
+from atlasnn.experiments.config._config import load_config
+from atlasnn.experiments.config._schema import key_spec
 
 
 def init(tmp_path, capsys, name, *args):

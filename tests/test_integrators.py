@@ -9,9 +9,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from atlasnn import integrators as integ
+from atlasnn.evaluation import _integrators as integ
 from atlasnn.errors import AtlasError, ConfigError, SystemError_
-from atlasnn.integrators import (
+from atlasnn.evaluation._integrators import (
     INTEGRATORS,
     REFERENCE_DESCRIPTION,
     integrate,
@@ -20,7 +20,7 @@ from atlasnn.integrators import (
     symplectic_euler,
     yoshida4,
 )
-from atlasnn.systems import (
+from atlasnn.systems._hamiltonian import (
     HamiltonianSystem,
     harmonic_exact,
     harmonic_oscillator,
@@ -341,7 +341,7 @@ def test_bad_z0():
 def test_reference_stops_with_one_line_error_when_the_field_becomes_non_finite():
     """sqrt(q) has no gradient once q < 0: the solver must stop, not shrink its step for ever."""
     from atlasnn.errors import AtlasError
-    from atlasnn.expression import expression_system
+    from atlasnn.systems._expression import expression_system
 
     system = expression_system("p**2/2 + sqrt(q)", coordinates=["q"], momenta=["p"], z0=[1.0, -1.0])
     with pytest.raises(AtlasError) as info:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import AtlasError, ConfigError
-from atlasnn.metrics import (
+from atlasnn.evaluation._metrics import (
     METRIC_NAMES,
     energy_drift,
     error_table,

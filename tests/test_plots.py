@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from matplotlib.image import imread
 
 from atlasnn.errors import AtlasError
-from atlasnn.plots import (
+from atlasnn.report._plots import (
     Series,
     first_epoch_below,
     model_style,
@@ -40,7 +40,7 @@ _KEEP_DEFAULT_DPI = {"test_plot_scaling_families"}
 @pytest.fixture(autouse=True)
 def _low_dpi(monkeypatch, request):
     """Render PNGs at a lower resolution to keep the suite fast (one test keeps the default)."""
-    import atlasnn.plotkit as plotkit
+    import atlasnn.report._plotkit as plotkit
 
     if request.node.name not in _KEEP_DEFAULT_DPI:
         monkeypatch.setattr(plotkit, "DPI", 72)
@@ -171,7 +171,7 @@ def test_series_validates_shapes():
 
 # ------------------------------------------------------------------------------ figures
 def test_plot_scaling_families(tmp_path):
-    import atlasnn.plots as plots
+    import atlasnn.report._plots as plots
 
     paths = plot_scaling_families(tmp_path / "sub" / "scaling")  # parent dir is created
     _check_outputs(paths)
@@ -255,7 +255,7 @@ def test_plot_target_loss_comparison(tmp_path):
 
 def test_target_loss_legend_reports_met_epoch(tmp_path, monkeypatch):
     # Capture the figure to read its legend texts.
-    import atlasnn.plots as plots
+    import atlasnn.report._plots as plots
 
     captured = {}
     real_save = plots._save

@@ -12,16 +12,16 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-import atlasnn.plots_summary as plots_summary
+import atlasnn.report._summary_plots as plots_summary
 from atlasnn.errors import ConfigError
-from atlasnn.plots import Series, plot_loss_vs_accuracy, plot_overview
+from atlasnn.report._plots import Series, plot_loss_vs_accuracy, plot_overview
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(autouse=True)
 def _low_dpi(monkeypatch):
-    import atlasnn.plotkit as plotkit
+    import atlasnn.report._plotkit as plotkit
 
     monkeypatch.setattr(plotkit, "DPI", 60)
 

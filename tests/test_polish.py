@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import ConfigError
-from atlasnn.loss import physics_loss
-from atlasnn.model import make_model
-from atlasnn.polish import PolishConfig, polish
-from atlasnn.systems import harmonic_exact
-from atlasnn.train import TrainConfig, train
+from atlasnn.training._loss import physics_loss
+from atlasnn.nn._trial import make_model
+from atlasnn.training._polish import PolishConfig, polish
+from atlasnn.systems._hamiltonian import harmonic_exact
+from atlasnn.training._train import TrainConfig, train
 
 T_END = 2 * math.pi
 PCFG = PolishConfig(steps=300, n_points=120, chunk=50, patience=300)
@@ -82,8 +82,8 @@ def test_polish_vmaps_over_seeds(ho):
     """The compiled part is a pure function: vmapped over two models it gives each one's result."""
     from jax.flatten_util import ravel_pytree
 
-    from atlasnn.polish import make_lbfgs, polish_data, polish_init, polish_steps
-    from atlasnn.train import trainable_filter
+    from atlasnn.training._polish import make_lbfgs, polish_data, polish_init, polish_steps
+    from atlasnn.training._train import trainable_filter
 
     cfg = PCFG.replace(steps=10, chunk=10)
     models = [make_model((1.0, 0.0), scaling="rational_exp", width=8, depth=1, seed=s) for s in (0, 1)]

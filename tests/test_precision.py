@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import atlasnn
-from atlasnn.model import make_model
+from atlasnn.nn._trial import make_model
 from atlasnn.precision import default_float
 
 
@@ -52,9 +52,9 @@ _X64_SCRIPT = textwrap.dedent(
     import json
     import jax, numpy as np
     import atlasnn
-    from atlasnn.model import make_model
-    from atlasnn.systems import harmonic_oscillator
-    from atlasnn.train import TrainConfig, train
+    from atlasnn.nn._trial import make_model
+    from atlasnn.systems._hamiltonian import harmonic_oscillator
+    from atlasnn.training._train import TrainConfig, train
 
     system = harmonic_oscillator()
     model = make_model(system.z0, scaling="rational_exp", width=8, depth=1, seed=0)

@@ -7,9 +7,9 @@ import tomllib
 
 import pytest
 
-from atlasnn.cli import main
+from atlasnn.cli._main import main
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config import builtin_config_path, builtin_experiments, load_config, parse_config
+from atlasnn.experiments.config._config import builtin_config_path, builtin_experiments, load_config, parse_config
 
 from test_resume import TRANSFER
 
@@ -95,8 +95,8 @@ def test_the_default_run_directory_names_a_chosen_profile(tmp_path, monkeypatch)
 
 
 def test_a_profile_run_resumes_with_its_profile(tmp_path, monkeypatch):
-    from atlasnn.experiments import training
-    from atlasnn.experiments.runner import RunInterrupted, resume_experiment, run_experiment
+    from atlasnn.experiments import _task as training
+    from atlasnn.experiments._runner import RunInterrupted, resume_experiment, run_experiment
 
     cfg = parse_config(tomllib.loads(PROFILED), profile="release", quick=True)
     out = tmp_path / "run"

@@ -1,4 +1,4 @@
-"""The quality verdict (atlasnn.quality): each rule on synthetic histories, and two real trainings
+"""The quality verdict (atlasnn.evaluation._quality): each rule on synthetic histories, and two real trainings
 of the double well H = p²/2 − q²/2 + q⁴/4 (one that jumps the separatrix, one that does not)."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from atlasnn import quality as q
-from atlasnn.quality import Verdict, energy_drift, judge_training
+from atlasnn.evaluation import _quality as q
+from atlasnn.evaluation._quality import Verdict, energy_drift, judge_training
 
 
 def falling(n=1000, start=1.0, end=1e-6):
@@ -162,7 +162,7 @@ def test_bad_arguments():
 def double_well():
     """H = p²/2 − q²/2 + q⁴/4, z0 = (0.5, 0) (E0 = −0.109, separatrix at H = 0); one object for
     the module, so the compiled training step is shared."""
-    from atlasnn.systems import HamiltonianSystem
+    from atlasnn.systems._hamiltonian import HamiltonianSystem
 
     return HamiltonianSystem(lambda q_, p: p[0] ** 2 / 2 - q_[0] ** 2 / 2 + q_[0] ** 4 / 4, dim=1,
                              name="double_well", separable=True, z0=[0.5, 0.0])
@@ -171,9 +171,9 @@ def double_well():
 def train_and_judge(system, lr, betas, epochs, sigma):
     import jax.numpy as jnp
 
-    from atlasnn.model import make_model
-    from atlasnn.solution import Solution
-    from atlasnn.train import TrainConfig, train
+    from atlasnn.nn._trial import make_model
+    from atlasnn.solutions._solution import Solution
+    from atlasnn.training._train import TrainConfig, train
 
     T = 4 * math.pi
     model = make_model(system.z0, scaling="rational_exp", width=50, depth=2, seed=0)

@@ -12,7 +12,7 @@ import subprocess
 
 import pytest
 
-from atlasnn.cli import main
+from atlasnn.cli._main import main
 
 TINY = """
 name = "tiny"
@@ -96,10 +96,10 @@ def test_out_in_an_unwritable_directory_as_nobody():
             f.write(TINY)
         os.chmod(config, 0o644)
         as_nobody = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", sys.executable, "-c"]
-        probe = subprocess.run(as_nobody + ["import atlasnn.cli"], capture_output=True, text=True, cwd=base)
+        probe = subprocess.run(as_nobody + ["import atlasnn.cli._main"], capture_output=True, text=True, cwd=base)
         if probe.returncode != 0:
             pytest.skip(f"nobody cannot import atlasnn here: {probe.stderr.strip()[-200:]}")
-        code = "import sys; from atlasnn.cli import main; sys.exit(main(sys.argv[1:]))"
+        code = "import sys; from atlasnn.cli._main import main; sys.exit(main(sys.argv[1:]))"
         done = subprocess.run(as_nobody + [code, "run", config, "--out", os.path.join(locked, "run"), "--no-progress"],
                               capture_output=True, text=True, cwd=base, timeout=120)
         assert done.returncode == 2, done.stderr
@@ -150,7 +150,7 @@ def test_a_full_disk_mid_run_for_real(tmp_path, config, capsys):
 
 
 def test_a_full_disk_mid_run_simulated(tmp_path, config, capsys, monkeypatch):
-    import atlasnn.checkpoint_format as ck  # where _write_atomic looks up write_atomic
+    import atlasnn.checkpoint._format as ck  # where _write_atomic looks up write_atomic
 
     real = ck.write_atomic
 
@@ -170,7 +170,7 @@ def test_a_full_disk_mid_run_simulated(tmp_path, config, capsys, monkeypatch):
 
 
 def test_a_full_disk_before_the_run_starts(tmp_path, config, capsys, monkeypatch):
-    import atlasnn.experiments.runner as runner
+    import atlasnn.experiments._runner as runner
 
     def no_space(path, data):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))  # no file name: the CLI adds the run
@@ -183,7 +183,7 @@ def test_a_full_disk_before_the_run_starts(tmp_path, config, capsys, monkeypatch
 
 
 def test_an_os_error_names_both_paths_of_a_rename(tmp_path, config, capsys, monkeypatch):
-    import atlasnn.experiments.runner as runner
+    import atlasnn.experiments._runner as runner
 
     def cannot_rename(path, data):
         raise OSError(errno.EXDEV, os.strerror(errno.EXDEV), "/a/tmp", None, "/b/results.json")

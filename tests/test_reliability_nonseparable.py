@@ -9,7 +9,7 @@ from __future__ import annotations
 import csv
 import json
 
-from atlasnn.cli import main
+from atlasnn.cli._main import main
 
 CONFIG = """
 name = "nonsep"

@@ -1,4 +1,4 @@
-"""Tests of atlasnn.report on synthetic results.json dicts, and of the transcribed paper numbers."""
+"""Tests of atlasnn.report._tables on synthetic results.json dicts, and of the transcribed paper numbers."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import ConfigError
-from atlasnn.report import (
+from atlasnn.report._tables import (
     CSV_FIELDS,
     format_number,
     format_percent,
@@ -443,7 +443,7 @@ def test_write_tables(tmp_path):
 
 
 def test_cli(tmp_path, capsys):
-    from atlasnn.report import main
+    from atlasnn.report._tables import main
 
     (tmp_path / "results.json").write_text(json.dumps(_short_results()))
     assert main([str(tmp_path / "results.json"), "--out", str(tmp_path / "t")]) == 0

@@ -3,7 +3,7 @@
 (a) in process: a hook raises KeyboardInterrupt after the first chunk of the second job; the
     finished job's records and the interrupted job's state are on disk; the resumed run's loss
     histories, models and predictions equal those of an uninterrupted run bit for bit;
-(b) a real process: ``python -m atlasnn.cli run`` gets SIGINT while training, exits with status
+(b) a real process: ``python -m atlasnn.cli._main run`` gets SIGINT while training, exits with status
     130 and the resume command; resumed in a second process it gets SIGTERM; resumed a last time
     it finishes, identical to the uninterrupted run;
 (c) a transfer chain interrupted in its target stage (or between source and target) resumes from
@@ -25,11 +25,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from atlasnn.checkpoint import load_checkpoint, load_state
-from atlasnn.cli import main
-from atlasnn.experiments import runner, training
-from atlasnn.experiments.config import parse_config
-from atlasnn.experiments.runner import RunInterrupted, resume_experiment, run_experiment
+from atlasnn.checkpoint._single import load_checkpoint, load_state
+from atlasnn.cli._main import main
+from atlasnn.experiments import _runner as runner
+from atlasnn.experiments import _task as training
+from atlasnn.experiments.config._config import parse_config
+from atlasnn.experiments._runner import RunInterrupted, resume_experiment, run_experiment
 
 HISTORY = ("loss", "residual", "energy", "gamma")
 
@@ -225,7 +226,7 @@ def _start(args, env):
         signal.signal(signal.SIGINT, signal.SIG_DFL)
     try:
         return subprocess.Popen(
-            [sys.executable, "-m", "atlasnn.cli", *args], env=env, stdout=subprocess.PIPE,
+            [sys.executable, "-m", "atlasnn.cli._main", *args], env=env, stdout=subprocess.PIPE,
             stderr=subprocess.PIPE, text=True,
         )
     finally:

@@ -8,13 +8,13 @@ import tomllib
 
 import pytest
 
-from atlasnn.cli import main
+from atlasnn.cli._main import main
 from atlasnn.errors import ConfigError
-from atlasnn.experiments import training
-from atlasnn.experiments.config import builtin_config_path, load_config, parse_config
-from atlasnn.experiments.plan import AUTO_BATCH_WORK, Task, batch_size, epoch_work, plan_tasks
-from atlasnn.experiments.runner import RunInterrupted, resume_experiment, run_experiment
-from atlasnn.experiments.store import RunLock
+from atlasnn.experiments import _task as training
+from atlasnn.experiments.config._config import builtin_config_path, load_config, parse_config
+from atlasnn.experiments._plan import AUTO_BATCH_WORK, Task, batch_size, epoch_work, plan_tasks
+from atlasnn.experiments._runner import RunInterrupted, resume_experiment, run_experiment
+from atlasnn.experiments._store import RunLock
 
 from test_resume import SHORT, _quiet, assert_same_runs
 
@@ -98,7 +98,7 @@ def test_the_lock_is_released_after_a_run_and_after_a_failure(tmp_path, monkeypa
     def boom(*a, **k):
         raise RuntimeError("disk on fire")
 
-    monkeypatch.setattr("atlasnn.experiments.runner.run_local", boom)
+    monkeypatch.setattr("atlasnn.experiments._runner.run_local", boom)
     with pytest.raises(RuntimeError):
         _run(tmp_path / "other", seed_batch=1)
     RunLock(tmp_path / "other").acquire().release()

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import ConfigError
-from atlasnn.scaling import (
+from atlasnn.nn._scaling import (
     SCALINGS,
     ExpDecay,
     RationalExp,

@@ -18,11 +18,11 @@ from pathlib import Path
 
 import pytest
 
-from atlasnn.cli import main
+from atlasnn.cli._main import main
 from atlasnn.errors import ConfigError
-from atlasnn.experiments import training
-from atlasnn.experiments.config import parse_config
-from atlasnn.experiments.sweep import parse_set, parse_sets, plan_points, point_data, point_name
+from atlasnn.experiments import _task as training
+from atlasnn.experiments.config._config import parse_config
+from atlasnn.experiments._sweep import parse_set, parse_sets, plan_points, point_data, point_name
 
 from test_resume import SHORT, assert_same_runs
 

@@ -14,12 +14,12 @@ import numpy as np
 import optax
 import pytest
 
-from atlasnn.collocation import reflect_into, with_release_fixed_point
+from atlasnn.training._collocation import reflect_into, with_release_fixed_point
 from atlasnn.errors import ConfigError
-from atlasnn.loss import causal_physics_loss, causal_weights, physics_loss
-from atlasnn.model import make_model
-from atlasnn.systems import nonlinear_oscillator
-from atlasnn.train import TrainConfig, train
+from atlasnn.training._loss import causal_physics_loss, causal_weights, physics_loss
+from atlasnn.nn._trial import make_model
+from atlasnn.systems._hamiltonian import nonlinear_oscillator
+from atlasnn.training._train import TrainConfig, train
 
 from test_train import T_END, _model, _trees_equal, epoch_loss
 

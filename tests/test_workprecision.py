@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from atlasnn import workprecision as wp
-from atlasnn.systems import harmonic_exact, harmonic_oscillator
+from atlasnn.evaluation import _workprecision as wp
+from atlasnn.systems._hamiltonian import harmonic_exact, harmonic_oscillator
 
 
 @pytest.fixture(scope="module")

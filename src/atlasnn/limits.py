@@ -6,7 +6,7 @@ The estimates are linear models fitted to the peak resident memory (``ru_maxrss`
 on the reference machine (float32, JAX on CPU; ``python -m benchmarks.memory`` repeats the
 measurements).
 
-**A training** (one call of :func:`atlasnn.train.train`) needs
+**A training** (one call of :func:`atlasnn.training._train.train`) needs
 
     BASE + seeds · (K · (A·width·depth + B·2d) + C·P) bytes,
 

@@ -1,0 +1,1 @@
+"""atlasnn.checkpoint._single."""

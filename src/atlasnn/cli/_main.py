@@ -1,0 +1,495 @@
+"""The ``atlasnn`` command line.
+
+    atlasnn systems                      list the built-in Hamiltonian systems
+    atlasnn experiments                  list the paper's experiments (built-in configs)
+    atlasnn reproduce NAME [--quick] [--seeds K] [--jobs J] [--out DIR]
+    atlasnn run CONFIG.toml [...]        a user's own experiment
+    atlasnn run|reproduce --resume DIR   continue an interrupted run
+    atlasnn run|reproduce --scheduler ADDRESS   the trainings on a Dask cluster ($ATLASNN_SCHEDULER)
+    atlasnn report DIR                   re-render tables and figures of a finished run
+    atlasnn sweep CONFIG --set KEY=V1,V2 [--set ...] [--seeds K]   a grid of runs and one summary
+    atlasnn integrate [CONFIG] [--system NAME] [--T 6.0|20*pi]
+                                         reference vs classical integrators, an error table
+    atlasnn init NAME.toml [--transfer]  a commented experiment template for your own system
+    atlasnn config [--markdown]          every config key: type, default, limits, meaning
+
+Errors caused by input, and file-system errors (a path that cannot be created or written, a full
+disk: ``PATH: CAUSE``), are printed as one line; the exit status is 2 when the command failed
+before its run started and 1 when it failed mid-run (the run had written its meta.json; its
+finished trainings are on disk). SIGINT (Ctrl-C) or SIGTERM during training saves the training
+state and exits with status 130, printing the command that resumes the run.
+This module holds the commands, their parser and :func:`main`; the checks before a command and
+the wording of its failure are in :mod:`atlasnn.cli._errors`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+from atlasnn import __version__
+from atlasnn.cli._errors import _check_out, _os_error_line, _raise_interrupt, _resume_command, _RunWatch
+from atlasnn.errors import AtlasError
+
+
+def _seeds(args) -> tuple[int, ...] | None:
+    if args.seeds is None:
+        return None
+    if args.seeds < 1:
+        raise AtlasError(f"--seeds must be >= 1, got {args.seeds}")
+    return tuple(range(args.seeds))
+
+
+def _jobs(args) -> int:
+    if args.jobs < 1:
+        raise AtlasError(f"--jobs must be >= 1, got {args.jobs}")
+    return args.jobs
+
+
+def _print_summary(results, out: Path, start: float) -> int:
+    from atlasnn.report._render import summary_lines
+
+    for line in summary_lines(results, run_dir=out):
+        print(line)
+    print(f"done in {time.perf_counter() - start:.1f} s; see {out}/tables.md and {out}/figures/")
+    return 0
+
+
+def _seed_batch(args) -> int | str | None:
+    if args.seed_batch is None:
+        return None
+    text = str(args.seed_batch).strip().lower()
+    if text == "auto":
+        return "auto"
+    if not text.isdigit() or int(text) < 1:
+        raise AtlasError(f"--seed-batch must be a whole number >= 1 or auto, got {args.seed_batch!r}")
+    return int(text)
+
+
+def _default_out(cfg, args) -> str:
+    """runs/NAME[-PROFILE][-quick]; the profile is named when one was chosen."""
+    profile = f"-{cfg.profile}" if args.profile is not None else ""
+    return f"runs/{cfg.name}{profile}{'-quick' if args.quick else ''}"
+
+
+def _run_config(cfg, args, config_text: str, default_out: str, config_source: str | None = None) -> int:
+    from atlasnn.experiments._runner import run_experiment
+
+    seeds, jobs, seed_batch = _seeds(args), _jobs(args), _seed_batch(args)
+    out = Path(args.out or default_out)
+    args.run_dir = out
+    start = time.perf_counter()
+    results = run_experiment(
+        cfg, out, seeds=seeds, jobs=jobs, progress=not args.no_progress,
+        overwrite=args.overwrite, config_text=config_text, quick=args.quick, config_source=config_source,
+        seed_batch=seed_batch, scheduler=args.scheduler,
+    )
+    return _print_summary(results, out, start)
+
+
+def _resume(args, check) -> int:
+    """``--resume DIR``: the config, seeds and quick flag come from DIR; options given again must
+    agree with them. ``check(cfg, meta, out)`` compares the command's NAME or CONFIG."""
+    from atlasnn.experiments._runner import load_run_config, run_experiment
+
+    out = Path(args.resume)
+    args.run_dir = out
+    jobs = _jobs(args)
+    if args.overwrite:
+        raise AtlasError("--resume and --overwrite cannot be combined: --resume continues the run in DIR, "
+                         "--overwrite starts it again")
+    if args.out is not None and Path(args.out).resolve() != out.resolve():
+        raise AtlasError(f"--out {args.out} differs from --resume {args.resume}; the run continues in its own directory")
+    cfg, meta = load_run_config(out)
+    seeds = tuple(meta["seeds"])
+    if args.seeds is not None and tuple(range(args.seeds)) != seeds:
+        raise AtlasError(f"--seeds {args.seeds} differs from the run's seeds {list(seeds)} (recorded in {out}/meta.json)")
+    if args.quick and not meta.get("quick"):
+        raise AtlasError(f"--quick given, but the run in {out} was started without --quick")
+    if args.profile is not None and args.profile != meta.get("profile", cfg.profile):
+        raise AtlasError(f"--profile {args.profile} differs from the run's profile {meta.get('profile', cfg.profile)!r} "
+                         f"(recorded in {out}/meta.json)")
+    check(cfg, meta, out)
+    start = time.perf_counter()
+    results = run_experiment(
+        cfg, out, seeds=seeds, jobs=jobs, progress=not args.no_progress, quick=bool(meta.get("quick")),
+        resume=True, scheduler=args.scheduler,
+    )
+    return _print_summary(results, out, start)
+
+
+def cmd_systems(args) -> int:
+    from atlasnn.systems._hamiltonian import BUILTIN_DESCRIPTIONS
+
+    for name, (dim, H, z0) in BUILTIN_DESCRIPTIONS.items():
+        print(f"{name:22s} {dim}  {H}   (default z0: {z0})")
+    print("Your own system: HamiltonianSystem(H, d) in Python, or system.hamiltonian = \"...\" in a config.")
+    return 0
+
+
+def cmd_experiments(args) -> int:
+    from atlasnn.experiments.config._config import builtin_config_path, builtin_experiments, load_config
+
+    for name in builtin_experiments():
+        cfg = load_config(builtin_config_path(name))
+        print(f"{name:24s} {cfg.description}")
+    return 0
+
+
+def cmd_reproduce(args) -> int:
+    from atlasnn.experiments.config._config import builtin_config_path, load_config
+
+    if args.resume is not None:
+        def check(cfg, meta, out):
+            if args.name is not None and args.name != meta.get("experiment"):
+                raise AtlasError(f"--resume {out} holds experiment {meta.get('experiment')!r}, not {args.name!r}")
+
+        return _resume(args, check)
+    if args.name is None:
+        raise AtlasError("reproduce needs the NAME of an experiment (see `atlasnn experiments`), or --resume DIR")
+    path = builtin_config_path(args.name)
+    cfg = load_config(path, quick=args.quick, profile=args.profile)
+    return _run_config(cfg, args, path.read_text(encoding="utf-8"), _default_out(cfg, args), f"{args.name}.toml")
+
+
+def cmd_run(args) -> int:
+    from atlasnn.experiments.config._config import load_config
+
+    if args.resume is not None:
+        def check(cfg, meta, out):
+            if args.config is None:
+                return
+            given, kept = Path(args.config), Path(out) / "config.toml"
+            try:
+                same = given.read_bytes() == kept.read_bytes()
+            except OSError:
+                same = False
+            if not same:
+                raise AtlasError(f"{args.config} is not the config the run in {out} was started with "
+                                 f"({kept}); omit CONFIG to resume with the run's own copy")
+
+        return _resume(args, check)
+    if args.config is None:
+        raise AtlasError("run needs a CONFIG.toml, or --resume DIR")
+    cfg = load_config(args.config, quick=args.quick, profile=args.profile)
+    return _run_config(cfg, args, Path(args.config).read_text(encoding="utf-8"), _default_out(cfg, args),
+                       str(args.config))
+
+
+def _sweep_config(name: str) -> Path:
+    """A sweep's CONFIG: a TOML file, or the name of a built-in experiment."""
+    from atlasnn.experiments.config._config import builtin_config_path, builtin_experiments
+
+    path = Path(name)
+    if path.is_file() or name not in builtin_experiments():
+        return path
+    return builtin_config_path(name)
+
+
+def cmd_sweep(args) -> int:
+    from atlasnn.experiments._sweep import SweepInterrupted, resume_sweep, run_sweep
+
+    seeds, jobs = _seeds(args), _jobs(args)
+    seed_batch = None if args.seed_batch is None else _seed_batch(args)
+    common = dict(jobs=jobs, scheduler=args.scheduler, progress=not args.no_progress)
+    start = time.perf_counter()
+    try:
+        if args.resume is not None:
+            if args.overwrite:
+                raise AtlasError("--resume and --overwrite cannot be combined")
+            if args.out is not None and Path(args.out).resolve() != Path(args.resume).resolve():
+                raise AtlasError(f"--out {args.out} differs from --resume {args.resume}")
+            out, _ = resume_sweep(args.resume, config=None if args.config is None else _sweep_config(args.config),
+                                  sets=args.sets, seeds=seeds, quick=args.quick, metric=args.metric,
+                                  seed_batch=seed_batch, **common)
+        else:
+            if args.config is None:
+                raise AtlasError("sweep needs a CONFIG.toml (or a built-in experiment name), or --resume DIR")
+            out, _ = run_sweep(_sweep_config(args.config), args.sets, seeds=seeds, out=args.out, quick=args.quick,
+                               metric=args.metric or "l2_discrete", overwrite=args.overwrite,
+                               seed_batch=seed_batch or "auto", profile=args.profile, **common)
+    except SweepInterrupted as exc:
+        parts = ["atlasnn", "sweep", "--resume", str(exc.sweep_dir)]
+        if args.jobs != 1:
+            parts += ["--jobs", str(args.jobs)]
+        if args.scheduler:
+            parts += ["--scheduler", args.scheduler]
+        print(f"atlasnn: interrupted: {exc.complete} of {exc.total} sweep points complete; resume with: "
+              f"{' '.join(shlex.quote(p) for p in parts)}", file=sys.stderr)
+        return 130
+    print((out / "summary.md").read_text(encoding="utf-8").rstrip())
+    print(f"sweep done in {time.perf_counter() - start:.1f} s; see {out}/summary.md, summary.csv and sweep.png")
+    return 0
+
+
+def cmd_report(args) -> int:
+    from atlasnn.report._render import summary_lines, write_report
+    from atlasnn.report._tables import load_results
+
+    paths = write_report(Path(args.dir))
+    for line in summary_lines(load_results(Path(args.dir)), run_dir=Path(args.dir)):
+        print(line)
+    print(f"wrote {len(paths)} files in {args.dir}")
+    return 0
+
+
+def _end_time(flag: str, text: str) -> float:
+    """An end time from the command line: a plain number ("6.0", "100", "1e2") or a multiple of
+    pi ("4*pi", "20pi", "pi/2"); finite, > 0 and at most the configs' time limit."""
+    from atlasnn.experiments.config._config import MAX_TIME, _number
+
+    try:
+        value: float | str = float(text)
+    except ValueError:
+        value = text
+    return _number(flag, value, low=0, low_open=True, high=MAX_TIME, allow_pi=True)
+
+
+def _integrate_problem(args):
+    """(system, z0, t0, T, steps) from --system/--T/--steps, or from a config file (its system,
+    z0 and evaluation interval; --T and --steps still override)."""
+    from atlasnn.systems._hamiltonian import builtin_system
+
+    config = args.config_pos or args.config
+    if args.config_pos and args.config and args.config_pos != args.config:
+        raise AtlasError(f"two configs given ({args.config_pos} and --config {args.config}); give one")
+    if config is None:
+        system = builtin_system(args.system or "nonlinear_oscillator")
+        T = _end_time("--T", args.T or "4*pi")
+        return system, system.initial_state(), 0.0, T, args.steps or 199
+    if args.system is not None:
+        raise AtlasError(f"--system {args.system} and a config ({config}) both name a system; give one")
+    from atlasnn.experiments.config._config import load_config
+
+    cfg = load_config(config)
+    stage = cfg.eval_stage
+    system = cfg.system.build()
+    z0 = system.initial_state(cfg.system.z0)
+    T = stage.T if args.T is None else _end_time("--T", args.T)
+    if T <= stage.t0:
+        raise AtlasError(f"--T {args.T}: must be greater than the config's t0 = {stage.t0:g}")
+    steps = args.steps or cfg.evaluation.se_steps or stage.train.n_points - 1
+    return system, z0, stage.t0, T, steps
+
+
+def _energy64(system, z):
+    """H along a float64 trajectory, evaluated in float64 (JAX computes in float32 otherwise)."""
+    import jax
+    import numpy as np
+
+    with jax.enable_x64(True), np.errstate(all="ignore"):
+        return np.asarray(system.energy(jax.numpy.asarray(z, dtype=jax.numpy.float64)))
+
+
+def cmd_integrate(args) -> int:
+    import numpy as np
+
+    from atlasnn.evaluation._integrators import INTEGRATORS, REFERENCE_DESCRIPTION, integrate, reference_solution
+    from atlasnn.evaluation._metrics import energy_drift, error_table
+
+    if args.steps is not None and args.steps < 1:
+        raise AtlasError(f"--steps must be >= 1, got {args.steps}")
+    system, z0, t0, T, steps = _integrate_problem(args)
+    print(f"{system.name}: z0 = {z0.tolist()}, [{t0:g}, {T:.4f}], {steps} steps; reference: {REFERENCE_DESCRIPTION}")
+    E0 = float(_energy64(system, z0))
+    if not system.separable:
+        print(f"skipping {', '.join(INTEGRATORS)}: they need a separable H = T(p) + V(q) and "
+              f"{system.name!r} is not declared separable")
+        t = np.linspace(t0, T, steps + 1)
+        ref = reference_solution(system, z0, t)
+        drift = energy_drift(_energy64(system, ref), E0)
+        state = ", ".join(f"{n} = {v:.6g}" for n, v in zip(system.state_names, ref[-1]))
+        print(f"reference: energy drift {drift:.3e} on {steps + 1} points; at t = {T:.4f}: {state}")
+        return 0
+    print(f"{'method':18s}" + "".join(f"{'L2(' + n + ')':>12s}" for n in system.state_names) + f"{'max|err|':>12s}{'energy drift':>14s}")
+    unstable, refs = [], {}
+    for method in INTEGRATORS:
+        with np.errstate(all="ignore"):
+            t, z = integrate(method, system, z0, t0, T, steps)
+            key = t.tobytes()  # every method has the same grid: solve the reference once
+            ref = refs[key] = refs[key] if key in refs else reference_solution(system, z0, t)
+            tab = error_table(t, z, ref, system.state_names)
+            drift = energy_drift(_energy64(system, z), E0)
+        if not np.all(np.isfinite(z)):
+            unstable.append(method)
+        cells = "".join(f"{tab['components'][n]['l2_discrete']:12.3e}" for n in system.state_names)
+        print(f"{method:18s}{cells}{tab['whole']['max_abs']:12.3e}{drift:14.3e}")
+    print("L2 = sqrt(sum_i err_i^2) on each method's own grid (the release's tabulated form)")
+    if unstable:
+        print(f"nan: {', '.join(unstable)} blew up (step {(T - t0) / steps:.3g} is too large for it); raise --steps")
+    return 0
+
+
+def cmd_init(args) -> int:
+    from atlasnn.experiments.config._templates import write_template
+
+    z0 = None
+    if args.z0 is not None:
+        try:
+            z0 = [float(x) for x in args.z0]
+        except ValueError:
+            raise AtlasError(f"--z0 {' '.join(args.z0)}: expected numbers") from None
+    split = lambda names: [n for part in names or () for n in part.split(",") if n]  # noqa: E731  "q1,q2" or q1 q2
+    write_template(args.path, force=args.force, transfer=args.transfer, system=args.system,
+                   hamiltonian=args.hamiltonian, coordinates=split(args.coordinates), momenta=split(args.momenta), z0=z0)
+    kind = "transfer (source -> target)" if args.transfer else "single interval"
+    print(f"wrote {args.path} ({kind}); every key is commented there, all of them: `atlasnn config`")
+    print(f"  smoke test (a few hundred epochs): atlasnn run {shlex.quote(args.path)} --quick")
+    print(f"  the full budget:                   atlasnn run {shlex.quote(args.path)}")
+    return 0
+
+
+def cmd_config(args) -> int:
+    from atlasnn.experiments.config._reference import reference_markdown, reference_text
+
+    try:
+        sys.stdout.write(reference_markdown() if args.markdown else reference_text())
+        sys.stdout.flush()
+    except BrokenPipeError:  # `atlasnn config | head`: the reader left; not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="atlasnn", description="ATLAS-NN: learnable time-scaled Hamiltonian neural networks")
+    p.add_argument("--version", action="version", version=f"atlasnn {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+
+    s = sub.add_parser("systems", help="list the built-in Hamiltonian systems")
+    s.set_defaults(func=cmd_systems)
+    s = sub.add_parser("experiments", help="list the paper's experiments")
+    s.set_defaults(func=cmd_experiments)
+
+    def add_run_options(s):
+        s.add_argument("--quick", action="store_true", help="the config's quick variant (far fewer epochs)")
+        s.add_argument("--seeds", type=int, default=None, metavar="K", help="repeat every training with seeds 0..K-1")
+        s.add_argument("--jobs", type=int, default=1, metavar="J", help="independent trainings in J processes")
+        s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="run the trainings on the Dask cluster of this scheduler (e.g. tcp://host:8786; "
+                            "default $ATLASNN_SCHEDULER; needs atlasnn[dask] and a file system shared with "
+                            "the workers; see docs/SCALE.md)")
+        s.add_argument("--seed-batch", default=None, metavar="N",
+                       help="seeds of one model trained together as one compiled program: a number, or auto "
+                            "(batch where it measures faster; default: the config's execution.seed_batch, auto)")
+        s.add_argument("--profile", default=None, metavar="NAME",
+                       help="a named variant of the config, e.g. release (the authors' release's settings; "
+                            "default: the file as written, the paper's for the built-in experiments)")
+        s.add_argument("--out", default=None, metavar="DIR", help="run directory (default runs/NAME[-quick])")
+        s.add_argument("--overwrite", action="store_true", help="reuse a non-empty run directory")
+        s.add_argument("--resume", default=None, metavar="DIR",
+                       help="continue an interrupted run in DIR (its config, seeds and --quick are read from DIR)")
+        s.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+    s = sub.add_parser("reproduce", help="reproduce one of the paper's experiments")
+    s.add_argument("name", nargs="?", help="oscillator-short, oscillator-transfer, henon-heiles-short or henon-heiles-transfer")
+    add_run_options(s)
+    s.set_defaults(func=cmd_reproduce)
+
+    s = sub.add_parser("run", help="run an experiment from your own TOML config")
+    s.add_argument("config", nargs="?", help="path to a TOML experiment file")
+    add_run_options(s)
+    s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("sweep", help="run a config at every point of a grid of settings, with one summary")
+    s.add_argument("config", nargs="?", help="a TOML experiment file or a built-in experiment name")
+    s.add_argument("--set", action="append", default=[], dest="sets", metavar="KEY=V1[,V2...]",
+                   help="a swept setting: a dotted config key and its values, read as TOML (repeatable)")
+    s.add_argument("--seeds", type=int, default=None, metavar="K", help="every point with seeds 0..K-1")
+    s.add_argument("--jobs", type=int, default=1, metavar="J", help="independent trainings in J processes")
+    s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the trainings on this Dask scheduler's cluster (default $ATLASNN_SCHEDULER)")
+    s.add_argument("--seed-batch", default=None, metavar="N", help="seeds per compiled program: a number or auto")
+    s.add_argument("--quick", action="store_true", help="the config's quick variant")
+    s.add_argument("--profile", default=None, metavar="NAME", help="a named variant of the config (e.g. release)")
+    s.add_argument("--metric", default=None, help="the summary's metric (default l2_discrete)")
+    s.add_argument("--out", default=None, metavar="DIR", help="sweep directory (default runs/sweep-NAME[-quick])")
+    s.add_argument("--overwrite", action="store_true", help="reuse a non-empty sweep directory")
+    s.add_argument("--resume", default=None, metavar="DIR", help="continue the sweep in DIR")
+    s.add_argument("--no-progress", action="store_true", help="no progress bars")
+    s.set_defaults(func=cmd_sweep)
+
+    s = sub.add_parser("report", help="re-render tables and figures of a finished run")
+    s.add_argument("dir", help="a run directory written by reproduce or run")
+    s.set_defaults(func=cmd_report)
+
+    s = sub.add_parser("integrate", help="reference solution vs symplectic integrators (a built-in system or "
+                                         "the system of a config)")
+    s.add_argument("config_pos", nargs="?", metavar="CONFIG", help="a TOML experiment file: its system, z0 and "
+                   "interval (the target's for a transfer experiment)")
+    s.add_argument("--config", default=None, metavar="FILE", help="the same as CONFIG")
+    s.add_argument("--system", default=None, help="a built-in system (default nonlinear_oscillator)")
+    s.add_argument("--T", default=None, help="end time: a number (6.0, 100) or a multiple of pi (20*pi); "
+                   "default 4*pi, or the config's T")
+    s.add_argument("--steps", type=int, default=None, help="integrator steps (default 199, or the config's K - 1)")
+    s.set_defaults(func=cmd_integrate)
+
+    s = sub.add_parser("init", help="write a commented experiment template for your own system")
+    s.add_argument("path", metavar="NAME.toml", help="the file to write (refused if it exists, unless --force)")
+    s.add_argument("--transfer", action="store_true", help="a transfer experiment (source -> target), "
+                   "not a single interval")
+    s.add_argument("--system", default=None, metavar="BUILTIN", help="a built-in system (see `atlasnn systems`)")
+    s.add_argument("--hamiltonian", default=None, metavar="EXPR",
+                   help="your own H, e.g. \"p**2/2 - cos(q)\" (the default: that pendulum)")
+    s.add_argument("--coordinates", nargs="+", default=None, metavar="NAME", help="names of q (with --hamiltonian)")
+    s.add_argument("--momenta", nargs="+", default=None, metavar="NAME", help="names of p (with --hamiltonian)")
+    s.add_argument("--z0", nargs="+", default=None, metavar="X", help="initial state (q..., p...); "
+                   "default: the built-in's, or q = 1, p = 0")
+    s.add_argument("--force", action="store_true", help="overwrite an existing file")
+    s.set_defaults(func=cmd_init)
+
+    s = sub.add_parser("config", help="every key of an experiment file: type, default, limits, meaning")
+    s.add_argument("--markdown", action="store_true", help="as Markdown (docs/CONFIG.md is this output)")
+    s.set_defaults(func=cmd_config)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "command", None):
+        parser.print_help()
+        return 0
+    # SIGTERM (kill, a batch system's time limit) is handled like Ctrl-C: the training state is
+    # saved and the run can be resumed
+    old_term = None
+    if threading.current_thread() is threading.main_thread():
+        old = signal.getsignal(signal.SIGTERM)
+        if old is not signal.SIG_IGN and old is not None:
+            old_term = old
+            signal.signal(signal.SIGTERM, _raise_interrupt)
+    watch = _RunWatch(args)
+    try:
+        _check_out(args)
+        return int(args.func(args) or 0)
+    except AtlasError as exc:
+        message = " ".join(str(exc).splitlines()) or type(exc).__name__  # one line, always
+        print(f"atlasnn: error: {message}", file=sys.stderr)
+        return watch.status()
+    except OSError as exc:  # the file system: a path we cannot create, write or read
+        print(f"atlasnn: error: {_os_error_line(exc, getattr(args, 'run_dir', None))}", file=sys.stderr)
+        return watch.status()
+    except MemoryError:
+        print("atlasnn: error: out of memory (MemoryError); lower train.n_points, network.width or --jobs",
+              file=sys.stderr)
+        return watch.status()
+    except KeyboardInterrupt as exc:
+        runner = sys.modules.get("atlasnn.experiments._runner")  # loaded if a run was interrupted
+        if runner is not None and isinstance(exc, runner.RunInterrupted):
+            print(f"atlasnn: interrupted: {exc.finished} of {exc.total} trainings finished; resume with: "
+                  f"{_resume_command(args, exc.run_dir)}", file=sys.stderr)
+        else:
+            print("atlasnn: interrupted", file=sys.stderr)
+        return 130
+    finally:
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""atlasnn.experiments.config._config."""

@@ -1,0 +1,480 @@
+"""Experiment configs: TOML files read into typed, validated dataclasses.
+
+Every number of an experiment lives in its TOML file; nothing experiment-specific is in code.
+Validation happens before anything is trained or written: an unknown key, a wrong type or an
+out-of-range value raises :class:`~atlasnn.errors.ConfigError` with one line naming the key
+(dotted path) and the value.
+
+Every key is declared once, in :mod:`atlasnn.experiments.config._schema` (type, limits, default,
+meaning); :func:`parse_config` validates by walking those declarations and then applies the few
+rules that relate several keys, each a small named function below (T > t0, sigma or
+sigma_per_T, z0 against the coordinates, collocation times distinct in float32, H finite at z0,
+separability). ``atlasnn config`` prints the reference generated from the same declarations.
+
+Adding a key: one ``Key(...)`` line in its table in ``config_schema.SCHEMA`` (see that module's
+docstring); a key of [train], [evaluation] or [system] then is a field of TrainSettings /
+EvaluationConfig / SystemConfig (generated from the schema), a top-level, [network] or
+[transfer] key also needs a field in ExperimentConfig, and a rule relating it to other keys goes
+here. Then regenerate docs/CONFIG.md (``atlasnn config --markdown``).
+
+A file may carry a ``[quick]`` table with the same layout; ``quick=True`` merges it over the
+rest (a smoke-test variant: same structure, far fewer epochs).
+
+Times may be numbers or multiples of π written as strings: ``"4*pi"``, ``"20pi"``, ``"pi/2"``.
+Models may be named as in the paper (hnn, atlas_tanh, atlas_exp) or by their scaling as in the
+Python API (exp_decay, tanh, rational_exp); configs are normalised to the paper's names.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from atlasnn.errors import ConfigError
+from atlasnn.experiments.config._schema import (  # noqa: F401  (the limits, re-exported as before)
+    MAX_DEPTH,
+    MAX_EPOCHS,
+    MAX_POINTS,
+    MAX_SEED,
+    MAX_SEEDS,
+    MAX_STEPS,
+    MAX_TIME,
+    MAX_WIDTH,
+    SCHEMA,
+    parse_table,
+    settings_fields,
+)
+from atlasnn.experiments.config._types import _fail, _number, _one_line, _table  # noqa: F401  (_number: cli integrate)
+from atlasnn.nn._labels import MODEL_LABELS  # noqa: F401  (re-exported for the runner)
+from atlasnn.training._train import TrainConfig
+
+
+def _deep_merge(base: dict, over: dict) -> dict:
+    out = copy.deepcopy(base)
+    for k, v in over.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = _deep_merge(out[k], v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
+# ----------------------------------------------------------------- settings dataclasses
+class _SystemMethods:
+    def build(self):
+        """The :class:`~atlasnn.systems._hamiltonian.HamiltonianSystem` this describes."""
+        from atlasnn.systems._hamiltonian import builtin_system
+
+        if self.hamiltonian is not None:
+            from atlasnn.systems._expression import expression_system
+
+            return expression_system(
+                self.hamiltonian, coordinates=list(self.coordinates), momenta=list(self.momenta),
+                params=dict(self.params), name=self.name or "custom", separable=self.separable,
+                z0=None if self.z0 is None else list(self.z0),
+            )
+        sysm = builtin_system(self.name, **self.params)
+        if self.z0 is not None:
+            sysm = dataclasses.replace(sysm, z0=sysm.check_state(self.z0, "system.z0"))
+        return sysm
+
+
+class _TrainMethods:
+    def to_train_config(self, T: float, seed: int, progress: bool, freeze_gamma: bool = False) -> TrainConfig:
+        """The trainer's settings: every key that is also a TrainConfig field, σ resolved
+        (σ = sigma, or sigma_per_T·T, or 0) and the chunk capped at the budget."""
+        known = {f.name for f in dataclasses.fields(TrainConfig)}
+        kw = {k: v for k, v in dataclasses.asdict(self).items() if k in known}
+        kw["sigma"] = self.sigma if self.sigma is not None else (self.sigma_per_T or 0.0) * T
+        kw["chunk"] = min(self.chunk, self.epochs)
+        return TrainConfig(**kw, freeze_gamma=freeze_gamma, seed=seed, progress=progress)
+
+
+def _settings_class(name: str, table: str, base: type, doc: str) -> type:
+    """A frozen dataclass whose fields are the keys of ``table`` (declared in config_schema),
+    with the methods of ``base``."""
+    cls = dataclasses.make_dataclass(name, settings_fields(table), bases=(base,), frozen=True,
+                                     namespace={"__doc__": doc})
+    cls.__module__ = __name__  # pickled by reference (the runner's worker processes)
+    return cls
+
+
+SystemConfig = _settings_class("SystemConfig", "system", _SystemMethods,
+                               "A built-in system by name, or a user Hamiltonian written as an expression "
+                               "(fields: the keys of [system]).")
+TrainSettings = _settings_class("TrainSettings", "train", _TrainMethods,
+                                "Training settings of one stage (fields: the keys of [train]); ``sigma_per_T`` "
+                                "(release convention) gives σ = value × T.")
+EvaluationConfig = _settings_class("EvaluationConfig", "evaluation", object,
+                                   "Where and against what trained models are measured (fields: the keys of "
+                                   "[evaluation]; eval_points None: the stage's K, se_steps None: K − 1).")
+
+
+@dataclass(frozen=True)
+class Stage:
+    """An interval [t0, T] and the training settings used on it."""
+
+    t0: float
+    T: float
+    train: TrainSettings
+
+
+@dataclass(frozen=True)
+class MarchSettings:
+    """The ``[march]`` table: which models are marched, their network, and the scheme."""
+
+    models: tuple[str, ...]
+    width: int
+    depth: int
+    activation: str
+    first_layer_scale: float
+    scheme: Any  # atlasnn.training._marching.MarchConfig (progress and seed are set per training)
+
+    def columns(self) -> list[str]:
+        return [f"{m}_march" for m in self.models]
+
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    """One experiment: a short run (``interval``) or a transfer run (``source`` → ``target``)."""
+
+    name: str
+    kind: str  # "short" | "transfer"
+    system: SystemConfig
+    width: int
+    depth: int
+    activation: str
+    models: tuple[str, ...]
+    gamma_init: dict[str, dict[str, float]]
+    stage: Stage | None = None  # short experiments
+    source: Stage | None = None  # transfer experiments
+    target: Stage | None = None
+    thaw: bool = False
+    carry_adam: bool = True
+    baseline: bool = True
+    lr_from_source: bool = False
+    evaluation: EvaluationConfig = EvaluationConfig()
+    seeds: tuple[int, ...] = (0,)
+    description: str = ""
+    follows: dict[str, str] = field(default_factory=dict)
+    paper_experiment: str = ""
+    first_layer_scale: float = 1.0
+    march: MarchSettings | None = None
+    polish: Any = None  # atlasnn.training._polish.PolishConfig, or None
+    profile: str = "default"
+    seed_batch: int | str = "auto"
+    scheduler: str = ""
+    raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def eval_stage(self) -> Stage:
+        """The stage whose interval the tables are measured on (the target for transfer)."""
+        return self.stage if self.kind == "short" else self.target
+
+    def columns(self) -> list[str]:
+        """Table columns: SE, then the models (transfer: baseline HNN and the transferred models)."""
+        marched = self.march.columns() if self.march is not None else []
+        if self.kind == "short":
+            return ["se", *self.models, *marched]
+        cols = ["se"] + (["hnn_baseline"] if self.baseline else [])
+        return cols + [f"{m}_transfer" for m in self.models] + marched
+
+    def baseline_column(self) -> str:
+        """The column improvements are measured against: the (baseline) HNN when there is one,
+        else the first network column."""
+        if self.kind == "short":
+            return "hnn" if "hnn" in self.models else self.models[0]
+        if self.baseline:
+            return "hnn_baseline"
+        return "hnn_transfer" if "hnn" in self.models else f"{self.models[0]}_transfer"
+
+
+# ------------------------------------------------------------------ cross-key rules
+def _default_name(values: dict, source: str) -> str:
+    """name defaults to the file's name, which must then be a valid name too."""
+    if values["name"] is not None:
+        return values["name"]
+    return SCHEMA[""].key("name").type.parse("name", Path(source).stem)
+
+
+def _system_config(v: dict, given: dict) -> SystemConfig:
+    """A built-in name or a hamiltonian; with a hamiltonian, as many momenta as coordinates and
+    z0 of length 2d. Without one, coordinates and momenta are not used."""
+    from atlasnn.systems._hamiltonian import BUILTIN_SYSTEMS
+
+    if v["hamiltonian"] is None:
+        if v["name"] is None:
+            _fail("system", given, "give a built-in system name or a hamiltonian expression")
+        if v["name"].replace("-", "_") not in BUILTIN_SYSTEMS:
+            _fail("system.name", v["name"], f"unknown system; built-ins are {sorted(BUILTIN_SYSTEMS)} "
+                  "(or give system.hamiltonian as an expression)")
+        return SystemConfig(**{**v, "coordinates": (), "momenta": ()})
+    coords, momenta = v["coordinates"], v["momenta"]
+    for key, names in (("coordinates", coords), ("momenta", momenta)):
+        if not names:
+            _fail(f"system.{key}", None, "expected a non-empty list of names")
+    if len(coords) != len(momenta):
+        _fail("system.momenta", given["momenta"], f"must have as many names as system.coordinates ({len(coords)})")
+    if v["z0"] is not None and len(v["z0"]) != 2 * len(coords):
+        _fail("system.z0", given["z0"], f"must have {2 * len(coords)} components {list(coords + momenta)}")
+    return SystemConfig(**v)
+
+
+def _train_settings(path: str, values: dict, given: dict, base: TrainSettings | None = None) -> TrainSettings:
+    """A stage's settings: [train] overridden key by key; sigma and sigma_per_T exclude each
+    other (given together in one table they are refused; given in a stage, one clears the
+    other inherited from [train])."""
+    if "sigma" in given and "sigma_per_T" in given:
+        _fail(f"{path}.sigma", given["sigma"], "give either sigma or sigma_per_T, not both")
+    kw = {**(dataclasses.asdict(base) if base is not None else {}), **values}
+    if "sigma" in given:
+        kw["sigma_per_T"] = None
+    if "sigma_per_T" in given:
+        kw["sigma"] = None
+    return TrainSettings(**kw)
+
+
+def _check_stages_present(kind: str, data: dict) -> None:
+    """A short run has [interval] only; a transfer run [source] and [target] only."""
+    if kind == "short":
+        if "interval" not in data:
+            _fail("interval", None, "missing: a short experiment needs [interval] with T")
+        for bad in ("source", "target"):
+            if bad in data:
+                _fail(bad, "...", "only a transfer experiment (kind = \"transfer\") has source and target")
+        return
+    for need in ("source", "target"):
+        if need not in data:
+            _fail(need, None, "missing: a transfer experiment needs [source] and [target] with T")
+    if "interval" in data:
+        _fail("interval", "...", "a transfer experiment uses [source] and [target], not [interval]")
+
+
+def _stage(path: str, values: dict, given: dict, base: TrainSettings) -> Stage:
+    t0, T = values["t0"], values["T"]
+    if T <= t0:
+        _fail(f"{path}.T", given["T"], f"must be greater than t0 = {t0:g}")
+    train = _train_settings(f"{path}.train", values["train"], given.get("train", {}), base)
+    _check_float32_spacing(path, t0, T, train.n_points, given["T"])
+    return Stage(t0, T, train)
+
+
+def _check_float32_spacing(path: str, t0: float, T: float, n_points: int, given_T: Any) -> None:
+    """The K collocation times must be distinct in float32 (the training precision)."""
+    import numpy as np
+
+    dt = (T - t0) / (n_points - 1)
+    if dt <= 4 * float(np.spacing(np.float32(max(abs(t0), abs(T))))):
+        _fail(f"{path}.T", given_T, f"[{t0:g}, {T:g}] is too short for {n_points} distinct collocation "
+              f"times in float32 (spacing {dt:.3g}); lengthen the interval or lower n_points")
+
+
+def _check_same_start(source: Stage, target: Stage) -> None:
+    """Transfer continues from the same initial state: the target starts where the source does."""
+    if source.t0 != target.t0:
+        _fail("target.t0", target.t0, f"must equal source.t0 = {source.t0:g} (same initial state)")
+
+
+def _check_fine_steps(evaluation: EvaluationConfig, stage: Stage) -> None:
+    """The figures' fine symplectic-Euler run must stay within MAX_STEPS steps."""
+    n_steps = (evaluation.se_steps or stage.train.n_points - 1) * evaluation.fine_factor
+    if n_steps > MAX_STEPS:
+        _fail("evaluation.fine_factor", evaluation.fine_factor,
+              f"the fine symplectic-Euler run would take {n_steps} steps (se_steps x fine_factor must be <= {MAX_STEPS})")
+
+
+# ----------------------------------------------------------------------- parsing
+def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "config",
+                 profile: str | None = None) -> ExperimentConfig:
+    """Validate a config dict (as read from TOML) and return an :class:`ExperimentConfig`.
+
+    ``profile``: a variant in ``[profiles]`` merged over the file first (the file's own ``profile``
+    name, or None, takes the file as written); ``quick``: ``[quick]`` merged over that.
+    """
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: expected a table at the top level")
+    _table("", data, {k.name for k in SCHEMA[""].keys})
+    data = apply_profile(data, profile, source)
+    if quick:
+        q = data.get("quick")
+        if q is None:
+            raise ConfigError(f"{source}: has no [quick] table for --quick")
+        SCHEMA[""].key("quick").type.parse("quick", q)
+        data = _deep_merge(data, q)
+    data = {k: v for k, v in data.items() if k != "quick"}
+    raw = copy.deepcopy(data)
+    v = parse_table("", "", data)
+
+    kind = v["kind"] or ("transfer" if "source" in data else "short")
+    system = _system_config(v["system"], data["system"])
+    base_train = _train_settings("train", v["train"], data.get("train", {}))
+    _check_stages_present(kind, data)
+    stages = {p: _stage(p, v[p], data[p], base_train) for p in ("interval", "source", "target") if p in data}
+    if kind == "transfer":
+        _check_same_start(stages["source"], stages["target"])
+    evaluation = EvaluationConfig(**v["evaluation"])
+    _check_fine_steps(evaluation, stages["interval" if kind == "short" else "target"])
+
+    # fields named like a top-level key (models, seeds, ...) or a key of [network] or [transfer]
+    # take its value; the rest are built above
+    fields = {f.name for f in dataclasses.fields(ExperimentConfig)}
+    by_name = {k: x for k, x in {**v, **v["network"], **v["transfer"], **v["execution"]}.items() if k in fields}
+    eval_stage = stages["interval" if kind == "short" else "target"]
+    cfg = ExperimentConfig(**{
+        **by_name, "name": _default_name(v, source), "kind": kind, "system": system, "stage": stages.get("interval"),
+        "source": stages.get("source"), "target": stages.get("target"), "evaluation": evaluation, "raw": raw,
+        "march": None if v["march"] is None else _march_settings(v["march"], data["march"], eval_stage),
+        "polish": None if v["polish"] is None else _polish_config("polish", v["polish"]),
+    })
+    _check_system_builds(system)
+    return cfg
+
+
+def apply_profile(data: dict[str, Any], profile: str | None, source: str) -> dict[str, Any]:
+    """The file with the named profile merged over it (its ``profile`` key set to that name)."""
+    own = data.get("profile", "default")
+    variants = SCHEMA[""].key("profiles").type.parse("profiles", data.get("profiles", {}))
+    if profile is None or profile == own:
+        return {k: v for k, v in data.items() if k != "profiles"}
+    if profile not in variants:
+        known = [own, *sorted(variants)]
+        raise ConfigError(f"{source}: has no profile {profile!r} (it has {known}; --profile chooses one)")
+    merged = _deep_merge({k: v for k, v in data.items() if k != "profiles"}, variants[profile])
+    merged["profile"] = profile  # (the profile's follows notes are merged over the file's, key by key)
+    return merged
+
+
+def _polish_config(path: str, v: dict[str, Any]):
+    from atlasnn.training._polish import PolishConfig
+
+    return PolishConfig(**{k: v[k] for k in ("steps", "n_points", "memory", "patience", "precision")})
+
+
+def _window_train(path: str, given: dict[str, Any], base, length: float):
+    """A window's TrainConfig: ``base`` with the keys given in the table at ``path`` (sigma_per_T
+    is in units of the window length, as the stages' is of their T)."""
+    if "sigma" in given and "sigma_per_T" in given:
+        _fail(f"{path}.sigma", given["sigma"], "give either sigma or sigma_per_T, not both")
+    fields = {f.name for f in dataclasses.fields(type(base))}
+    changes = {k: (tuple(x) if isinstance(x, list) else x) for k, x in given.items() if k in fields}
+    if "sigma_per_T" in given:
+        changes["sigma"] = given["sigma_per_T"] * length
+    out = base.replace(**changes)
+    return out.replace(chunk=min(out.chunk, out.epochs))  # a longer chunk would only run masked epochs
+
+
+def _march_settings(v: dict[str, Any], given: dict[str, Any], stage: Stage) -> MarchSettings:
+    """The [march] table as a MarchSettings (the scheme's train configs over the measured defaults)."""
+    from atlasnn.training._marching import DEFAULT_WINDOW_TRAIN, MarchConfig, n_windows_for
+
+    if v.get("window") is not None and v.get("n_windows") is not None:
+        _fail("march.window", given.get("window"), "give window or n_windows, not both")
+    scheme = MarchConfig(n_windows=v.get("n_windows"), window=v.get("window"), thaw=v["thaw"],
+                         carry_adam=v["carry_adam"], start=v["start"],
+                         polish=None if v["polish"] is None else _polish_config("march.polish", v["polish"]))
+    length = (stage.T - stage.t0) / n_windows_for(stage.t0, stage.T, scheme)
+    train = _window_train("march.train", given.get("train") or {}, DEFAULT_WINDOW_TRAIN, length)
+    first = None
+    if given.get("first_train"):
+        first = _window_train("march.first_train", given["first_train"], train, length)
+    net = v["network"]
+    return MarchSettings(models=tuple(v["models"]), width=net["width"], depth=net["depth"],
+                         activation=net["activation"], first_layer_scale=net["first_layer_scale"],
+                         scheme=scheme.replace(train=train, first=first))
+
+
+def _check_system_builds(system: SystemConfig) -> None:
+    """Build the system now so that a bad expression or z0 fails before any training."""
+    try:
+        sysm = system.build()
+        z0 = sysm.initial_state()
+    except ConfigError:
+        raise
+    except Exception as exc:  # AtlasError subclasses carry one-line messages
+        from atlasnn.errors import AtlasError
+
+        if isinstance(exc, AtlasError):
+            raise ConfigError(_one_line(f"system: {exc}")) from None
+        raise
+    _check_finite_at_z0(sysm, z0, system)
+
+
+def _check_finite_at_z0(sysm, z0, system: SystemConfig) -> None:
+    """H and J∇H must be finite at z0 (in float64): a singular or overflowing start would give
+    non-finite losses from the first epoch and a reference solver that cannot start."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    with jax.enable_x64(True):
+        z = jnp.asarray(z0, jnp.float64)
+        energy = float(sysm.energy(z))
+        field = np.asarray(sysm.vector_field(z), dtype=np.float64)
+    if math.isfinite(energy) and np.all(np.isfinite(field)):
+        if system.hamiltonian is not None and system.separable:
+            _check_separable(sysm, np.asarray(z0, np.float64))
+        return
+    where = "system.z0" if system.z0 is not None else ("system.hamiltonian" if system.hamiltonian else "system.params")
+    value = list(system.z0) if system.z0 is not None else (system.hamiltonian or dict(system.params))
+    at = "there" if where == "system.z0" else f"at z0 = {[float(x) for x in z0]}"
+    _fail(where, value, f"the Hamiltonian or its gradient is not finite {at} "
+          f"(H = {energy:g}, J∇H = {[float(x) for x in field]})")
+
+
+def _check_separable(sysm, z0) -> None:
+    """``separable = true`` lets the symplectic integrators run (they need H = T(p) + V(q)): the
+    mixed second derivatives ∂²H/∂q∂p must vanish (checked at z0 and three nearby states)."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    d = sysm.dim
+    shifts = [np.zeros_like(z0), np.full_like(z0, 0.1), np.resize([0.3, -0.2], z0.shape), np.full_like(z0, -0.25)]
+    with jax.enable_x64(True):
+        hess = jax.hessian(lambda z: sysm.energy(z))
+        for shift in shifts:
+            h = np.asarray(hess(jnp.asarray(z0 + shift, jnp.float64)), dtype=np.float64)
+            cross = np.abs(h[:d, d:])
+            if not np.all(np.isfinite(h)):
+                continue
+            if cross.max() > 1e-9 * (1.0 + np.abs(h).max()):
+                at = [round(float(x), 6) for x in z0 + shift]
+                _fail("system.separable", True, f"the Hamiltonian is not separable (d²H/dq dp = "
+                      f"{float(h[:d, d:].flat[int(np.argmax(cross))]):g} at {at}); set separable = false")
+
+
+def load_config(path: str | Path, *, quick: bool = False, profile: str | None = None) -> ExperimentConfig:
+    """Read and validate a TOML experiment file."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"config file not found: {path}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read config file {path}: {exc}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    return parse_config(data, quick=quick, source=str(path), profile=profile)
+
+
+def builtin_config_dir() -> Path:
+    """The folder of the paper's experiment configs shipped with the package."""
+    return Path(__file__).resolve().parent.parent / "configs"
+
+
+def builtin_experiments() -> list[str]:
+    return sorted(p.stem for p in builtin_config_dir().glob("*.toml"))
+
+
+def builtin_config_path(name: str) -> Path:
+    path = builtin_config_dir() / f"{name}.toml"
+    if not path.exists():
+        raise ConfigError(f"unknown experiment {name!r}; choose one of {builtin_experiments()}")
+    return path

@@ -1,0 +1,347 @@
+"""Shared machinery of atlasnn's figures: model styles, π ticks on time axes, the
+:class:`Series` of a model's trajectory next to the reference, and figure creation and saving.
+
+Figures are built on :class:`matplotlib.figure.Figure` objects directly, rendered by the Agg
+canvas, so no global pyplot state is created or needed (it works on a headless machine and inside
+threads). :func:`_save` writes ``<stem>.png`` (at :data:`DPI`) and ``<stem>.pdf``.
+
+The figures themselves are in :mod:`atlasnn.report._plots` (the paper's figures) and
+:mod:`atlasnn.report._summary_plots` (the overview of a run, loss against accuracy over many runs).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import zlib
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from atlasnn.errors import ConfigError
+
+__all__ = ["DPI", "Series", "model_style", "pi_ticks"]
+
+DPI = 150
+
+# ------------------------------------------------------------------------------ styles
+# Colours follow the paper where its text names them (baseline HNN purple, transfer HNN green,
+# ATLAS exp blue, ATLAS tanh orange).
+_REFERENCE_STYLE = {"color": "0.6", "linestyle": "-", "linewidth": 3.2, "alpha": 0.75, "zorder": 1}
+
+_BASE_STYLES: dict[str, dict[str, Any]] = {
+    "reference": _REFERENCE_STYLE,
+    "SE": {"color": "tab:red", "linestyle": ":", "linewidth": 1.6},
+    "SE-100": {"color": "tab:brown", "linestyle": (0, (5, 1, 1, 1)), "linewidth": 1.4},
+    "SE-10": {"color": "tab:brown", "linestyle": (0, (5, 1, 1, 1)), "linewidth": 1.4},
+    "HNN": {"color": "tab:purple", "linestyle": "--", "linewidth": 1.4},
+    "HNN baseline": {"color": "tab:purple", "linestyle": "--", "linewidth": 1.4},
+    "HNN transfer": {"color": "tab:green", "linestyle": (0, (6, 2)), "linewidth": 1.4},
+    "ATLAS tanh": {"color": "tab:orange", "linestyle": "-", "linewidth": 1.4},
+    "ATLAS tanh transfer": {"color": "tab:orange", "linestyle": "-", "linewidth": 1.4},
+    "ATLAS tanh thawed": {"color": "goldenrod", "linestyle": "-.", "linewidth": 1.4},
+    "ATLAS exp": {"color": "tab:blue", "linestyle": "-", "linewidth": 1.4},
+    "ATLAS exp transfer": {"color": "tab:blue", "linestyle": "-", "linewidth": 1.4},
+    "ATLAS exp thawed": {"color": "tab:cyan", "linestyle": "-.", "linewidth": 1.4},
+}
+_ALIASES = {"benchmark": "reference", "ref": "reference", "odeint": "reference"}
+
+# Colours not used by the named models, for labels the table does not know.
+_FALLBACK_COLORS = ("tab:pink", "tab:olive", "black", "darkred", "navy", "teal", "darkgoldenrod",
+                    "magenta", "slategray", "lime")
+_FALLBACK_LINESTYLES = ("-", "--", "-.", ":")
+
+
+def _label_key(label: str) -> frozenset[str]:
+    """An order-, case- and punctuation-insensitive key: the set of words of the label."""
+    text = label.lower().replace("atlas-nn", "atlas").replace("atlasnn", "atlas")
+    words = re.findall(r"[a-z]+|\d+", text)
+    words = [_ALIASES.get(w, w) for w in words]
+    return frozenset(words)
+
+
+_STYLE_BY_KEY = {_label_key(k): v for k, v in _BASE_STYLES.items()}
+
+
+def model_style(label: str) -> dict[str, Any]:
+    """Line keyword arguments (colour, linestyle, linewidth, ...) for a model label.
+
+    Known labels ("reference", "SE", "SE-100", "SE-10", "HNN", "HNN baseline", "HNN transfer",
+    "ATLAS tanh", "ATLAS exp", their "transfer" and "thawed" variants) have fixed styles; matching
+    ignores case, punctuation and word order. Any other label gets a colour and line style from a
+    fallback cycle picked by a CRC32 of the label, so it is the same in every figure and run.
+    """
+    style = _STYLE_BY_KEY.get(_label_key(str(label)))
+    if style is not None:
+        return dict(style)
+    h = zlib.crc32(str(label).encode("utf-8"))
+    return {
+        "color": _FALLBACK_COLORS[h % len(_FALLBACK_COLORS)],
+        "linestyle": _FALLBACK_LINESTYLES[(h // len(_FALLBACK_COLORS)) % len(_FALLBACK_LINESTYLES)],
+        "linewidth": 1.4,
+    }
+
+
+def _color(label: str) -> str:
+    return model_style(label)["color"]
+
+
+# ------------------------------------------------------------------------------ π ticks
+_PI_STEPS = tuple(Fraction(1, 4) * 2**k for k in range(12))  # π/4, π/2, π, 2π, 4π, ... 512π
+
+
+def _pi_label(multiple: Fraction) -> str:
+    """Text for ``multiple`` · π: "0", "π", "−π", "2π", "π/2", "3π/2"."""
+    if multiple == 0:
+        return "0"
+    sign = "\u2212" if multiple < 0 else ""
+    num, den = abs(multiple.numerator), multiple.denominator
+    head = "π" if num == 1 else f"{num}π"
+    return f"{sign}{head}" if den == 1 else f"{sign}{head}/{den}"
+
+
+def pi_ticks(ax: Axes, t_max: float, t_min: float = 0.0, *, axis: str = "x",
+             max_ticks: int = 9) -> list[str]:
+    """Put ticks at multiples of π on a time axis and return their label texts.
+
+    The step is the smallest of π/4, π/2, π, 2π, 4π, 8π, ... giving at most ``max_ticks`` ticks in
+    ``[t_min, t_max]``; labels read "0", "π/2", "π", "2π", "4π", ... (U+2212 for minus).
+    """
+    t_min, t_max = float(t_min), float(t_max)
+    if not (math.isfinite(t_min) and math.isfinite(t_max)) or t_max <= t_min:
+        raise ConfigError(f"pi_ticks needs finite t_min < t_max, got t_min={t_min}, t_max={t_max}")
+    if max_ticks < 2:
+        raise ConfigError(f"pi_ticks max_ticks must be >= 2, got {max_ticks}")
+    eps = 1e-9
+    chosen = _PI_STEPS[-1]
+    for step in _PI_STEPS:
+        width = float(step) * math.pi
+        k0 = math.ceil(t_min / width - eps)
+        k1 = math.floor(t_max / width + eps)
+        if k1 - k0 + 1 <= max_ticks:
+            chosen = step
+            break
+    width = float(chosen) * math.pi
+    k0 = math.ceil(t_min / width - eps)
+    k1 = math.floor(t_max / width + eps)
+    while (k1 - k0 + 1) > max_ticks:  # beyond the table (t_max > ~4000π): keep doubling
+        chosen *= 2
+        width = float(chosen) * math.pi
+        k0 = math.ceil(t_min / width - eps)
+        k1 = math.floor(t_max / width + eps)
+    multiples = [chosen * k for k in range(k0, k1 + 1)]
+    values = [float(m) * math.pi for m in multiples]
+    labels = [_pi_label(m) for m in multiples]
+    if axis == "x":
+        ax.set_xticks(values, labels)
+    elif axis == "y":
+        ax.set_yticks(values, labels)
+    else:
+        raise ConfigError(f"pi_ticks axis must be 'x' or 'y', got {axis!r}")
+    return labels
+
+
+# ------------------------------------------------------------------------------ data
+def _float_array(x: Any, what: str, ndim: int | None = None) -> np.ndarray:
+    try:
+        arr = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{what} must be a numeric array, got {type(x).__name__}") from None
+    if ndim is not None and arr.ndim != ndim:
+        raise ConfigError(f"{what} must be {ndim}-D, got shape {arr.shape}")
+    return arr
+
+
+@dataclass
+class Series:
+    """One model's trajectory next to the reference, on the model's own time grid.
+
+    ``t``: (N,) times; ``z``: (N, 2d) prediction, columns (q_1..q_d, p_1..p_d); ``z_ref``: (N, 2d)
+    reference on the same ``t``; ``energy``: optional (N,) Hamiltonian evaluated along ``z``.
+    Arrays are converted to float64 and shapes are checked on construction.
+    """
+
+    label: str
+    t: np.ndarray
+    z: np.ndarray
+    z_ref: np.ndarray
+    energy: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        self.label = str(self.label)
+        self.t = _float_array(self.t, f"Series {self.label!r} t", 1)
+        self.z = _float_array(self.z, f"Series {self.label!r} z", 2)
+        self.z_ref = _float_array(self.z_ref, f"Series {self.label!r} z_ref", 2)
+        n = self.t.shape[0]
+        if n < 2:
+            raise ConfigError(f"Series {self.label!r} t needs at least 2 points, got {n}")
+        if self.z.shape[0] != n or self.z.shape[1] % 2 or self.z.shape[1] == 0:
+            raise ConfigError(f"Series {self.label!r} z must have shape ({n}, 2d), "
+                              f"got {self.z.shape}")
+        if self.z_ref.shape != self.z.shape:
+            raise ConfigError(f"Series {self.label!r} z_ref must have shape {self.z.shape}, "
+                              f"got {self.z_ref.shape}")
+        if self.energy is not None:
+            self.energy = _float_array(self.energy, f"Series {self.label!r} energy", 1)
+            if self.energy.shape[0] != n:
+                raise ConfigError(f"Series {self.label!r} energy must have shape ({n},), "
+                                  f"got {self.energy.shape}")
+
+    @property
+    def dof(self) -> int:
+        return self.z.shape[1] // 2
+
+
+def _check_series(series: Sequence[Series], state_names: Sequence[str] | None) -> int:
+    """Validate a list of Series against state_names; return d."""
+    if len(series) == 0:
+        raise ConfigError("series must contain at least one Series, got an empty list")
+    for s in series:
+        if not isinstance(s, Series):
+            raise ConfigError(f"series items must be Series, got {type(s).__name__}")
+    width = series[0].z.shape[1]
+    for s in series:
+        if s.z.shape[1] != width:
+            raise ConfigError(f"all series must have the same state width, {s.label!r} has "
+                              f"{s.z.shape[1]} vs {width}")
+    if state_names is not None and len(state_names) != width:
+        raise ConfigError(f"state_names must have {width} names, got {len(state_names)}: "
+                          f"{list(state_names)}")
+    return width // 2
+
+
+def _check_interval(source_interval: Any) -> tuple[float, float] | None:
+    if source_interval is None:
+        return None
+    try:
+        a, b = (float(v) for v in source_interval)
+    except (TypeError, ValueError):
+        raise ConfigError(
+            f"source_interval must be a pair (a, b), got {source_interval!r}") from None
+    if not (math.isfinite(a) and math.isfinite(b) and a < b):
+        raise ConfigError(f"source_interval must satisfy a < b, got ({a}, {b})")
+    return a, b
+
+
+# ------------------------------------------------------------------------------ helpers
+def _state_math(name: str) -> str | None:
+    """Mathtext body (without $) for a state name such as x, px, p_y, q1; None if not simple."""
+    if re.fullmatch(r"[A-Za-z]", name):
+        return name
+    m = re.fullmatch(r"([A-Za-z])_?([A-Za-z0-9]{1,3})", name)
+    if m:
+        return f"{m.group(1)}_{{{m.group(2)}}}"
+    return None
+
+
+def _state_label(name: str) -> str:
+    body = _state_math(name)
+    return f"${body}$" if body is not None else name
+
+
+def _delta_label(name: str, absolute: bool = False) -> str:
+    body = _state_math(name)
+    if body is None:
+        return f"|δ{name}|" if absolute else f"δ{name}"
+    return f"$|\\delta {body}|$" if absolute else f"$\\delta {body}$"
+
+
+def _new_figure(figsize: tuple[float, float]) -> Figure:
+    fig = Figure(figsize=figsize, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig: Figure, stem: str | Path) -> list[Path]:
+    base = Path(stem)
+    base.parent.mkdir(parents=True, exist_ok=True)
+    png = Path(f"{base}.png")
+    pdf = Path(f"{base}.pdf")
+    fig.savefig(png, dpi=DPI, format="png")
+    # The constrained layout was solved while drawing the PNG; the PDF has the same size in
+    # inches, so freeze those positions instead of solving the layout a second time.
+    fig.set_layout_engine("none")
+    fig.savefig(pdf, format="pdf", metadata={"CreationDate": None})
+    return [png, pdf]
+
+
+def _t_range(series: Iterable[Series]) -> tuple[float, float]:
+    lo = min(float(np.nanmin(s.t)) for s in series)
+    hi = max(float(np.nanmax(s.t)) for s in series)
+    if hi <= lo:
+        hi = lo + 1.0
+    return lo, hi
+
+
+def _time_axis(ax: Axes, t_lo: float, t_hi: float, interval: tuple[float, float] | None,
+               max_ticks: int = 7) -> None:
+    ax.set_xlim(t_lo, t_hi)
+    pi_ticks(ax, t_hi, t_lo, max_ticks=max_ticks)
+    ax.set_xlabel("$t$")
+    if interval is not None:
+        ax.axvspan(interval[0], interval[1], color="tab:gray", alpha=0.15, lw=0, zorder=0,
+                   label="source interval")
+
+
+def _reference_source(series: Sequence[Series]) -> Series:
+    """The series whose reference is drawn: the one on the densest grid (most points)."""
+    return max(series, key=lambda s: s.t.shape[0])
+
+
+def _figure_legend(fig: Figure, axes: Iterable[Axes], ncol: int | None = None) -> None:
+    """One legend for the whole figure, below the panels, each label once."""
+    handles: dict[str, Any] = {}
+    for ax in axes:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            if lab and not lab.startswith("_") and lab not in handles:
+                handles[lab] = h
+    if not handles:
+        return
+    n = len(handles)
+    fig.legend(list(handles.values()), list(handles.keys()), loc="outside lower center",
+               ncol=ncol or (n if n <= 8 else math.ceil(n / 2)), frameon=False, fontsize="small")
+
+
+def _log_floor(arrays: Iterable[np.ndarray]) -> float:
+    """A positive floor for log plots: the smallest finite positive value seen (or 1e-16)."""
+    best = math.inf
+    for a in arrays:
+        pos = a[np.isfinite(a) & (a > 0)]
+        if pos.size:
+            best = min(best, float(pos.min()))
+    return best if math.isfinite(best) else 1e-16
+
+
+def _as_runs(value: Any, what: str) -> list[np.ndarray]:
+    """A history given as one 1-D array, a 2-D (seeds, epochs) array or a list of 1-D arrays."""
+    if isinstance(value, np.ndarray) and value.ndim == 2:
+        runs = [value[i] for i in range(value.shape[0])]
+    elif isinstance(value, (list, tuple)) and value and not np.isscalar(value[0]):
+        runs = list(value)
+    else:
+        runs = [value]
+    out = [_float_array(r, f"{what}", 1) for r in runs]
+    if not out or any(r.size == 0 for r in out):
+        raise ConfigError(f"{what} must contain at least one non-empty history")
+    return out
+
+
+def _pad(runs: Sequence[np.ndarray]) -> np.ndarray:
+    n = max(r.shape[0] for r in runs)
+    out = np.full((len(runs), n), np.nan)
+    for i, r in enumerate(runs):
+        out[i, : r.shape[0]] = r
+    return out
+
+
+def _positive(a: np.ndarray) -> np.ndarray:
+    """Non-positive values become NaN (they cannot be shown on a log axis)."""
+    a = np.array(a, dtype=np.float64, copy=True)
+    a[~(a > 0)] = np.nan
+    return a

@@ -1,0 +1,481 @@
+"""Every figure of the paper, drawn from plain NumPy arrays (shared machinery: :mod:`atlasnn.report._plotkit`).
+
+This module sits at the end of the data flow (``report -> plots``): it never imports the trainer or
+any JAX code, it only receives arrays (loss histories, γ histories, trajectories, energies, per-seed
+metric values) and turns them into figures.
+
+Figures are built on :class:`matplotlib.figure.Figure` objects directly, rendered by the Agg
+canvas, so no global pyplot state is created or needed (the module works on a headless machine and
+inside threads). Every ``plot_*`` function writes ``<stem>.png`` (150 dpi) and ``<stem>.pdf``,
+creating the parent directory if needed, and returns the list ``[png_path, pdf_path]``.
+
+Conventions shared by all figures:
+
+* one colour / line style per model label (:func:`model_style`), so that "ATLAS exp" is the same
+  blue line everywhere; word order, case, punctuation and "ATLAS-NN" vs "ATLAS" do not matter
+  ("transfer ATLAS-NN (exp)" == "ATLAS exp transfer"); unknown labels get a colour from a
+  fallback cycle chosen by a stable hash of the label;
+* the reference solution is a thick light-grey line drawn below the models;
+* time axes are labelled in multiples of π (:func:`pi_ticks`);
+* the source interval of a transfer run, when given, is shaded on every time axis.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import matplotlib as mpl
+import numpy as np
+from matplotlib.axes import Axes
+
+from atlasnn.errors import ConfigError
+from atlasnn.report._plotkit import (
+    _REFERENCE_STYLE,
+    DPI,
+    Series,
+    _as_runs,
+    _check_interval,
+    _check_series,
+    _color,
+    _delta_label,
+    _figure_legend,
+    _float_array,
+    _log_floor,
+    _new_figure,
+    _pad,
+    _positive,
+    _reference_source,
+    _save,
+    _state_label,
+    _t_range,
+    _time_axis,
+    model_style,
+    pi_ticks,
+)
+
+__all__ = [
+    "Series",
+    "model_style",
+    "pi_ticks",
+    "first_epoch_below",
+    "plot_scaling_families",
+    "plot_loss_curves",
+    "plot_gamma_evolution",
+    "plot_trajectories",
+    "plot_errors",
+    "plot_energy",
+    "plot_target_loss_comparison",
+    "plot_seed_spread",
+    "plot_overview",
+    "plot_loss_vs_accuracy",
+    "DPI",
+]
+
+
+# ------------------------------------------------------------------------------ figures
+def plot_scaling_families(stem: str | Path, t_max: float = 10.0, *,
+                          title: str = "Temporal scaling functions f(t; γ)") -> list[Path]:
+    """The two families of f(t; γ): tanh(m t) and (1 − e^{−αt}) / (1 + β e^{−αt}).
+
+    Left: tanh(m t) for m ∈ {0.25, 0.5, 1, 2, 4}, with the plain HNN's 1 − e^{−t} dashed.
+    Right: the rational-exp form for a few (α, β), including β = 1 (equal to tanh(αt/2)) and
+    β → 0 (equal to 1 − e^{−αt}).
+    """
+    t_max = float(t_max)
+    if not (math.isfinite(t_max) and t_max > 0):
+        raise ConfigError(f"t_max must be a positive number, got {t_max}")
+    t = np.linspace(0.0, t_max, 600)
+    fig = _new_figure((11.0, 4.2))
+    ax_tanh, ax_exp = fig.subplots(1, 2, sharey=True)
+
+    m_values = (0.25, 0.5, 1.0, 2.0, 4.0)
+    shades = np.linspace(0.35, 0.95, len(m_values))
+    oranges = mpl.colormaps["Oranges"]
+    cycle = mpl.colormaps["viridis"]
+    for m, s in zip(m_values, shades):
+        ax_tanh.plot(t, np.tanh(m * t), color=oranges(s), lw=1.8, label=f"$m={m:g}$")
+    hnn = model_style("HNN")
+    ax_tanh.plot(t, 1.0 - np.exp(-t), color=hnn["color"], ls="--", lw=1.6,
+                 label="HNN: $1-e^{-t}$")
+    ax_tanh.set_title(r"$f(t;m)=\tanh(mt)$")
+
+    pairs = ((1.0, 0.0), (1.0, 0.25), (1.0, 1.0), (1.0, 4.0), (0.5, 1.0), (2.0, 1.0))
+    shades = np.linspace(0.0, 0.85, len(pairs))
+    for (alpha, beta), s in zip(pairs, shades):
+        e = np.exp(-alpha * t)
+        f = (1.0 - e) / (1.0 + beta * e)
+        if beta == 0.0:
+            lab = rf"$\alpha={alpha:g},\ \beta\to0$"
+            ax_exp.plot(t, f, color="black", ls=":", lw=1.8, label=lab)
+        else:
+            ax_exp.plot(t, f, color=cycle(s), lw=1.8, ls="-" if alpha == 1.0 else "--",
+                        label=rf"$\alpha={alpha:g},\ \beta={beta:g}$")
+    ax_exp.set_title(r"$f(t;\alpha,\beta)=\dfrac{1-e^{-\alpha t}}{1+\beta e^{-\alpha t}}$")
+
+    for ax in (ax_tanh, ax_exp):
+        ax.set_xlim(0.0, t_max)
+        pi_ticks(ax, t_max)
+        ax.set_xlabel("$t$")
+        ax.axhline(1.0, color="0.7", lw=0.8, zorder=0)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="small", loc="lower right")
+    ax_tanh.set_ylabel("$f(t;\\gamma)$")
+    ax_tanh.set_ylim(-0.02, 1.08)
+    if title:
+        fig.suptitle(title)
+    return _save(fig, stem)
+
+
+def _loss_axes(ax: Axes, ylabel: str, title: str) -> None:
+    """Log-scale loss-against-epoch axes with grid, legend and title."""
+    ax.set_yscale("log")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel(ylabel)
+    ax.set_xlim(left=0)
+    ax.grid(alpha=0.3, which="major")
+    ax.legend(fontsize="small")
+    ax.set_title(title)
+
+
+def plot_loss_curves(stem: str | Path, histories: Mapping[str, Any],
+                     tolerance: float | None = None, title: str = "") -> list[Path]:
+    """Total training loss against epoch, log scale, one curve per model.
+
+    A history is a 1-D array (one run) or a list of 1-D arrays / a 2-D array (several seeds):
+    then the median over seeds is drawn (shorter runs padded with NaN, so the median at epoch k is
+    over the runs that reached k) with a light min–max band. ``tolerance`` adds a horizontal line.
+    """
+    if not histories:
+        raise ConfigError("histories must contain at least one model, got an empty mapping")
+    fig = _new_figure((8.0, 4.8))
+    ax = fig.subplots()
+    for label, value in histories.items():
+        runs = _as_runs(value, f"histories[{label!r}]")
+        style = model_style(label)
+        if len(runs) == 1:
+            y = _positive(runs[0])
+            ax.plot(np.arange(y.size), y, label=label, **style)
+        else:
+            arr = _positive(_pad(runs))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                med = np.nanmedian(arr, axis=0)
+                lo = np.nanmin(arr, axis=0)
+                hi = np.nanmax(arr, axis=0)
+            x = np.arange(arr.shape[1])
+            ax.fill_between(x, lo, hi, color=style["color"], alpha=0.18, lw=0)
+            ax.plot(x, med, label=f"{label} (median of {len(runs)} seeds)", **style)
+    if tolerance is not None:
+        tol = float(tolerance)
+        if not tol > 0:
+            raise ConfigError(f"tolerance must be positive, got {tolerance}")
+        ax.axhline(tol, color="black", ls=":", lw=1.2, label=f"tolerance {tol:.0e}")
+    _loss_axes(ax, "total loss", title or "Training loss")
+    return _save(fig, stem)
+
+
+_TANH_NAMES = {"m"}
+_EXP_NAMES = {"alpha": r"\alpha", "α": r"\alpha", "beta": r"\beta", "β": r"\beta"}
+
+
+def plot_gamma_evolution(stem: str | Path, gammas: Mapping[str, Mapping[str, Any]], *,
+                         title: str = "Evolution of the scaling parameters γ") -> list[Path]:
+    """Per-epoch γ parameters: a panel for m (tanh) and a panel for α, β (exp).
+
+    ``gammas`` maps a model label to {parameter name → per-epoch array}; names "m", "alpha"/"α",
+    "beta"/"β" go to their panels, any other name to an extra panel. Models with no γ (HNN) may be
+    left out or given an empty mapping. The final value is written at the end of each curve.
+    """
+    groups: dict[str, list[tuple[str, str, np.ndarray]]] = {"m": [], "exp": [], "other": []}
+    for label, params in gammas.items():
+        for name, values in (params or {}).items():
+            arr = _float_array(values, f"gammas[{label!r}][{name!r}]", 1)
+            if arr.size == 0:
+                continue
+            key = "m" if name in _TANH_NAMES else ("exp" if name in _EXP_NAMES else "other")
+            groups[key].append((label, name, arr))
+    panels = [k for k in ("m", "exp", "other") if groups[k]]
+    fig = _new_figure((5.0 * max(len(panels), 1) + 1.0, 4.2))
+    if not panels:
+        ax = fig.subplots()
+        ax.text(0.5, 0.5, "no γ parameters to show", ha="center", va="center",
+                transform=ax.transAxes, fontsize="large")
+        ax.set_axis_off()
+        fig.suptitle(title)
+        return _save(fig, stem)
+    axes = np.atleast_1d(fig.subplots(1, len(panels)))
+    names_title = {"m": "$m$ (tanh)", "exp": r"$\alpha$, $\beta$ (exp)", "other": "other γ"}
+    for ax, key in zip(axes, panels):
+        for label, name, arr in groups[key]:
+            style = model_style(label)
+            if key == "exp":
+                is_beta = _EXP_NAMES[name] == r"\beta"
+                style["linestyle"] = "--" if is_beta else "-"
+                shown = f"${_EXP_NAMES[name]}$"
+            elif key == "m":
+                shown = "$m$"
+            else:
+                shown = name
+            x = np.arange(arr.size)
+            ax.plot(x, arr, label=f"{label}: {shown}", **style)
+            last = arr[np.isfinite(arr)]
+            if last.size:
+                ax.annotate(f"{last[-1]:.3f}", (x[-1], arr[-1]), xytext=(3, 0),
+                            textcoords="offset points", va="center", fontsize="small",
+                            color=style["color"])
+        ax.set_xlabel("epoch")
+        ax.set_ylabel("value")
+        ax.set_title(names_title[key])
+        ax.grid(alpha=0.3)
+        n_max = max(arr.size for _, _, arr in groups[key])
+        ax.set_xlim(0, max(n_max - 1, 1) * 1.13)  # room for the final-value notes
+        ax.legend(fontsize="small")
+    if title:
+        fig.suptitle(title)
+    return _save(fig, stem)
+
+
+def plot_trajectories(stem: str | Path, series: Sequence[Series], state_names: Sequence[str],
+                      source_interval: tuple[float, float] | None = None, *,
+                      title: str = "Trajectories") -> list[Path]:
+    """Phase-space panels (left) and every state component against time (right).
+
+    Phase panels: q_i against p_i for each degree of freedom, and for d = 2 also the configuration
+    plane q_1–q_2 (the x–y orbit). The reference (from the series on the densest grid) is the thick
+    grey line; ``source_interval=(a, b)`` is shaded on the time panels.
+    """
+    d = _check_series(series, state_names)
+    interval = _check_interval(source_interval)
+    names = list(state_names)
+    phase_pairs: list[tuple[int, int]] = []
+    if d == 2:
+        phase_pairs.append((0, 1))
+    phase_pairs += [(i, d + i) for i in range(d)]
+    n_time = 2 * d
+    height = max(4.6, 1.9 * n_time + 1.0)
+    fig = _new_figure((12.0, height))
+    sf_phase, sf_time = fig.subfigures(1, 2, width_ratios=[1.0, 1.9])
+    phase_axes = np.atleast_1d(sf_phase.subplots(len(phase_pairs), 1))
+    time_axes = np.atleast_1d(sf_time.subplots(n_time, 1, sharex=True))
+    ref = _reference_source(series)
+    t_lo, t_hi = _t_range(series)
+
+    for ax, (i, j) in zip(phase_axes, phase_pairs):
+        ax.plot(ref.z_ref[:, i], ref.z_ref[:, j], label="reference", **_REFERENCE_STYLE)
+        for s in series:
+            ax.plot(s.z[:, i], s.z[:, j], label=s.label, **model_style(s.label))
+        ax.plot(ref.z_ref[0, i], ref.z_ref[0, j], "o", color="black", ms=4, zorder=5,
+                label="initial state")
+        ax.set_xlabel(_state_label(names[i]))
+        ax.set_ylabel(_state_label(names[j]))
+        ax.grid(alpha=0.3)
+        if len(phase_pairs) == 1:
+            ax.set_box_aspect(1.0)
+    for k, ax in enumerate(time_axes):
+        ax.plot(ref.t, ref.z_ref[:, k], label="reference", **_REFERENCE_STYLE)
+        for s in series:
+            ax.plot(s.t, s.z[:, k], label=s.label, **model_style(s.label))
+        _time_axis(ax, t_lo, t_hi, interval)
+        ax.set_ylabel(_state_label(names[k]))
+        ax.grid(alpha=0.3)
+        if k < n_time - 1:
+            ax.set_xlabel("")
+            ax.tick_params(labelbottom=False)
+    sf_phase.suptitle("phase space", fontsize="medium")
+    sf_time.suptitle("state against time", fontsize="medium")
+    _figure_legend(fig, list(phase_axes) + list(time_axes))
+    if title:
+        fig.suptitle(title, fontsize="large")
+    return _save(fig, stem)
+
+
+def plot_errors(stem: str | Path, series: Sequence[Series], state_names: Sequence[str],
+                source_interval: tuple[float, float] | None = None, *,
+                phase_error_scale: str = "linear",
+                title: str = "Prediction errors") -> list[Path]:
+    """Pointwise errors δz_i(t) = z_i − z_ref_i against time, and δp against δx.
+
+    Left: |δz_i| for each component on a log axis (exact zeros are clipped to the smallest positive
+    error in the figure). Right: the signed error of the first momentum against the signed error of
+    the first coordinate; ``phase_error_scale="symlog"`` makes small and large errors both visible.
+    """
+    d = _check_series(series, state_names)
+    interval = _check_interval(source_interval)
+    if phase_error_scale not in ("linear", "symlog"):
+        raise ConfigError(
+            f"phase_error_scale must be 'linear' or 'symlog', got {phase_error_scale!r}")
+    names = list(state_names)
+    n = 2 * d
+    errs = {id(s): s.z - s.z_ref for s in series}
+    floor = _log_floor(np.abs(e) for e in errs.values())
+    height = max(4.6, 1.9 * n + 1.0)
+    fig = _new_figure((12.0, height))
+    sf_time, sf_phase = fig.subfigures(1, 2, width_ratios=[1.9, 1.0])
+    time_axes = np.atleast_1d(sf_time.subplots(n, 1, sharex=True))
+    ax_pp = sf_phase.subplots()
+    t_lo, t_hi = _t_range(series)
+    for k, ax in enumerate(time_axes):
+        for s in series:
+            e = np.abs(errs[id(s)][:, k])
+            e = np.where(np.isfinite(e), np.maximum(e, floor), np.nan)
+            ax.plot(s.t, e, label=s.label, **model_style(s.label))
+        ax.set_yscale("log")
+        _time_axis(ax, t_lo, t_hi, interval)
+        ax.set_ylabel(_delta_label(names[k], absolute=True))
+        ax.grid(alpha=0.3, which="major")
+        if k < n - 1:
+            ax.set_xlabel("")
+            ax.tick_params(labelbottom=False)
+    for s in series:
+        e = errs[id(s)]
+        ax_pp.plot(e[:, 0], e[:, d], label=s.label, **model_style(s.label))
+    ax_pp.axhline(0.0, color="0.6", lw=0.8, zorder=0)
+    ax_pp.axvline(0.0, color="0.6", lw=0.8, zorder=0)
+    if phase_error_scale == "symlog":
+        lin = max(floor * 10.0, 1e-12)
+        ax_pp.set_xscale("symlog", linthresh=lin)
+        ax_pp.set_yscale("symlog", linthresh=lin)
+    ax_pp.set_xlabel(_delta_label(names[0]))
+    ax_pp.set_ylabel(_delta_label(names[d]))
+    ax_pp.set_title(f"{_delta_label(names[d])} against {_delta_label(names[0])}",
+                    fontsize="medium")
+    ax_pp.grid(alpha=0.3)
+    ax_pp.set_box_aspect(1.0)
+    sf_time.suptitle("absolute pointwise error against time", fontsize="medium")
+    _figure_legend(fig, list(time_axes) + [ax_pp])
+    if title:
+        fig.suptitle(title, fontsize="large")
+    return _save(fig, stem)
+
+
+def plot_energy(stem: str | Path, series: Sequence[Series], energy0: float,
+                source_interval: tuple[float, float] | None = None, *,
+                title: str = "Energy") -> list[Path]:
+    """H(t) per series against the exact E0 (top), and |H(t) − E0| on a log axis (bottom).
+
+    Series whose ``energy`` is None are skipped; at least one must carry an energy.
+    """
+    _check_series(series, None)
+    interval = _check_interval(source_interval)
+    e0 = float(energy0)
+    if not math.isfinite(e0):
+        raise ConfigError(f"energy0 must be a finite number, got {energy0}")
+    with_energy = [s for s in series if s.energy is not None]
+    if not with_energy:
+        raise ConfigError("plot_energy needs at least one Series with energy, none has it")
+    drift = {id(s): np.abs(s.energy - e0) for s in with_energy}
+    floor = _log_floor(drift.values())
+    fig = _new_figure((10.0, 6.4))
+    ax_h, ax_d = fig.subplots(2, 1, sharex=True)
+    t_lo, t_hi = _t_range(with_energy)
+    ax_h.axhline(e0, color="black", ls="--", lw=1.0, label=f"$E_0$ = {e0:.6g}", zorder=2)
+    for s in with_energy:
+        style = model_style(s.label)
+        ax_h.plot(s.t, s.energy, label=s.label, **style)
+        dd = drift[id(s)]
+        dd = np.where(np.isfinite(dd), np.maximum(dd, floor), np.nan)
+        ax_d.plot(s.t, dd, label=s.label, **style)
+    for ax in (ax_h, ax_d):
+        _time_axis(ax, t_lo, t_hi, interval, max_ticks=9)
+        ax.grid(alpha=0.3, which="major")
+    ax_h.set_xlabel("")
+    ax_h.tick_params(labelbottom=False)
+    ax_h.set_ylabel("$H(t)$")
+    ax_d.set_yscale("log")
+    ax_d.set_ylabel("$|H(t) - E_0|$")
+    _figure_legend(fig, [ax_h, ax_d])
+    if title:
+        fig.suptitle(title, fontsize="large")
+    return _save(fig, stem)
+
+
+def first_epoch_below(loss: Any, tol: float) -> int | None:
+    """Index of the first entry of ``loss`` that is ≤ ``tol`` (NaN never counts), or None."""
+    arr = _float_array(loss, "loss", 1)
+    hits = np.flatnonzero(arr <= float(tol))
+    return int(hits[0]) if hits.size else None
+
+
+def plot_target_loss_comparison(stem: str | Path, histories: Mapping[str, Any], tolerance: float,
+                                *, title: str = "Target-task training loss") -> list[Path]:
+    """Target-task loss per model with the tolerance line; a marker where each model meets it.
+
+    The epoch is the index into the history array (:func:`first_epoch_below`); the legend says
+    "met at epoch N" or "not met".
+    """
+    if not histories:
+        raise ConfigError("histories must contain at least one model, got an empty mapping")
+    tol = float(tolerance)
+    if not tol > 0:
+        raise ConfigError(f"tolerance must be positive, got {tolerance}")
+    fig = _new_figure((8.5, 5.0))
+    ax = fig.subplots()
+    for label, value in histories.items():
+        loss = _float_array(value, f"histories[{label!r}]", 1)
+        style = model_style(label)
+        met = first_epoch_below(loss, tol)
+        note = f"met at epoch {met}" if met is not None else "not met"
+        ax.plot(np.arange(loss.size), _positive(loss), label=f"{label} ({note})", **style)
+        if met is not None and loss[met] > 0:
+            ax.plot([met], [loss[met]], marker="o", ms=8, mfc="white", mec=style["color"], mew=2,
+                    ls="none", zorder=6)
+            ax.axvline(met, color=style["color"], lw=0.8, ls=":", alpha=0.7, zorder=0)
+    ax.axhline(tol, color="black", ls="--", lw=1.2, label=f"tolerance {tol:.0e}", zorder=3)
+    _loss_axes(ax, "target-task loss", title)
+    return _save(fig, stem)
+
+
+def plot_seed_spread(stem: str | Path, values: Mapping[str, Sequence[float]], metric_name: str,
+                     paper: Mapping[str, float] | None = None, *, title: str = "") -> list[Path]:
+    """Per model, a strip of per-seed values (log y), the median, and the paper's value as a star.
+
+    Non-finite or non-positive values cannot sit on a log axis; they are left out and counted in
+    the model's tick label. Models that only appear in ``paper`` get a position of their own.
+    """
+    if not values and not paper:
+        raise ConfigError("plot_seed_spread needs values or paper values, got neither")
+    paper = dict(paper or {})
+    labels = list(values.keys()) + [k for k in paper if k not in values]
+    fig = _new_figure((max(5.0, 1.4 * len(labels) + 2.0), 4.8))
+    ax = fig.subplots()
+    ticks = []
+    shown_seed = shown_med = shown_paper = False
+    for x, label in enumerate(labels):
+        raw = _float_array(values.get(label, []), f"values[{label!r}]", 1)
+        good = raw[np.isfinite(raw) & (raw > 0)]
+        bad = raw.size - good.size
+        color = _color(label)
+        if good.size:
+            offsets = np.linspace(-0.18, 0.18, good.size) if good.size > 1 else np.zeros(1)
+            ax.scatter(x + offsets, good, s=26, color=color, alpha=0.75, edgecolor="none",
+                       zorder=3, label=None if shown_seed else "per-seed value")
+            shown_seed = True
+            med = float(np.median(good))
+            ax.plot([x - 0.3, x + 0.3], [med, med], color="black", lw=2.2, zorder=4,
+                    label=None if shown_med else "median")
+            shown_med = True
+        if label in paper and float(paper[label]) > 0:
+            ax.scatter([x + 0.32], [float(paper[label])], marker="*", s=170, color="gold",
+                       edgecolor="black", linewidth=0.8, zorder=5,
+                       label=None if shown_paper else "paper")
+            shown_paper = True
+        tick = f"{label}\n(n={good.size}"
+        tick += f", {bad} invalid)" if bad else ")"
+        ticks.append(tick)
+    ax.set_xticks(range(len(labels)), ticks, fontsize="small")
+    ax.set_xlim(-0.6, len(labels) - 0.4)
+    ax.set_yscale("log")
+    ax.set_ylabel(metric_name)
+    ax.grid(alpha=0.3, axis="y", which="major")
+    if shown_seed or shown_paper:
+        ax.legend(fontsize="small")
+    ax.set_title(title or f"{metric_name} over seeds")
+    return _save(fig, stem)
+
+
+# The figures that summarise a run or many runs live in their own module; they are part of this
+# module's public interface (imported last: plots_summary uses only plotkit, not this module).
+from atlasnn.report._summary_plots import plot_loss_vs_accuracy, plot_overview  # noqa: E402

@@ -1,0 +1,261 @@
+"""Hamiltonian systems: H(q, p), the vector field J∇H, and the built-in examples.
+
+A state is z = (q, p) in R^{2d}, stored as one array with the d coordinates first and the d
+momenta after them. Hamilton's equations read
+
+    dz/dt = J ∇H(z),   J = [[0, I_d], [-I_d, 0]],   i.e.  dq/dt = ∂H/∂p,  dp/dt = -∂H/∂q.
+
+A user brings any Hamiltonian as a JAX-traceable function ``H(q, p) -> scalar`` of two arrays of
+shape (d,); nothing in the package needs to change for it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from atlasnn.errors import SystemError_
+
+HamiltonianFn = Callable[[jax.Array, jax.Array], jax.Array]
+
+
+@dataclass(frozen=True, eq=False)
+class HamiltonianSystem:
+    """A Hamiltonian system with d degrees of freedom.
+
+    Args:
+        hamiltonian: ``H(q, p)`` for q, p of shape (d,), returning a scalar; must be JAX-traceable.
+        dim: the number of degrees of freedom d (the state has 2d components).
+        name: a short identifier (used in file names and tables).
+        q_names, p_names: names of the coordinates and momenta (default q1.., p1..).
+        z0: default initial state (q then p), length 2d.
+        separable: the user's declaration that H = T(p) + V(q). Explicit symplectic
+            integrators need it; atlasnn does not try to prove it.
+        params: named parameters of H (e.g. ``{"lam": 1.0}``), for the record.
+        spec: a JSON-able description from which :func:`system_from_spec` can rebuild the
+            system (set by the built-ins and by expression systems; ``None`` for a Python
+            function, which then has to be passed again when a checkpoint is loaded).
+
+    Equality is identity, so a system can key a cache of compiled functions.
+    """
+
+    hamiltonian: HamiltonianFn
+    dim: int
+    name: str = "custom"
+    q_names: tuple[str, ...] = ()
+    p_names: tuple[str, ...] = ()
+    z0: np.ndarray | None = None
+    separable: bool = False
+    params: Mapping[str, float] = field(default_factory=dict)
+    spec: Mapping[str, Any] | None = None
+
+    def __post_init__(self) -> None:
+        if not callable(self.hamiltonian):
+            raise SystemError_(f"hamiltonian must be callable, got {type(self.hamiltonian).__name__}")
+        if not isinstance(self.dim, (int, np.integer)) or isinstance(self.dim, bool) or self.dim < 1:
+            raise SystemError_(f"dim must be a positive integer, got {self.dim!r}")
+        d = int(self.dim)
+        object.__setattr__(self, "dim", d)
+        qn = tuple(self.q_names) or (("q",) if d == 1 else tuple(f"q{i + 1}" for i in range(d)))
+        pn = tuple(self.p_names) or (("p",) if d == 1 else tuple(f"p{i + 1}" for i in range(d)))
+        if len(qn) != d or len(pn) != d:
+            raise SystemError_(f"q_names and p_names must have {d} names each, got {list(qn)} and {list(pn)}")
+        if len(set(qn + pn)) != 2 * d:
+            raise SystemError_(f"state names must be distinct, got {list(qn + pn)}")
+        object.__setattr__(self, "q_names", qn)
+        object.__setattr__(self, "p_names", pn)
+        if self.z0 is not None:
+            object.__setattr__(self, "z0", self.check_state(self.z0, "z0"))
+        object.__setattr__(self, "params", dict(self.params))
+
+    # ------------------------------------------------------------------ basics
+    @property
+    def state_dim(self) -> int:
+        """2d, the length of a state vector."""
+        return 2 * self.dim
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        """Coordinate names followed by momentum names."""
+        return self.q_names + self.p_names
+
+    def check_state(self, z: Any, what: str = "state") -> np.ndarray:
+        """Return z as a float64 array of length 2d, or raise a one-line error."""
+        try:
+            arr = np.asarray(z, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise SystemError_(f"{what} must be a list of {self.state_dim} numbers, got {z!r}") from None
+        if arr.shape != (self.state_dim,):
+            raise SystemError_(
+                f"{what} must have {self.state_dim} components {list(self.state_names)}, got {arr.size}"
+            )
+        if not np.all(np.isfinite(arr)):
+            raise SystemError_(f"{what} must be finite, got {arr.tolist()}")
+        return arr
+
+    def initial_state(self, z0: Any = None) -> np.ndarray:
+        """The given initial state, or the system's default one."""
+        if z0 is not None:
+            return self.check_state(z0, "z0")
+        if self.z0 is None:
+            raise SystemError_(f"system {self.name!r} has no default initial state; give z0")
+        return self.z0
+
+    # ------------------------------------------------------------ mathematics
+    def split(self, z: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """(q, p) from a state of shape (..., 2d)."""
+        return z[..., : self.dim], z[..., self.dim :]
+
+    def _h_single(self, z: jax.Array) -> jax.Array:
+        q, p = self.split(z)
+        return jnp.asarray(self.hamiltonian(q, p)).reshape(())
+
+    def energy(self, z: jax.Array) -> jax.Array:
+        """H(z) for z of shape (..., 2d); returns shape (...)."""
+        z = jnp.asarray(z)
+        flat = z.reshape(-1, self.state_dim)
+        out = jax.vmap(self._h_single)(flat)
+        return out.reshape(z.shape[:-1])
+
+    def grad(self, z: jax.Array) -> jax.Array:
+        """∇H(z) = (∂H/∂q, ∂H/∂p) for z of shape (..., 2d)."""
+        z = jnp.asarray(z)
+        flat = z.reshape(-1, self.state_dim)
+        g = jax.vmap(jax.grad(self._h_single))(flat)
+        return g.reshape(z.shape)
+
+    def vector_field(self, z: jax.Array) -> jax.Array:
+        """J ∇H(z) = (∂H/∂p, -∂H/∂q) for z of shape (..., 2d)."""
+        g = self.grad(z)
+        return jnp.concatenate([g[..., self.dim :], -g[..., : self.dim]], axis=-1)
+
+    def dH_dq(self, q: jax.Array, p: jax.Array) -> jax.Array:
+        """∂H/∂q at one state (q, p of shape (d,)); for a separable H this is V'(q)."""
+        return jax.grad(lambda qq: jnp.asarray(self.hamiltonian(qq, p)).reshape(()))(q)
+
+    def dH_dp(self, q: jax.Array, p: jax.Array) -> jax.Array:
+        """∂H/∂p at one state; for a separable H this is T'(p)."""
+        return jax.grad(lambda pp: jnp.asarray(self.hamiltonian(q, pp)).reshape(()))(p)
+
+    def require_separable(self, method: str) -> None:
+        """Raise a one-line error if H was not declared separable."""
+        if not self.separable:
+            raise SystemError_(
+                f"{method} needs a separable Hamiltonian H = T(p) + V(q); system {self.name!r} "
+                "is not declared separable (pass separable=True if it is)"
+            )
+
+    # ----------------------------------------------------------------- record
+    def describe(self) -> dict[str, Any]:
+        """A JSON-able summary (name, dim, names, params, z0, separable, spec)."""
+        return {
+            "name": self.name,
+            "dim": self.dim,
+            "q_names": list(self.q_names),
+            "p_names": list(self.p_names),
+            "params": {k: float(v) for k, v in self.params.items()},
+            "z0": None if self.z0 is None else [float(x) for x in self.z0],
+            "separable": bool(self.separable),
+            "spec": None if self.spec is None else dict(self.spec),
+        }
+
+
+# ---------------------------------------------------------------------- built-ins
+def nonlinear_oscillator(lam: float = 1.0, z0: Sequence[float] = (1.3, 1.0)) -> HamiltonianSystem:
+    """H = p²/2 + x²/2 + lam·x⁴/4 (paper §4.1); default z0 = (x, p) = (1.3, 1)."""
+    lam = float(lam)
+
+    def H(q, p):
+        x = q[0]
+        return p[0] ** 2 / 2 + x**2 / 2 + lam * x**4 / 4
+
+    return HamiltonianSystem(
+        H, 1, name="nonlinear_oscillator", q_names=("x",), p_names=("p",), z0=np.asarray(z0, float),
+        separable=True, params={"lam": lam},
+        spec={"kind": "builtin", "name": "nonlinear_oscillator", "params": {"lam": lam}},
+    )
+
+
+def henon_heiles(
+    lam: float = 1.0, z0: Sequence[float] = (0.3, -0.3, 0.3, 0.15)
+) -> HamiltonianSystem:
+    """H = (px²+py²)/2 + (x²+y²)/2 + lam·(x²y − y³/3) (paper §4.2); z = (x, y, px, py)."""
+    lam = float(lam)
+
+    def H(q, p):
+        x, y = q[0], q[1]
+        return (p[0] ** 2 + p[1] ** 2) / 2 + (x**2 + y**2) / 2 + lam * (x**2 * y - y**3 / 3)
+
+    return HamiltonianSystem(
+        H, 2, name="henon_heiles", q_names=("x", "y"), p_names=("px", "py"), z0=np.asarray(z0, float),
+        separable=True, params={"lam": lam},
+        spec={"kind": "builtin", "name": "henon_heiles", "params": {"lam": lam}},
+    )
+
+
+def harmonic_oscillator(omega: float = 1.0, z0: Sequence[float] = (1.0, 0.0)) -> HamiltonianSystem:
+    """H = p²/2 + ω² x²/2; exact solution x = x0 cos ωt + (p0/ω) sin ωt. Used for testing."""
+    omega = float(omega)
+
+    def H(q, p):
+        return p[0] ** 2 / 2 + omega**2 * q[0] ** 2 / 2
+
+    return HamiltonianSystem(
+        H, 1, name="harmonic_oscillator", q_names=("x",), p_names=("p",), z0=np.asarray(z0, float),
+        separable=True, params={"omega": omega},
+        spec={"kind": "builtin", "name": "harmonic_oscillator", "params": {"omega": omega}},
+    )
+
+
+def harmonic_exact(t: np.ndarray, z0: Sequence[float] = (1.0, 0.0), omega: float = 1.0) -> np.ndarray:
+    """Exact solution of :func:`harmonic_oscillator`, shape (len(t), 2)."""
+    t = np.asarray(t, dtype=np.float64)
+    x0, p0 = float(z0[0]), float(z0[1])
+    x = x0 * np.cos(omega * t) + p0 / omega * np.sin(omega * t)
+    p = -x0 * omega * np.sin(omega * t) + p0 * np.cos(omega * t)
+    return np.stack([x, p], axis=-1)
+
+
+BUILTIN_SYSTEMS: dict[str, Callable[..., HamiltonianSystem]] = {
+    "nonlinear_oscillator": nonlinear_oscillator,
+    "henon_heiles": henon_heiles,
+    "harmonic_oscillator": harmonic_oscillator,
+}
+
+BUILTIN_DESCRIPTIONS = {
+    "nonlinear_oscillator": ("d=1", "H = p²/2 + x²/2 + lam·x⁴/4", "x=1.3, p=1"),
+    "henon_heiles": ("d=2", "H = (px²+py²)/2 + (x²+y²)/2 + lam·(x²y − y³/3)", "x=0.3, y=-0.3, px=0.3, py=0.15"),
+    "harmonic_oscillator": ("d=1", "H = p²/2 + omega²·x²/2", "x=1, p=0"),
+}
+
+
+def builtin_system(name: str, **params: float) -> HamiltonianSystem:
+    """A built-in system by name, e.g. ``builtin_system("henon_heiles", lam=1.0)``."""
+    key = name.replace("-", "_")
+    if key not in BUILTIN_SYSTEMS:
+        raise SystemError_(f"unknown system {name!r}; built-ins are {sorted(BUILTIN_SYSTEMS)}")
+    try:
+        return BUILTIN_SYSTEMS[key](**params)
+    except TypeError as exc:
+        raise SystemError_(f"bad parameters for system {name!r}: {exc}") from None
+
+
+def system_from_spec(spec: Mapping[str, Any]) -> HamiltonianSystem:
+    """Rebuild a system from the ``spec`` a built-in or expression system records."""
+    kind = spec.get("kind")
+    if kind == "builtin":
+        return builtin_system(spec["name"], **dict(spec.get("params", {})))
+    if kind == "expression":
+        from atlasnn.systems._expression import expression_system
+
+        return expression_system(
+            spec["hamiltonian"], coordinates=spec["coordinates"], momenta=spec["momenta"],
+            params=spec.get("params", {}), name=spec.get("name", "custom"),
+            separable=bool(spec.get("separable", False)), z0=spec.get("z0"),
+        )
+    raise SystemError_(f"cannot rebuild a system from spec kind {kind!r}; pass the system explicitly")
+
