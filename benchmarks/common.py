@@ -49,9 +49,9 @@ CONFIGS = {
 
 
 def atlas_system(name: str):
-    from atlasnn.systems import _hamiltonian as systems
+    from atlasnn.systems import builtin_system
 
-    return getattr(systems, name)()
+    return builtin_system(name)
 
 
 def torch_system(name: str):

@@ -51,10 +51,10 @@ def measure(n: int, separable: bool) -> dict:
         out[name] = [round(now[0] - clock[0], 2), round(now[1] - clock[1], 2)]
         clock[:] = now
 
-    from atlasnn.experiments.config._config import parse_config
-    from atlasnn.evaluation._integrators import integrate, reference_solution
-    from atlasnn.nn._trial import make_model
-    from atlasnn.training._train import TrainConfig, train
+    from atlasnn.experiments.config import parse_config
+    from atlasnn.evaluation import integrate, reference_solution
+    from atlasnn.nn import make_model
+    from atlasnn.training import TrainConfig, train
 
     lap("import")
     data = {"system": {"hamiltonian": text, "coordinates": ["q"], "momenta": ["p"], "separable": separable,

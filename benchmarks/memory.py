@@ -32,7 +32,7 @@ def _system(d: int):
     import jax.numpy as jnp
     import numpy as np
 
-    from atlasnn.systems._hamiltonian import HamiltonianSystem, henon_heiles, nonlinear_oscillator
+    from atlasnn.systems import HamiltonianSystem, henon_heiles, nonlinear_oscillator
 
     if d == 1:
         return nonlinear_oscillator()
@@ -44,8 +44,8 @@ def _system(d: int):
 def one_training(K: int, width: int, depth: int, d: int) -> dict:
     import numpy as np
 
-    from atlasnn.nn._trial import make_model
-    from atlasnn.training._train import TrainConfig, train
+    from atlasnn.nn import make_model
+    from atlasnn.training import TrainConfig, train
 
     system = _system(d)
     model = make_model(system.z0, scaling="rational_exp", width=width, depth=depth)
@@ -58,8 +58,7 @@ def one_integration(n: int, d: int) -> dict:
     import jax.numpy as jnp
     import numpy as np
 
-    from atlasnn.evaluation import _metrics as metrics
-    from atlasnn.evaluation._integrators import integrate, reference_solution
+    from atlasnn.evaluation import error_table, integrate, reference_solution
 
     system = _system(d)
     before = _peak_mib()
@@ -68,7 +67,7 @@ def one_integration(n: int, d: int) -> dict:
     with jax.enable_x64(True):
         np.asarray(system.energy(jnp.asarray(z, jnp.float64)))
         np.asarray(system.energy(jnp.asarray(ref, jnp.float64)))
-    metrics.error_table(t, z, ref, system.state_names)
+    error_table(t, z, ref, system.state_names)
     return {"increase_MiB": _peak_mib() - before}
 
 

@@ -72,8 +72,8 @@ def hlo_op_counts(hlo: str) -> dict[str, int]:
 def main(argv: list[str] | None = None) -> int:
     import jax
 
-    from atlasnn.training import _train as tr
-    from atlasnn.nn._trial import make_model
+    import atlasnn.training as tr
+    from atlasnn.nn import make_model
 
     ap = argparse.ArgumentParser(prog="python -m benchmarks.profile_step", description=__doc__.split("\n")[0])
     ap.add_argument("--config", choices=sorted(CONFIGS), default="osc-target")

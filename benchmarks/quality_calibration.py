@@ -16,12 +16,12 @@ import time
 import jax.numpy as jnp
 import numpy as np
 
-from atlasnn.evaluation._integrators import reference_solution
-from atlasnn.nn._trial import make_model
-from atlasnn.evaluation._quality import judge_training
-from atlasnn.solutions._solution import Solution
-from atlasnn.systems._hamiltonian import HamiltonianSystem, nonlinear_oscillator
-from atlasnn.training._train import TrainConfig, train
+from atlasnn.evaluation import reference_solution
+from atlasnn.nn import make_model
+from atlasnn.evaluation import judge_training
+from atlasnn.solutions import Solution
+from atlasnn.systems import HamiltonianSystem, nonlinear_oscillator
+from atlasnn.training import TrainConfig, train
 
 SCALINGS = ("exp_decay", "tanh", "rational_exp")
 RELEASE_BETAS = (0.999, 0.9999)

@@ -28,20 +28,20 @@ from benchmarks.common import BETAS, CONFIGS, atlas_system, machine_info
 
 
 def _config(cfg, epochs: int, seed: int):
-    from atlasnn.training._train import TrainConfig
+    from atlasnn.training import TrainConfig
 
     return TrainConfig(epochs=epochs, lr=cfg.lr, betas=BETAS, lam_reg=cfg.lam_reg, n_points=cfg.n_points,
                        sigma=cfg.sigma, progress=False, chunk=min(epochs, 1000), seed=seed)
 
 
 def _models(cfg, system, seeds):
-    from atlasnn.nn._trial import make_model
+    from atlasnn.nn import make_model
 
     return [make_model(system.z0, scaling="atlas_exp", width=cfg.width, depth=cfg.depth, seed=s) for s in seeds]
 
 
 def _lone_ms(cfg, system, epochs: int) -> float:
-    from atlasnn.training._train import train
+    from atlasnn.training import train
 
     (model,) = _models(cfg, system, [0])
     r = train(model, system, cfg.T, _config(cfg, epochs, 0))
@@ -50,7 +50,7 @@ def _lone_ms(cfg, system, epochs: int) -> float:
 
 def _batch_ms(cfg, system, epochs: int, size: int) -> float:
     """Milliseconds per epoch per seed of a batch of ``size`` seeds."""
-    from atlasnn.training._train import train_batch
+    from atlasnn.training import train_batch
 
     seeds = list(range(size))
     res = train_batch(_models(cfg, system, seeds), system, cfg.T, [_config(cfg, epochs, s) for s in seeds])

@@ -25,7 +25,7 @@ def main(argv: list[str] | None = None) -> int:
     import jax
     import jax.numpy as jnp
 
-    from atlasnn.nn._trial import SINCOS_FAST_LIMIT, sin_cos
+    from atlasnn.nn import SINCOS_FAST_LIMIT, sin_cos
 
     ap = argparse.ArgumentParser(prog="python -m benchmarks.sincos_accuracy", description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=2_000_000)

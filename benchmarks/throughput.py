@@ -41,8 +41,8 @@ COLUMNS = ("config", "K", "net", "compile_s", "recompile_s", "atlas_ms", "atlas_
 
 # ----------------------------------------------------------------------------- atlasnn
 def _atlas_run(cfg, system, epochs: int, seed: int = 0):
-    from atlasnn.nn._trial import make_model
-    from atlasnn.training._train import TrainConfig, train
+    from atlasnn.nn import make_model
+    from atlasnn.training import TrainConfig, train
 
     model = make_model(system.z0, scaling="atlas_exp", width=cfg.width, depth=cfg.depth, seed=seed)
     tc = TrainConfig(

@@ -33,10 +33,10 @@ WIDTH, DEPTH, LAM_REG, SIGMA_PER_T = 80, 2, 1.0, 0.03
 
 
 def run_atlasnn(seed: int, source_cap: int, target_cap: int, log=print) -> dict:
-    from atlasnn.nn._trial import make_model
-    from atlasnn.systems._hamiltonian import nonlinear_oscillator
-    from atlasnn.training._train import TrainConfig, train
-    from atlasnn.training._transfer import transfer
+    from atlasnn.nn import make_model
+    from atlasnn.systems import nonlinear_oscillator
+    from atlasnn.training import TrainConfig, train
+    from atlasnn.training import transfer
 
     system = nonlinear_oscillator()
     out = {}

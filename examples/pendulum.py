@@ -17,11 +17,11 @@ import time
 import jax.numpy as jnp
 import numpy as np
 
-from atlasnn.evaluation._integrators import reference_solution
-from atlasnn.nn._trial import make_model
-from atlasnn.solutions._solution import Solution
-from atlasnn.systems._hamiltonian import HamiltonianSystem
-from atlasnn.training._train import TrainConfig, train
+from atlasnn.evaluation import reference_solution
+from atlasnn.nn import make_model
+from atlasnn.solutions import Solution
+from atlasnn.systems import HamiltonianSystem
+from atlasnn.training import TrainConfig, train
 
 
 def pendulum_hamiltonian(q, p):

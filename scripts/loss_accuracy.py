@@ -22,10 +22,10 @@ import json
 import sys
 from pathlib import Path
 
-from atlasnn.report._caveats import QUICK_TAG
+from atlasnn.report import QUICK_TAG
 from atlasnn.errors import AtlasError, ConfigError
-from atlasnn.report._plots import plot_loss_vs_accuracy
-from atlasnn.report._tables import load_paper, load_results
+from atlasnn.report import plot_loss_vs_accuracy
+from atlasnn.report import load_paper, load_results
 
 #: Final training losses of the paper's runs, read from the authors' release (its loss logs and
 #: the physics loss of its shipped weights), per experiment and table column. The oscillator

@@ -23,14 +23,14 @@ import time
 
 import numpy as np
 
-from atlasnn.evaluation._integrators import reference_solution
-from atlasnn.training._marching import DEFAULT_NETWORK, DEFAULT_WINDOW_TRAIN, MarchConfig, march
-from atlasnn.evaluation._metrics import energy_drift
-from atlasnn.nn._trial import make_model
-from atlasnn.training._polish import PolishConfig
-from atlasnn.systems._hamiltonian import henon_heiles, nonlinear_oscillator
-from atlasnn.training._train import TrainConfig, train
-from atlasnn.training._transfer import transfer
+from atlasnn.evaluation import reference_solution
+from atlasnn.training import DEFAULT_NETWORK, DEFAULT_WINDOW_TRAIN, MarchConfig, march
+from atlasnn.evaluation import energy_drift
+from atlasnn.nn import make_model
+from atlasnn.training import PolishConfig
+from atlasnn.systems import henon_heiles, nonlinear_oscillator
+from atlasnn.training import TrainConfig, train
+from atlasnn.training import transfer
 
 SYSTEMS = {
     # name: (factory, z0, T, eval points, lam_reg, paper transfer: (src T, src K, src lr, tgt K, tgt lr, sigma/T))
@@ -92,13 +92,12 @@ class _Model:
     """A TrialSolution as a callable returning NumPy (for evaluate)."""
 
     def __init__(self, model):
-        from atlasnn.solutions._solution import Solution
+        from atlasnn.solutions import Solution
         self.sol = Solution(model, None)
 
     def __call__(self, t):
         import jax.numpy as jnp
-        from atlasnn.solutions._solution import _evaluate
-        return np.asarray(_evaluate(self.sol.model, jnp.asarray(t, self.sol.model.z0.dtype))[0])
+        return np.asarray(self.sol.model(jnp.asarray(t, self.sol.model.z0.dtype)))
 
 
 def run_transfer(args, system, z0, T, lam_reg, paper, seed):

@@ -34,9 +34,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from atlasnn.report._claims import experiment_claims, markdown as claims_markdown  # noqa: E402
-from atlasnn.report._tables import load_paper  # noqa: E402
-from atlasnn.report._text import format_number  # noqa: E402
+from atlasnn.report import claims_markdown, experiment_claims  # noqa: E402
+from atlasnn.report import load_paper  # noqa: E402
+from atlasnn.report import format_number  # noqa: E402
 
 # the overview already shows trajectories, errors and energy; the run directory keeps the full set
 FIGURES = ["overview", "loss", "target_loss_comparison", "loss_source", "gamma", "seed_spread_l2_x", "work_precision"]
@@ -133,7 +133,8 @@ def long_time(runs: dict[str, dict[str, dict]]) -> str:
     """Per long-time experiment (one with a work–precision record): each network column's L2 of
     the first state and max error over seeds (median and worst), worst energy drift, training
     seconds per seed, and the cheapest classical setting as accurate as its *worst* seed."""
-    from atlasnn.evaluation._workprecision import WorkPoint, SYMPLECTIC, cheapest_match
+    from atlasnn.evaluation import SYMPLECTIC, WorkPoint
+    from atlasnn.evaluation import workprecision
 
     out = []
     for name, by_profile in runs.items():
@@ -150,7 +151,7 @@ def long_time(runs: dict[str, dict[str, dict]]) -> str:
             for label in dict.fromkeys(p.method for p in points if p.kind == "network"):
                 mine = [p for p in points if p.method == label]
                 worst = max(mine, key=lambda p: p.max_error)
-                match = cheapest_match(points, worst)
+                match = workprecision.cheapest_match(points, worst)
                 cheap = "none measured" if match is None else (
                     f"{SYMPLECTIC.get(match.method, 'DOP853')} {match.setting}: {format_number(match.max_error)} "
                     f"in {match.seconds:.3g} s ({worst.seconds / max(match.seconds, 1e-12):.3g}x cheaper)")

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from atlasnn.systems._hamiltonian import harmonic_oscillator
+from atlasnn.systems import harmonic_oscillator
 
 
 @pytest.fixture(scope="session")

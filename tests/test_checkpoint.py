@@ -16,12 +16,12 @@ import pytest
 
 import atlasnn
 from atlasnn.checkpoint import _single as ckpt
-from atlasnn.checkpoint._single import load_checkpoint, load_state, save_checkpoint, save_state
+from atlasnn.checkpoint import load_checkpoint, load_state, save_checkpoint, save_state
 from atlasnn.errors import AtlasError, CheckpointError
-from atlasnn.nn._trial import make_model
-from atlasnn.solutions._solution import Solution
-from atlasnn.systems._hamiltonian import HamiltonianSystem, harmonic_oscillator, henon_heiles, nonlinear_oscillator
-from atlasnn.training._train import TrainConfig, train
+from atlasnn.nn import make_model
+from atlasnn.solutions import Solution
+from atlasnn.systems import HamiltonianSystem, harmonic_oscillator, henon_heiles, nonlinear_oscillator
+from atlasnn.training import TrainConfig, train
 
 T_EVAL = np.linspace(0.0, 3.0, 17)
 GAMMAS = {"exp_decay": None, "tanh": {"m": 0.8}, "rational_exp": {"alpha": 0.7, "beta": 1.3}}
@@ -123,7 +123,7 @@ def test_non_finite_values_are_stored_as_is(tmp_path):
 
 
 def test_expression_system_is_rebuilt_from_its_spec(tmp_path):
-    from atlasnn.systems._expression import expression_system
+    from atlasnn.systems import expression_system
 
     system = expression_system("p**2/2 + q**2/2 + lam*q**4/4", ["q"], ["p"], params={"lam": 0.5}, name="quartic")
     model = _small_model("tanh")

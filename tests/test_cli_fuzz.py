@@ -16,7 +16,7 @@ import random
 import pytest
 
 from atlasnn import fileio
-from atlasnn.cli._main import main
+from atlasnn.cli import main
 from atlasnn.experiments._store import RunLock
 
 from test_reliability_fs import TINY

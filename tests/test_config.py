@@ -7,7 +7,8 @@ import tomllib
 import pytest
 
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config._config import (
+from atlasnn.experiments import table_columns
+from atlasnn.experiments.config import (
     builtin_config_path,
     builtin_experiments,
     load_config,
@@ -35,7 +36,7 @@ def test_long_experiments_compare_the_papers_transfer_with_time_marching(name, p
     experiment; the HNN baseline and ATLAS-NN (exp) transferred, and ATLAS-NN (exp) marched."""
     long, ref = load_config(builtin_config_path(name)), load_config(builtin_config_path(paper))
     assert long.paper_experiment == paper
-    assert long.columns() == ["se", "hnn_baseline", "atlas_exp_transfer", "atlas_exp_march"]
+    assert table_columns(long) == ["se", "hnn_baseline", "atlas_exp_transfer", "atlas_exp_march"]
     assert (long.system, long.width, long.depth) == (ref.system, ref.width, ref.depth)
     assert (long.source, long.target, long.evaluation.eval_points) == (ref.source, ref.target, ref.evaluation.eval_points)
     m = long.march
@@ -63,16 +64,16 @@ def test_paper_configs_hold_spec_numbers(name):
     if cfg.kind == "transfer":
         assert st.train.tolerance == 4e-5 and cfg.source.train.tolerance == 4e-5
         assert not cfg.thaw and cfg.carry_adam and cfg.baseline
-        assert cfg.columns()[:2] == ["se", "hnn_baseline"]
+        assert table_columns(cfg)[:2] == ["se", "hnn_baseline"]
     else:
-        assert cfg.columns() == ["se", "hnn", "atlas_tanh", "atlas_exp"]
+        assert table_columns(cfg) == ["se", "hnn", "atlas_tanh", "atlas_exp"]
     assert cfg.follows, "each paper config says which of paper/release it follows"
 
 
 @pytest.mark.parametrize("name", PAPER)
 def test_quick_variant_keeps_structure_with_fewer_epochs(name):
     full, quick = load_config(builtin_config_path(name)), load_config(builtin_config_path(name), quick=True)
-    assert quick.columns() == full.columns()
+    assert table_columns(quick) == table_columns(full)
     assert quick.eval_stage.T == full.eval_stage.T
     assert quick.eval_stage.train.n_points == full.eval_stage.train.n_points
     assert quick.eval_stage.train.epochs * 5 <= full.eval_stage.train.epochs

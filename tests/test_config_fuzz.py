@@ -21,14 +21,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from atlasnn.cli._main import main
+from atlasnn.cli import main
 from atlasnn.errors import AtlasError
 from atlasnn.experiments import _runner as runner
 from atlasnn.experiments import _task as training
-from atlasnn.experiments.config._config import parse_config
-from atlasnn.nn._trial import MODEL_SCALINGS, make_model
-from atlasnn.training._train import train
-from atlasnn.training._transfer import transfer
+from atlasnn.experiments.config import parse_config
+from atlasnn.nn import make_model
+from atlasnn.training import train
+from atlasnn.training import transfer
 
 MAX_EXAMPLES = int(os.environ.get("ATLASNN_FUZZ_EXAMPLES", "500"))
 MAX_COMPILES = 6  # distinct compiled training steps the fuzz test may build (a few seconds each)
@@ -208,7 +208,7 @@ def _tiny_train(cfg) -> bool:
     system = training.system_of(cfg)  # one system object per config: compiled steps are reused
     z0 = system.initial_state(cfg.system.z0)
     seed = cfg.seeds[0]
-    model = make_model(z0, scaling=MODEL_SCALINGS[model_name], width=cfg.width, depth=cfg.depth, t0=first.t0,
+    model = make_model(z0, scaling=model_name, width=cfg.width, depth=cfg.depth, t0=first.t0,
                        gamma=cfg.gamma_init.get(model_name), activation=cfg.activation, seed=seed)
     tc = first.train.to_train_config(first.T, seed, False).replace(epochs=5, chunk=5)
     res = train(model, system, first.T, tc)

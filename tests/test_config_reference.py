@@ -11,11 +11,11 @@ import copy
 import re
 from pathlib import Path
 
-from atlasnn.cli._main import main
+from atlasnn.cli import main
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config._config import parse_config
+from atlasnn.experiments.config import parse_config
 from atlasnn.experiments.config._reference import GENERATED_BY, reference_markdown, reference_text
-from atlasnn.experiments.config._schema import SCHEMA
+from atlasnn.experiments.config import SCHEMA
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBE = "zzz_probe"

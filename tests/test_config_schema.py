@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config._config import (
+from atlasnn.experiments.config import (
     EvaluationConfig,
     SystemConfig,
     TrainSettings,
@@ -18,10 +18,10 @@ from atlasnn.experiments.config._config import (
     load_config,
     parse_config,
 )
-from atlasnn.experiments.config._schema import MODEL_ALIASES, SCHEMA, key_spec
-from atlasnn.nn._trial import MODEL_SCALINGS, make_model
-from atlasnn.nn._scaling import SCALINGS, make_scaling
-from atlasnn.training._train import TrainConfig
+from atlasnn.experiments import table_columns
+from atlasnn.experiments.config import SCHEMA, key_spec
+from atlasnn.nn import MODELS, make_model, make_scaling
+from atlasnn.training import TrainConfig
 
 
 def raw(name):
@@ -276,13 +276,14 @@ def test_settings_dataclasses_have_exactly_the_declared_keys_and_defaults():
 
 def test_gamma_keys_match_the_scalings():
     """gamma_init declares, per model, exactly its scaling's γ names, with the scaling's own default."""
-    for model, scaling in MODEL_SCALINGS.items():
+    for model, kind in MODELS.items():
         keys = SCHEMA[f"gamma_init.{model}"].keys
-        assert [k.name for k in keys] == list(SCALINGS[scaling].gamma_names)
-        made = make_scaling(scaling)
+        assert [k.name for k in keys] == list(kind.scaling.gamma_names)
+        made = make_scaling(kind.scaling.name)
         for k in keys:
             assert float(np.asarray(made.gamma()[k.name])) == pytest.approx(k.default, rel=1e-6)
-    assert set(MODEL_ALIASES) == set(SCALINGS) and set(MODEL_ALIASES.values()) == set(MODEL_SCALINGS)
+    aliases = SCHEMA["gamma_init"].aliases
+    assert {kind.scaling.name for kind in MODELS.values()} <= set(aliases) and set(aliases.values()) == set(MODELS)
 
 
 def test_key_spec_finds_declarations_through_shared_tables():
@@ -305,7 +306,7 @@ def test_configs_accept_the_api_scaling_names_and_normalise_them():
     a, b = parse_config(api), parse_config(paper)
     assert a == b  # everything resolved the same
     assert a.models == ("hnn", "atlas_tanh", "atlas_exp")
-    assert a.columns() == ["se", "hnn", "atlas_tanh", "atlas_exp"]
+    assert table_columns(a) == ["se", "hnn", "atlas_tanh", "atlas_exp"]
     assert set(a.gamma_init) == {"atlas_tanh", "atlas_exp"}
 
 

@@ -26,10 +26,10 @@ import pytest
 
 distributed = pytest.importorskip("distributed")
 
-from atlasnn.cli._main import main  # noqa: E402
+from atlasnn.cli import main  # noqa: E402
 from atlasnn.errors import ConfigError  # noqa: E402
-from atlasnn.experiments._executors import scheduler_address  # noqa: E402
-from atlasnn.experiments._runner import RunInterrupted, resume_experiment, run_experiment  # noqa: E402
+from atlasnn.experiments import scheduler_address  # noqa: E402
+from atlasnn.experiments import RunInterrupted, resume_experiment, run_experiment  # noqa: E402
 
 from test_resume import SHORT, _cfg, _quiet, assert_same_runs  # noqa: E402
 

@@ -11,8 +11,8 @@ import jax
 import numpy as np
 import pytest
 
-from atlasnn.checkpoint._single import load_checkpoint
-from atlasnn.cli._main import main
+from atlasnn.checkpoint import load_checkpoint
+from atlasnn.cli import main
 
 # HNN with an unbounded activation: at lr = 1e3 the loss overflows after the first update
 CONFIG = """\

@@ -195,7 +195,7 @@ def _check_cap(workspace: Path, since: float) -> None:
 
 # ------------------------------------------------------------------------------ runners
 def _run_atlasnn(words: list[str], workspace: Path) -> None:
-    from atlasnn.cli._main import main
+    from atlasnn.cli import main
 
     out, err = io.StringIO(), io.StringIO()
     start = time.time()
@@ -219,7 +219,7 @@ def _run_python(args: list[str], workspace: Path, what: str) -> None:
 def _check_atlasnn_command(words: list[str]) -> None:
     """A command that is not run: its options must parse and its config must load."""
     from atlasnn.cli._main import build_parser
-    from atlasnn.experiments.config._config import builtin_config_path, load_config
+    from atlasnn.experiments.config import builtin_config_path, load_config
 
     err = io.StringIO()
     with contextlib.redirect_stderr(err):
@@ -261,7 +261,7 @@ def run_block(block: Block, workspace: Path) -> None:
 
 
 def _check_toml(block: Block) -> None:
-    from atlasnn.experiments.config._config import parse_config
+    from atlasnn.experiments.config import parse_config
 
     data = tomllib.loads(block.code)
     parse_config(data, source=block.id)

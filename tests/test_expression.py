@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from atlasnn.errors import AtlasError, ExpressionError
-from atlasnn.systems._expression import (
+from atlasnn.systems import (
     FUNCTIONS,
     MAX_DEPTH,
     MAX_EXPRESSION_LENGTH,
@@ -21,7 +21,7 @@ from atlasnn.systems._expression import (
     expression_system,
     is_syntactically_separable,
 )
-from atlasnn.systems._hamiltonian import HamiltonianSystem, henon_heiles, system_from_spec
+from atlasnn.systems import HamiltonianSystem, henon_heiles, system_from_spec
 
 HH_TEXT = "(px**2+py**2)/2 + (x**2+y**2)/2 + lam*(x**2*y - y**3/3)"
 

@@ -8,9 +8,10 @@ import tomllib
 
 import pytest
 
-from atlasnn.cli._main import main
-from atlasnn.experiments.config._config import load_config
-from atlasnn.experiments.config._schema import key_spec
+from atlasnn.cli import main
+from atlasnn.experiments.config import load_config
+from atlasnn.experiments.config import key_spec
+from atlasnn.experiments import table_columns
 
 
 def init(tmp_path, capsys, name, *args):
@@ -39,7 +40,7 @@ def test_templates_parse_with_and_without_quick(tmp_path, capsys, transfer):
     assert rc == 0 and path.is_file() and f"atlasnn run {path} --quick" in out.out
     full, quick = load_config(path), load_config(path, quick=True)
     assert full.name == "pendulum" and full.kind == ("transfer" if transfer else "short")
-    assert full.models == ("hnn", "atlas_tanh", "atlas_exp") and quick.columns() == full.columns()
+    assert full.models == ("hnn", "atlas_tanh", "atlas_exp") and table_columns(quick) == table_columns(full)
     sysm = full.system.build()
     assert sysm.state_names == ("q", "p") and sysm.separable and full.system.z0 == (1.0, 0.0)
     assert float(sysm.energy(sysm.z0)) == pytest.approx(-math.cos(1.0))

@@ -11,7 +11,7 @@ import pytest
 
 from atlasnn.evaluation import _integrators as integ
 from atlasnn.errors import AtlasError, ConfigError, SystemError_
-from atlasnn.evaluation._integrators import (
+from atlasnn.evaluation import (
     INTEGRATORS,
     REFERENCE_DESCRIPTION,
     integrate,
@@ -20,7 +20,7 @@ from atlasnn.evaluation._integrators import (
     symplectic_euler,
     yoshida4,
 )
-from atlasnn.systems._hamiltonian import (
+from atlasnn.systems import (
     HamiltonianSystem,
     harmonic_exact,
     harmonic_oscillator,
@@ -341,7 +341,7 @@ def test_bad_z0():
 def test_reference_stops_with_one_line_error_when_the_field_becomes_non_finite():
     """sqrt(q) has no gradient once q < 0: the solver must stop, not shrink its step for ever."""
     from atlasnn.errors import AtlasError
-    from atlasnn.systems._expression import expression_system
+    from atlasnn.systems import expression_system
 
     system = expression_system("p**2/2 + sqrt(q)", coordinates=["q"], momenta=["p"], z0=[1.0, -1.0])
     with pytest.raises(AtlasError) as info:

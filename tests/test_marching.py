@@ -14,13 +14,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from atlasnn.checkpoint._single import load_checkpoint, load_piecewise, save_checkpoint, save_piecewise
+from atlasnn.checkpoint import load_checkpoint, load_piecewise, save_checkpoint, save_piecewise
 from atlasnn.errors import CheckpointError, ConfigError
 from atlasnn.training._marching import MarchConfig, end_state, march, n_windows_for
-from atlasnn.nn._trial import make_model
-from atlasnn.solutions._piecewise import PiecewiseSolution, window_edges
-from atlasnn.systems._hamiltonian import harmonic_exact
-from atlasnn.training._train import TrainConfig
+from atlasnn.nn import make_model
+from atlasnn.solutions import PiecewiseSolution, window_edges
+from atlasnn.systems import harmonic_exact
+from atlasnn.training import TrainConfig
 
 T_END = 4 * math.pi
 N_WIN = 4
@@ -173,7 +173,7 @@ def test_first_layer_scale_multiplies_the_initial_first_layer_only():
 
 
 def test_seeds_marched_together_are_their_lone_marches(ho):
-    from atlasnn.training._marching import march_batch
+    from atlasnn.training import march_batch
 
     cfgs = [CFG.replace(train=CFG.train.replace(seed=s)) for s in (0, 1)]
     together = march_batch([_model(0), _model(1)], ho, T_END, cfgs)
@@ -189,7 +189,7 @@ def test_seeds_marched_together_are_their_lone_marches(ho):
 def test_outside_the_interval_warns_once_or_raises(marched):
     import warnings as w
 
-    from atlasnn.solutions._solution import ExtrapolationError, ExtrapolationWarning
+    from atlasnn.solutions import ExtrapolationError, ExtrapolationWarning
 
     sol = PiecewiseSolution(marched.models, marched.system, marched.edges)
     with pytest.warns(ExtrapolationWarning, match="outside its training interval"):
@@ -204,9 +204,9 @@ def test_outside_the_interval_warns_once_or_raises(marched):
 
 
 def test_load_piecewise_refuses_another_problem(marched, ho, tmp_path):
-    from atlasnn.checkpoint._single import load_piecewise, save_piecewise
+    from atlasnn.checkpoint import load_piecewise, save_piecewise
     from atlasnn.errors import CheckpointError
-    from atlasnn.systems._hamiltonian import nonlinear_oscillator
+    from atlasnn.systems import nonlinear_oscillator
 
     path = tmp_path / "pw.npz"
     save_piecewise(path, marched)

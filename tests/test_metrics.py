@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import AtlasError, ConfigError
-from atlasnn.evaluation._metrics import (
-    METRIC_NAMES,
+from atlasnn.evaluation import (
     energy_drift,
     error_table,
     improvement,
@@ -18,6 +17,7 @@ from atlasnn.evaluation._metrics import (
     l2_integral,
     max_abs_error,
     mse,
+    state_metric_names,
 )
 
 # A tiny trajectory: err = pred − ref = [[0, 1], [2, 3], [4, 5]].
@@ -183,7 +183,7 @@ def test_error_table():
     assert table["n_points"] == 3
     assert list(table["components"]) == ["x", "p"]
     for comp in ("x", "p"):
-        assert set(table["components"][comp]) == set(METRIC_NAMES)
+        assert set(table["components"][comp]) == set(state_metric_names())
         assert all(isinstance(v, float) for v in table["components"][comp].values())
     x, p, w = table["components"]["x"], table["components"]["p"], table["whole"]
     assert x["l2_integral"] == pytest.approx(math.sqrt(22.0))

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import ConfigError
-from atlasnn.training._loss import hamilton_residual, physics_loss
-from atlasnn.nn._trial import MLP, TrialSolution, make_model
-from atlasnn.nn._scaling import ExpDecay, RationalExp, Tanh, make_scaling
-from atlasnn.systems._hamiltonian import henon_heiles, nonlinear_oscillator
+from atlasnn.training import hamilton_residual, physics_loss
+from atlasnn.nn import MLP, TrialSolution, make_model
+from atlasnn.nn import ExpDecay, RationalExp, Tanh, make_scaling
+from atlasnn.systems import henon_heiles, nonlinear_oscillator
 
 SCALING_NAMES = ["exp_decay", "tanh", "rational_exp"]
 
@@ -241,7 +241,7 @@ def test_bad_model_config(kwargs):
 
 def test_float32_sin_cos_matches_numpy_and_differentiates_as_sin_cos():
     """The network's fused sin/cos (own polynomial fit, shared range reduction) is float32-exact enough."""
-    from atlasnn.nn._trial import SINCOS_FAST_LIMIT, sin_cos
+    from atlasnn.nn import SINCOS_FAST_LIMIT, sin_cos
 
     x = jnp.linspace(-200.0, 200.0, 400_001, dtype=jnp.float32)
     s, c = sin_cos(x)

@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from matplotlib.image import imread
 
 from atlasnn.errors import AtlasError
-from atlasnn.report._plots import (
+from atlasnn.report import (
     Series,
     first_epoch_below,
     model_style,

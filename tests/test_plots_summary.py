@@ -14,7 +14,7 @@ from matplotlib.image import imread
 
 import atlasnn.report._summary_plots as plots_summary
 from atlasnn.errors import ConfigError
-from atlasnn.report._plots import Series, plot_loss_vs_accuracy, plot_overview
+from atlasnn.report import Series, plot_loss_vs_accuracy, plot_overview
 
 ROOT = Path(__file__).resolve().parents[1]
 

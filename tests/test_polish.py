@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import ConfigError
-from atlasnn.training._loss import physics_loss
-from atlasnn.nn._trial import make_model
-from atlasnn.training._polish import PolishConfig, polish
-from atlasnn.systems._hamiltonian import harmonic_exact
-from atlasnn.training._train import TrainConfig, train
+from atlasnn.training import physics_loss
+from atlasnn.nn import make_model
+from atlasnn.training import PolishConfig, polish
+from atlasnn.systems import harmonic_exact
+from atlasnn.training import TrainConfig, train
 
 T_END = 2 * math.pi
 PCFG = PolishConfig(steps=300, n_points=120, chunk=50, patience=300)
@@ -83,7 +83,7 @@ def test_polish_vmaps_over_seeds(ho):
     from jax.flatten_util import ravel_pytree
 
     from atlasnn.training._polish import make_lbfgs, polish_data, polish_init, polish_steps
-    from atlasnn.training._train import trainable_filter
+    from atlasnn.training import trainable_filter
 
     cfg = PCFG.replace(steps=10, chunk=10)
     models = [make_model((1.0, 0.0), scaling="rational_exp", width=8, depth=1, seed=s) for s in (0, 1)]

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import atlasnn
-from atlasnn.nn._trial import make_model
+from atlasnn.nn import make_model
 from atlasnn.precision import default_float
 
 

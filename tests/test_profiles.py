@@ -7,9 +7,9 @@ import tomllib
 
 import pytest
 
-from atlasnn.cli._main import main
+from atlasnn.cli import main
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config._config import builtin_config_path, builtin_experiments, load_config, parse_config
+from atlasnn.experiments.config import builtin_config_path, builtin_experiments, load_config, parse_config
 
 from test_resume import TRANSFER
 
@@ -95,8 +95,8 @@ def test_the_default_run_directory_names_a_chosen_profile(tmp_path, monkeypatch)
 
 
 def test_a_profile_run_resumes_with_its_profile(tmp_path, monkeypatch):
-    from atlasnn.experiments import _task as training
-    from atlasnn.experiments._runner import RunInterrupted, resume_experiment, run_experiment
+    from atlasnn.experiments import _schemes as schemes
+    from atlasnn.experiments import RunInterrupted, resume_experiment, run_experiment
 
     cfg = parse_config(tomllib.loads(PROFILED), profile="release", quick=True)
     out = tmp_path / "run"
@@ -105,10 +105,10 @@ def test_a_profile_run_resumes_with_its_profile(tmp_path, monkeypatch):
         if event == "source_done":
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(training, "_hook", hook)
+    monkeypatch.setattr(schemes, "_hook", hook)
     with pytest.raises(RunInterrupted):
         run_experiment(cfg, out, progress=False, report=False, log=lambda *a: None, config_text=PROFILED, quick=True)
-    monkeypatch.setattr(training, "_hook", lambda *a: None)
+    monkeypatch.setattr(schemes, "_hook", lambda *a: None)
     res = resume_experiment(out, progress=False, report=False, log=lambda *a: None)
     assert res["profile"] == "release"
     assert {r["role"]: r["lr"] for r in res["runs"]}["target"] == 8e-3

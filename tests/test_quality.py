@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from atlasnn.evaluation import _quality as q
-from atlasnn.evaluation._quality import Verdict, energy_drift, judge_training
+from atlasnn.evaluation import Verdict, energy_drift, judge_training
 
 
 def falling(n=1000, start=1.0, end=1e-6):
@@ -70,7 +70,7 @@ def test_energy_not_finite_fails_and_zero_energy_needs_a_scale():
     v = judge(energy=[0.0, 0.5], energy0=0.0, energy_scale=1.0)
     assert v.status == "failed" and v.measures["energy_drift"] == pytest.approx(0.5)
     assert energy_drift([1.0, 1.0], 1.0) == 0.0
-    assert energy_drift([-2.0, -1.8], -2.0, energy_scale=4.0) == pytest.approx(0.2 / 4)
+    assert energy_drift([-2.0, -1.8], -2.0, scale=4.0) == pytest.approx(0.2 / 4)
 
 
 def test_a_flat_loss_fails_and_a_slow_one_is_suspect():
@@ -162,7 +162,7 @@ def test_bad_arguments():
 def double_well():
     """H = p²/2 − q²/2 + q⁴/4, z0 = (0.5, 0) (E0 = −0.109, separatrix at H = 0); one object for
     the module, so the compiled training step is shared."""
-    from atlasnn.systems._hamiltonian import HamiltonianSystem
+    from atlasnn.systems import HamiltonianSystem
 
     return HamiltonianSystem(lambda q_, p: p[0] ** 2 / 2 - q_[0] ** 2 / 2 + q_[0] ** 4 / 4, dim=1,
                              name="double_well", separable=True, z0=[0.5, 0.0])
@@ -171,9 +171,9 @@ def double_well():
 def train_and_judge(system, lr, betas, epochs, sigma):
     import jax.numpy as jnp
 
-    from atlasnn.nn._trial import make_model
-    from atlasnn.solutions._solution import Solution
-    from atlasnn.training._train import TrainConfig, train
+    from atlasnn.nn import make_model
+    from atlasnn.solutions import Solution
+    from atlasnn.training import TrainConfig, train
 
     T = 4 * math.pi
     model = make_model(system.z0, scaling="rational_exp", width=50, depth=2, seed=0)

@@ -7,8 +7,8 @@ import time
 import pytest
 
 from atlasnn.errors import ConfigError, ExpressionError
-from atlasnn.experiments.config._config import parse_config
-from atlasnn.systems._expression import MAX_OPERATIONS, compile_expression
+from atlasnn.experiments.config import parse_config
+from atlasnn.systems import MAX_OPERATIONS, compile_expression
 
 
 def test_the_issues_expression_is_refused_at_once():

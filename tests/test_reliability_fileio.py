@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from atlasnn import fileio
-from atlasnn.checkpoint._single import save_checkpoint
+from atlasnn.checkpoint import save_checkpoint
 from atlasnn.errors import CheckpointError
-from atlasnn.nn._trial import make_model
+from atlasnn.nn import make_model
 
 
 @pytest.fixture

@@ -12,7 +12,7 @@ import subprocess
 
 import pytest
 
-from atlasnn.cli._main import main
+from atlasnn.cli import main
 
 TINY = """
 name = "tiny"

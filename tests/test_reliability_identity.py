@@ -10,13 +10,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from atlasnn.checkpoint._single import load_checkpoint, load_state, save_checkpoint, save_state
-from atlasnn.cli._main import main
+from atlasnn.checkpoint import load_checkpoint, load_state, save_checkpoint, save_state
+from atlasnn.cli import main
 from atlasnn.errors import CheckpointError
-from atlasnn.systems._expression import expression_system
+from atlasnn.systems import expression_system
 from atlasnn.checkpoint._identity import probe_states, system_mismatch
-from atlasnn.nn._trial import make_model
-from atlasnn.systems._hamiltonian import HamiltonianSystem, harmonic_oscillator, henon_heiles, nonlinear_oscillator
+from atlasnn.nn import make_model
+from atlasnn.systems import HamiltonianSystem, harmonic_oscillator, henon_heiles, nonlinear_oscillator
 
 
 def small(system, z0=None):
@@ -99,7 +99,7 @@ def test_expected_interval_z0_and_system(tmp_path):
 
 
 def test_load_state_refuses_another_system(tmp_path):
-    from atlasnn.training._train import TrainConfig, train
+    from atlasnn.training import TrainConfig, train
 
     osc = nonlinear_oscillator()
     cfg = TrainConfig(epochs=3, n_points=8, chunk=3, progress=False)
@@ -141,8 +141,8 @@ fine_factor = 1
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
     """A finished run directory (results and models; tables and figures are not needed here)."""
-    from atlasnn.experiments.config._config import parse_config
-    from atlasnn.experiments._runner import run_experiment
+    from atlasnn.experiments.config import parse_config
+    from atlasnn.experiments import run_experiment
 
     import tomllib
 

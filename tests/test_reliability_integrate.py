@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from atlasnn.cli._main import main
+from atlasnn.cli import main
 
 
 def integrate(argv, capsys):
@@ -23,9 +23,9 @@ def header_interval(out: str) -> str:
 @pytest.mark.parametrize("text, T", [("6.0", 6.0), ("100", 100.0), ("1e1", 10.0), ("20*pi", 20 * math.pi),
                                      ("pi/2", math.pi / 2), ("4pi", 4 * math.pi), (" 3 ", 3.0)])
 def test_end_time_parsing(text, T):
-    from atlasnn.cli._main import _end_time
+    from atlasnn.experiments.config import parse_end_time
 
-    assert _end_time("--T", text) == pytest.approx(T, rel=1e-15)
+    assert parse_end_time("--T", text) == pytest.approx(T, rel=1e-15)
 
 
 @pytest.mark.parametrize("text", ["6.0", "100"])  # the two refused before

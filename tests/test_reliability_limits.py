@@ -21,7 +21,7 @@ from atlasnn.limits import (
     estimate_training_memory,
     parameter_count,
 )
-from atlasnn.nn._trial import make_model
+from atlasnn.nn import make_model
 
 MACHINE_24_GIB = 24 * GIB
 

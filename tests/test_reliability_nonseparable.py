@@ -9,7 +9,7 @@ from __future__ import annotations
 import csv
 import json
 
-from atlasnn.cli._main import main
+from atlasnn.cli import main
 
 CONFIG = """
 name = "nonsep"

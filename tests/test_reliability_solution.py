@@ -7,10 +7,10 @@ import warnings
 import numpy as np
 import pytest
 
-from atlasnn.checkpoint._single import load_checkpoint, save_checkpoint
+from atlasnn.checkpoint import load_checkpoint, save_checkpoint
 from atlasnn.errors import AtlasError
-from atlasnn.nn._trial import make_model
-from atlasnn.solutions._solution import ExtrapolationError, ExtrapolationWarning, Solution
+from atlasnn.nn import make_model
+from atlasnn.solutions import ExtrapolationError, ExtrapolationWarning, Solution
 
 
 @pytest.fixture

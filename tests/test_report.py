@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import ConfigError
-from atlasnn.report._tables import (
+from atlasnn.report import (
     CSV_FIELDS,
     format_number,
     format_percent,

@@ -8,10 +8,10 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from atlasnn.checkpoint._single import load_checkpoint
-from atlasnn.cli._main import main
+from atlasnn.checkpoint import load_checkpoint
+from atlasnn.cli import main
 from atlasnn.experiments.config import _config as config_module
-from atlasnn.experiments.config._config import builtin_config_path
+from atlasnn.experiments.config import builtin_config_path
 
 
 CI_QUICK = "[quick]\ntrain = { epochs = 3000, chunk = 1000 }\nevaluation = { eval_points = 2000 }\n"

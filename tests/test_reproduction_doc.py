@@ -11,7 +11,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
 
 import reproduction_doc as doc  # noqa: E402
-from atlasnn.evaluation._workprecision import WorkPoint  # noqa: E402
+from atlasnn.evaluation import WorkPoint  # noqa: E402
 
 
 def _long_results():

@@ -25,12 +25,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from atlasnn.checkpoint._single import load_checkpoint, load_state
-from atlasnn.cli._main import main
+from atlasnn.checkpoint import load_checkpoint, load_state
+from atlasnn.cli import main
 from atlasnn.experiments import _runner as runner
-from atlasnn.experiments import _task as training
-from atlasnn.experiments.config._config import parse_config
-from atlasnn.experiments._runner import RunInterrupted, resume_experiment, run_experiment
+from atlasnn.experiments import _schemes as schemes
+from atlasnn.experiments.config import parse_config
+from atlasnn.experiments import RunInterrupted, resume_experiment, run_experiment
 
 HISTORY = ("loss", "residual", "energy", "gamma")
 
@@ -163,7 +163,7 @@ def test_interrupted_in_process_then_resumed_is_bit_identical(tmp_path, monkeypa
         if event == "chunk" and task.seed == 1 and state.epoch == 100:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(training, "_hook", hook)
+    monkeypatch.setattr(schemes, "_hook", hook)
     with pytest.raises(RunInterrupted) as info:
         _run(SHORT, out)
     assert (info.value.finished, info.value.total) == (1, 2)
@@ -179,7 +179,7 @@ def test_interrupted_in_process_then_resumed_is_bit_identical(tmp_path, monkeypa
     state = load_state(out / "state" / "atlas_exp_seed1.npz")
     assert state.epoch == 100 and len(state.history) == 100
 
-    monkeypatch.setattr(training, "_hook", lambda *a: None)
+    monkeypatch.setattr(schemes, "_hook", lambda *a: None)
     results = resume_experiment(out, progress=False, report=False, log=_quiet)
     assert [r["resumed_from_epoch"] for r in results["runs"]] == [None, 100]
     assert assert_same_runs(out, reference_short) == 2
@@ -201,13 +201,13 @@ def test_a_second_interrupt_during_the_resume_is_fine_too(tmp_path, monkeypatch,
             stop = next(stops, None)
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(training, "_hook", hook)
+    monkeypatch.setattr(schemes, "_hook", hook)
     with pytest.raises(RunInterrupted):
         _run(SHORT, out)
     with pytest.raises(RunInterrupted) as info:
         resume_experiment(out, progress=False, report=False, log=_quiet)
     assert info.value.finished == 1
-    monkeypatch.setattr(training, "_hook", lambda *a: None)
+    monkeypatch.setattr(schemes, "_hook", lambda *a: None)
     resume_experiment(out, progress=False, report=False, log=_quiet)
     assert assert_same_runs(out, reference_short) == 2
 
@@ -314,7 +314,7 @@ def test_transfer_interrupted_then_resumed_is_bit_identical(where, tmp_path, mon
         if where == "between" and event == "source_done":
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(training, "_hook", hook)
+    monkeypatch.setattr(schemes, "_hook", hook)
     with pytest.raises(RunInterrupted) as info:
         _run(TRANSFER, out)
     assert (info.value.finished, info.value.total) == (0, 1)
@@ -329,7 +329,7 @@ def test_transfer_interrupted_then_resumed_is_bit_identical(where, tmp_path, mon
     else:
         assert not target_state.exists()
 
-    monkeypatch.setattr(training, "_hook", lambda *a: None)
+    monkeypatch.setattr(schemes, "_hook", lambda *a: None)
     results = resume_experiment(out, progress=False, report=False, log=_quiet)
     by_role = {r["role"]: r for r in results["runs"]}
     assert by_role["target"]["resumed_from_epoch"] == (200 if where == "target" else None)

@@ -8,12 +8,12 @@ import tomllib
 
 import pytest
 
-from atlasnn.cli._main import main
+from atlasnn.cli import main
 from atlasnn.errors import ConfigError
-from atlasnn.experiments import _task as training
-from atlasnn.experiments.config._config import builtin_config_path, load_config, parse_config
+from atlasnn.experiments import _schemes as schemes
+from atlasnn.experiments.config import builtin_config_path, load_config, parse_config
 from atlasnn.experiments._plan import AUTO_BATCH_WORK, Task, batch_size, epoch_work, plan_tasks
-from atlasnn.experiments._runner import RunInterrupted, resume_experiment, run_experiment
+from atlasnn.experiments import RunInterrupted, resume_experiment, run_experiment
 from atlasnn.experiments._store import RunLock
 
 from test_resume import SHORT, _quiet, assert_same_runs
@@ -61,7 +61,7 @@ def test_a_batch_interrupted_mid_way_resumes_bit_identically(tmp_path, monkeypat
         if event == "chunk" and task.seed == 1 and state.epoch == 200:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(training, "_hook", hook)
+    monkeypatch.setattr(schemes, "_hook", hook)
     with pytest.raises(RunInterrupted) as info:
         _run(out, seed_batch=2)
     assert (info.value.finished, info.value.total) == (0, 2)
@@ -70,7 +70,7 @@ def test_a_batch_interrupted_mid_way_resumes_bit_identically(tmp_path, monkeypat
     states = sorted(p.name for p in (out / "state").glob("*.npz"))
     assert states == ["atlas_exp_seed0.npz", "atlas_exp_seed1.npz"]  # both seeds of the batch
 
-    monkeypatch.setattr(training, "_hook", lambda *a: None)
+    monkeypatch.setattr(schemes, "_hook", lambda *a: None)
     results = resume_experiment(out, jobs=2, progress=False, report=False, log=_quiet)  # plan kept
     assert [r["resumed_from_epoch"] for r in results["runs"]] == [200, 200]
     assert [r["batch_size"] for r in results["runs"]] == [2, 2]
@@ -98,7 +98,7 @@ def test_the_lock_is_released_after_a_run_and_after_a_failure(tmp_path, monkeypa
     def boom(*a, **k):
         raise RuntimeError("disk on fire")
 
-    monkeypatch.setattr("atlasnn.experiments._runner.run_local", boom)
+    monkeypatch.setattr("atlasnn.experiments._local.LocalExecutor.run", boom)
     with pytest.raises(RuntimeError):
         _run(tmp_path / "other", seed_batch=1)
     RunLock(tmp_path / "other").acquire().release()

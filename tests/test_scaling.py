@@ -11,15 +11,9 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import ConfigError
-from atlasnn.nn._scaling import (
-    SCALINGS,
-    ExpDecay,
-    RationalExp,
-    Tanh,
-    inverse_softplus,
-    make_scaling,
-    softplus,
-)
+from atlasnn.nn import MODELS, ExpDecay, RationalExp, Tanh, inverse_softplus, make_scaling, softplus
+
+SCALINGS = {kind.scaling.name: kind.scaling for kind in MODELS.values()}
 
 SEEDS = [0, 1, 2, 3, 4]
 T_GRID = np.linspace(0.0, 30.0, 601)

@@ -13,8 +13,8 @@ import io
 import pytest
 
 from atlasnn.report._caveats import QUICK_BANNER, column_verdicts, figure_title, verdict_status_text
-from atlasnn.report._render import SUMMARY_WIDTH, summary_lines
-from atlasnn.report._tables import render_tables
+from atlasnn.report import SUMMARY_WIDTH, summary_lines
+from atlasnn.report import render_tables
 
 SEEDS = [0, 1, 2, 3, 4]
 

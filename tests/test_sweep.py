@@ -18,10 +18,10 @@ from pathlib import Path
 
 import pytest
 
-from atlasnn.cli._main import main
+from atlasnn.cli import main
 from atlasnn.errors import ConfigError
-from atlasnn.experiments import _task as training
-from atlasnn.experiments.config._config import parse_config
+from atlasnn.experiments import _schemes as schemes
+from atlasnn.experiments.config import parse_config
 from atlasnn.experiments._sweep import parse_set, parse_sets, plan_points, point_data, point_name
 
 from test_resume import SHORT, assert_same_runs
@@ -82,7 +82,7 @@ def test_an_interrupted_sweep_resumes_where_it_stopped(tmp_path, config, swept, 
         if event == "chunk" and first.exists() and task.seed == 1 and state.epoch == 200:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(training, "_hook", hook)
+    monkeypatch.setattr(schemes, "_hook", hook)
     assert main(["sweep", str(config), "--out", str(out), *ARGS]) == 130
     err = capsys.readouterr().err
     assert f"atlasnn: interrupted: 1 of 2 sweep points complete; resume with: atlasnn sweep --resume {out}" in err
@@ -91,7 +91,7 @@ def test_an_interrupted_sweep_resumes_where_it_stopped(tmp_path, config, swept, 
     assert not (out / "summary.md").exists()
     done_before = first.stat().st_mtime_ns
 
-    monkeypatch.setattr(training, "_hook", lambda *a: None)
+    monkeypatch.setattr(schemes, "_hook", lambda *a: None)
     assert main(["sweep", "--resume", str(out), "--no-progress"]) == 0
     assert "train.lr=0.003: complete, skipped" in capsys.readouterr().out
     assert first.stat().st_mtime_ns == done_before

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import AtlasError, SystemError_
-from atlasnn.systems._hamiltonian import (
+from atlasnn.systems import (
     BUILTIN_SYSTEMS,
     HamiltonianSystem,
     builtin_system,
@@ -232,8 +232,8 @@ def test_default_names():
 
 # --------------------------------------------------------------------- user-defined H
 def test_user_defined_pendulum_needs_no_package_change():
-    from atlasnn.training._loss import physics_loss
-    from atlasnn.nn._trial import make_model
+    from atlasnn.training import physics_loss
+    from atlasnn.nn import make_model
 
     def pendulum(q, p):
         return p[0] ** 2 / 2 - jnp.cos(q[0])

@@ -15,12 +15,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from atlasnn.training._collocation import jittered, uniform_grid
+from atlasnn.training import jittered, uniform_grid
 from atlasnn.errors import ConfigError
-from atlasnn.training._loss import physics_loss
-from atlasnn.nn._trial import make_model
-from atlasnn.systems._hamiltonian import harmonic_exact, henon_heiles
-from atlasnn.training._train import TrainConfig, init_opt_state, train
+from atlasnn.training import physics_loss
+from atlasnn.nn import make_model
+from atlasnn.systems import harmonic_exact, henon_heiles
+from atlasnn.training import TrainConfig, init_opt_state, train
 
 T_END = 2 * math.pi
 CFG = TrainConfig(epochs=3000, lr=5e-3, n_points=100, sigma=0.1, progress=False)

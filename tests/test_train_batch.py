@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import ConfigError
-from atlasnn.training._train import TrainConfig, train, train_batch
+from atlasnn.training import TrainConfig, train, train_batch
 
 from test_train import T_END, _model, _trees_equal
 

@@ -17,9 +17,9 @@ import pytest
 from atlasnn.training._collocation import reflect_into, with_release_fixed_point
 from atlasnn.errors import ConfigError
 from atlasnn.training._loss import causal_physics_loss, causal_weights, physics_loss
-from atlasnn.nn._trial import make_model
-from atlasnn.systems._hamiltonian import nonlinear_oscillator
-from atlasnn.training._train import TrainConfig, train
+from atlasnn.nn import make_model
+from atlasnn.systems import nonlinear_oscillator
+from atlasnn.training import TrainConfig, train
 
 from test_train import T_END, _model, _trees_equal, epoch_loss
 

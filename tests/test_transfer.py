@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import ConfigError
-from atlasnn.nn._trial import make_model
-from atlasnn.systems._hamiltonian import henon_heiles
-from atlasnn.training._train import TrainConfig, train
-from atlasnn.training._transfer import check_same_architecture, restrict_opt_state, transfer
+from atlasnn.nn import make_model
+from atlasnn.systems import henon_heiles
+from atlasnn.training import TrainConfig, train
+from atlasnn.training import check_same_architecture, restrict_opt_state, transfer
 
 # the same model shape and K as in test_train.py, so that the compiled steps are shared
 SOURCE_CFG = TrainConfig(epochs=1000, lr=5e-3, n_points=100, sigma=0.1, progress=False)

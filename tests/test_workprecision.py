@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from atlasnn.evaluation import _workprecision as wp
-from atlasnn.systems._hamiltonian import harmonic_exact, harmonic_oscillator
+from atlasnn.systems import harmonic_exact, harmonic_oscillator
 
 
 @pytest.fixture(scope="module")

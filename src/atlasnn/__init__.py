@@ -1,13 +1,49 @@
 """atlasnn: ATLAS-NN, learnable time-scaled Hamiltonian neural networks (JAX).
 
-The data flow of the package, one module per concept:
+The package, one subpackage per concept, data flowing one way (lowest first):
 
-    config -> systems + scaling + model -> loss/collocation -> train/transfer
-           -> solution -> integrators/metrics -> report/plots
+    systems, nn → solutions → training → checkpoint → evaluation → report → experiments → cli
+
+The names below are this face: what the README and a script use, e.g.
+``from atlasnn import HamiltonianSystem, make_model, train, Solution``. They are loaded on first
+use (PEP 562), so ``import atlasnn`` and ``atlasnn --help`` stay quick; each also lives in its
+subpackage (``atlasnn.training.train``), which is where its documentation is.
 """
 
-from atlasnn._version import __version__
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
 from atlasnn.errors import AtlasError
 from atlasnn.precision import enable_x64, x64_enabled
+from atlasnn.version import __version__
 
-__all__ = ["__version__", "AtlasError", "enable_x64", "x64_enabled"]
+# name -> the subpackage that defines it
+_FACE = {
+    "systems": ("HamiltonianSystem", "builtin_system", "expression_system", "register_system", "BuiltinSystem"),
+    "nn": ("make_model", "TrialSolution", "TimeScaling", "ModelKind", "register_model", "MODELS"),
+    "solutions": ("Solution", "PiecewiseSolution"),
+    "training": ("TrainConfig", "train", "train_batch", "transfer", "polish", "PolishConfig", "MarchConfig",
+                 "march", "march_batch", "DEFAULT_NETWORK", "DEFAULT_WINDOW_TRAIN"),
+    "checkpoint": ("save_checkpoint", "load_checkpoint", "save_piecewise", "load_piecewise"),
+    "evaluation": ("reference_solution", "integrate", "error_table", "judge_training", "Metric", "register_metric"),
+    "experiments": ("run_experiment", "resume_experiment", "run_sweep", "load_config"),
+}
+_WHERE = {name: pkg for pkg, names in _FACE.items() for name in names}
+_WHERE["load_config"] = "experiments.config"
+
+__all__ = ["__version__", "AtlasError", "enable_x64", "x64_enabled", *_WHERE]
+
+
+def __getattr__(name: str) -> Any:
+    pkg = _WHERE.get(name)
+    if pkg is None:
+        raise AttributeError(f"module 'atlasnn' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"atlasnn.{pkg}"), name)
+    globals()[name] = value  # looked up once
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

@@ -1,1 +1,30 @@
-"""atlasnn.checkpoint._single."""
+"""Checkpoints: trained models, training states and time-marching solutions saved as one ``.npz``
+file each (arrays + JSON meta, a content hash, atomic writes, never pickle), loaded back with
+every problem reported as one line naming the file."""
+
+from atlasnn.checkpoint._format import FORMAT, FORMAT_VERSION
+from atlasnn.checkpoint._piecewise import KIND_PIECEWISE, load_piecewise, save_piecewise
+from atlasnn.checkpoint._single import (
+    KIND_MODEL,
+    KIND_STATE,
+    Checkpoint,
+    load_checkpoint,
+    load_state,
+    save_checkpoint,
+    save_state,
+)
+
+__all__ = [
+    "save_checkpoint",
+    "load_checkpoint",
+    "Checkpoint",
+    "save_state",
+    "load_state",
+    "save_piecewise",
+    "load_piecewise",
+    "FORMAT",
+    "FORMAT_VERSION",
+    "KIND_MODEL",
+    "KIND_STATE",
+    "KIND_PIECEWISE",
+]

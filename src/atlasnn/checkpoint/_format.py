@@ -46,12 +46,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from atlasnn._version import __version__
+from atlasnn.version import __version__
 from atlasnn.errors import AtlasError, CheckpointError
 from atlasnn.fileio import write_atomic
 from atlasnn.checkpoint._identity import record_probes, system_mismatch
-from atlasnn.nn._trial import TrialSolution
-from atlasnn.systems._hamiltonian import HamiltonianSystem, system_from_spec
+from atlasnn.nn import TrialSolution
+from atlasnn.systems import HamiltonianSystem, system_from_spec
 
 FORMAT = "atlasnn-checkpoint"
 FORMAT_VERSION = 1

@@ -32,8 +32,8 @@ from atlasnn.checkpoint._format import (
 )
 from atlasnn.errors import AtlasError, CheckpointError
 from atlasnn.checkpoint._identity import interval_mismatch, system_mismatch
-from atlasnn.nn._trial import make_model
-from atlasnn.systems._hamiltonian import HamiltonianSystem
+from atlasnn.nn import make_model
+from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["KIND_PIECEWISE", "save_piecewise", "load_piecewise"]
 
@@ -63,7 +63,7 @@ def save_piecewise(
     The content hash covers all of it. ``train_config``: a TrainConfig, a MarchConfig's dict, or
     any JSON-able dict.
     """
-    from atlasnn.solutions._piecewise import PiecewiseSolution, stack_models
+    from atlasnn.solutions import PiecewiseSolution, stack_models
 
     p = os.fspath(path)
     if not isinstance(solution, PiecewiseSolution):
@@ -96,7 +96,7 @@ def save_piecewise(
 
 
 def _window_records(path: str, records: Any, arrays: Mapping[str, np.ndarray]) -> list:
-    from atlasnn.solutions._piecewise import WindowRecord
+    from atlasnn.solutions import WindowRecord
 
     out = []
     for k, rec in enumerate(records):
@@ -119,7 +119,7 @@ def load_piecewise(path: str | os.PathLike, system: HamiltonianSystem | None = N
     ``expect`` (keys ``"system"`` and ``"interval"``, as for :func:`load_checkpoint`) refuses a
     solution of another problem with one line naming ``owner``.
     """
-    from atlasnn.solutions._piecewise import PiecewiseSolution, stack_models, unstack_models
+    from atlasnn.solutions import PiecewiseSolution, stack_models, unstack_models
 
     p = os.fspath(path)
     arrays, meta = _read(p)

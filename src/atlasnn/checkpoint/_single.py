@@ -2,11 +2,10 @@
 
 :func:`save_checkpoint` and :func:`load_checkpoint` store and restore a trained model (with its
 history, training config and a free ``extra`` dict) as one ``.npz`` file, :func:`save_state` and
-:func:`load_state` a :class:`~atlasnn.training._train.TrainState` so that an interrupted training continues
+:func:`load_state` a :class:`~atlasnn.training.TrainState` so that an interrupted training continues
 exactly; :class:`Checkpoint` is what :func:`load_checkpoint` returns. The file format (no pickle,
 a content hash, atomic writes) is described and implemented in :mod:`atlasnn.checkpoint._format`;
-piecewise (time-marching) solutions are saved by :mod:`atlasnn.checkpoint._piecewise`, whose
-:func:`save_piecewise` and :func:`load_piecewise` are importable from here too.
+piecewise (time-marching) solutions are saved by :mod:`atlasnn.checkpoint._piecewise`.
 
 The model is rebuilt from its architecture with :func:`~atlasnn.nn._trial.make_model` (under the
 stored float type) and the stored leaves are put into that skeleton, after checking their
@@ -24,14 +23,10 @@ import os
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-import equinox as eqx
 import numpy as np
 
-# the format's pieces this module uses, and the piecewise API, importable from here as before
-from atlasnn.checkpoint._format import (  # noqa: F401
+from atlasnn.checkpoint._format import (
     _FLOAT_DTYPES,
-    FORMAT,
-    FORMAT_VERSION,
     _build_meta,
     _canonical,
     _content_hash,
@@ -44,33 +39,20 @@ from atlasnn.checkpoint._format import (  # noqa: F401
     _write_atomic,
     _x64,
 )
-from atlasnn.checkpoint._piecewise import (  # noqa: F401
-    KIND_PIECEWISE,
-    load_piecewise,
-    save_piecewise,
-)
 from atlasnn.errors import AtlasError, CheckpointError
 from atlasnn.checkpoint._identity import interval_mismatch, system_mismatch
-from atlasnn.nn._trial import TrialSolution, make_model
-from atlasnn.solutions._solution import Solution
-from atlasnn.systems._hamiltonian import HamiltonianSystem
+from atlasnn.checkpoint._piecewise import KIND_PIECEWISE
+from atlasnn.training import History, TrainConfig, TrainState, state_template
+from atlasnn.nn import TrialSolution, make_model
+from atlasnn.solutions import Solution
+from atlasnn.systems import HamiltonianSystem
 
 KIND_MODEL = "model"
 KIND_STATE = "train_state"
 
 _HISTORY_FIELDS = ("loss", "residual", "energy", "gamma")
 
-__all__ = [
-    "FORMAT",
-    "FORMAT_VERSION",
-    "Checkpoint",
-    "save_checkpoint",
-    "load_checkpoint",
-    "save_state",
-    "load_state",
-    "save_piecewise",
-    "load_piecewise",
-]
+__all__ = ["Checkpoint", "save_checkpoint", "load_checkpoint", "save_state", "load_state"]
 
 
 # ------------------------------------------------------------------------ history
@@ -83,8 +65,6 @@ def _history_arrays(history: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]
 
 
 def _history_from(path: str, meta: Mapping[str, Any], arrays: Mapping[str, np.ndarray]):
-    from atlasnn.training._train import History
-
     info = meta.get("history")
     if info is None:
         return None
@@ -137,7 +117,7 @@ def save_checkpoint(
         system: its Hamiltonian system (its ``describe()`` is stored; a built-in or expression
             system is rebuilt from it on load, a Python-function system must be passed again).
         history: a :class:`~atlasnn.training._train.History` to keep, or ``None``.
-        train_config: a :class:`~atlasnn.training._train.TrainConfig` (or a JSON-able dict), or ``None``.
+        train_config: a :class:`~atlasnn.training.TrainConfig` (or a JSON-able dict), or ``None``.
         extra: a free JSON-able dict (model name, seed, ``interval``, stop reason, ...).
             An ``"interval": [t0, T]`` entry is used by :meth:`Checkpoint.solution`.
             Non-finite floats in the meta are written as ``null``.
@@ -156,14 +136,12 @@ def save_state(
     *,
     extra: Mapping[str, Any] | None = None,
 ) -> str:
-    """Save a :class:`~atlasnn.training._train.TrainState` (model, Adam state, bookkeeping, epoch, history)
+    """Save a :class:`~atlasnn.training.TrainState` (model, Adam state, bookkeeping, epoch, history)
     so that ``train(..., resume=load_state(path))`` continues the run exactly; return the hash.
 
-    ``train_config`` must be the run's :class:`~atlasnn.training._train.TrainConfig`: loading needs it to
+    ``train_config`` must be the run's :class:`~atlasnn.training.TrainConfig`: loading needs it to
     rebuild the structure of the optimizer state.
     """
-    from atlasnn.training._train import TrainConfig
-
     p = os.fspath(path)
     if not isinstance(train_config, TrainConfig):
         raise _fail(p, f"save_state needs the run's TrainConfig, got {type(train_config).__name__}")
@@ -238,9 +216,7 @@ class Checkpoint:
         return None
 
     def train_config(self):
-        """The stored :class:`~atlasnn.training._train.TrainConfig`, or ``None`` if none was stored."""
-        from atlasnn.training._train import TrainConfig
-
+        """The stored :class:`~atlasnn.training.TrainConfig`, or ``None`` if none was stored."""
         cfg = self.meta.get("train_config")
         if cfg is None:
             return None
@@ -321,16 +297,13 @@ def load_checkpoint(
 
 
 def load_state(path: str | os.PathLike, system: HamiltonianSystem | None = None):
-    """Load a :class:`~atlasnn.training._train.TrainState` written by :func:`save_state`, to pass as
+    """Load a :class:`~atlasnn.training.TrainState` written by :func:`save_state`, to pass as
     ``train(model, system, T, config, resume=...)`` with the same config.
 
     The optimizer state and bookkeeping are rebuilt without pickle: a template is built from the
-    restored model and the stored TrainConfig (``init_opt_state`` and ``_initial_track`` on the
-    trainable partition) and the stored leaves are put into its structure, shapes checked.
+    restored model and the stored TrainConfig (:func:`atlasnn.training.state_template`) and the stored leaves are put into its structure, shapes checked.
     ``system``, when given, must be the stored one (as for :func:`load_checkpoint`).
     """
-    from atlasnn.training import _train as tr
-
     p = os.fspath(path)
     arrays, meta = _read(p)
     if meta.get("kind") != KIND_STATE or not isinstance(meta.get("state"), dict):
@@ -339,7 +312,7 @@ def load_state(path: str | os.PathLike, system: HamiltonianSystem | None = None)
     if system is not None:
         _resolve_system(p, meta, system)
     try:
-        cfg = tr.TrainConfig(**meta["train_config"])
+        cfg = TrainConfig(**meta["train_config"])
         epoch = meta["state"]["epoch"]
         if isinstance(epoch, bool) or not isinstance(epoch, int) or epoch < 0:
             raise ValueError(f"bad epoch {epoch!r}")
@@ -347,12 +320,10 @@ def load_state(path: str | os.PathLike, system: HamiltonianSystem | None = None)
         raise _fail(p, f"cannot rebuild the training state from its meta ({_describe_exc(exc)})") from None
     dtype = meta["dtype"]
     with _x64(dtype):
-        params, _ = eqx.partition(model, tr.trainable_filter(model, cfg.freeze_gamma))
-        opt_template = tr.init_opt_state(params, cfg, model.z0.dtype)
-        track_template = tr._initial_track(params, model.z0.dtype)
-        opt_state = _restore_leaves(p, arrays, "opt", opt_template, "optimizer state")
-        track = _restore_leaves(p, arrays, "track", track_template, "trainer bookkeeping")
+        template = state_template(model, cfg)
+        opt_state = _restore_leaves(p, arrays, "opt", template.opt_state, "optimizer state")
+        track = _restore_leaves(p, arrays, "track", template.track, "trainer bookkeeping")
     history = _history_from(p, meta, arrays)
     if history is None:
-        history = tr.History.empty(tuple(model.scaling.gamma_names))
-    return tr.TrainState(model=model, opt_state=opt_state, track=track, epoch=epoch, history=history)
+        history = template.history
+    return TrainState(model=model, opt_state=opt_state, track=track, epoch=epoch, history=history)

@@ -33,7 +33,7 @@ import threading
 import time
 from pathlib import Path
 
-from atlasnn import __version__
+from atlasnn.version import __version__
 from atlasnn.cli._errors import _check_out, _os_error_line, _raise_interrupt, _resume_command, _RunWatch
 from atlasnn.errors import AtlasError
 
@@ -53,7 +53,7 @@ def _jobs(args) -> int:
 
 
 def _print_summary(results, out: Path, start: float) -> int:
-    from atlasnn.report._render import summary_lines
+    from atlasnn.report import summary_lines
 
     for line in summary_lines(results, run_dir=out):
         print(line)
@@ -79,7 +79,7 @@ def _default_out(cfg, args) -> str:
 
 
 def _run_config(cfg, args, config_text: str, default_out: str, config_source: str | None = None) -> int:
-    from atlasnn.experiments._runner import run_experiment
+    from atlasnn.experiments import run_experiment
 
     seeds, jobs, seed_batch = _seeds(args), _jobs(args), _seed_batch(args)
     out = Path(args.out or default_out)
@@ -96,7 +96,7 @@ def _run_config(cfg, args, config_text: str, default_out: str, config_source: st
 def _resume(args, check) -> int:
     """``--resume DIR``: the config, seeds and quick flag come from DIR; options given again must
     agree with them. ``check(cfg, meta, out)`` compares the command's NAME or CONFIG."""
-    from atlasnn.experiments._runner import load_run_config, run_experiment
+    from atlasnn.experiments import load_run_config, run_experiment
 
     out = Path(args.resume)
     args.run_dir = out
@@ -125,16 +125,16 @@ def _resume(args, check) -> int:
 
 
 def cmd_systems(args) -> int:
-    from atlasnn.systems._hamiltonian import BUILTIN_DESCRIPTIONS
+    from atlasnn.systems import BUILTIN_SYSTEMS
 
-    for name, (dim, H, z0) in BUILTIN_DESCRIPTIONS.items():
-        print(f"{name:22s} {dim}  {H}   (default z0: {z0})")
+    for name, entry in BUILTIN_SYSTEMS.items():
+        print(f"{name:22s} {entry.dims}  {entry.formula}   (default z0: {entry.default_z0})")
     print("Your own system: HamiltonianSystem(H, d) in Python, or system.hamiltonian = \"...\" in a config.")
     return 0
 
 
 def cmd_experiments(args) -> int:
-    from atlasnn.experiments.config._config import builtin_config_path, builtin_experiments, load_config
+    from atlasnn.experiments.config import builtin_config_path, builtin_experiments, load_config
 
     for name in builtin_experiments():
         cfg = load_config(builtin_config_path(name))
@@ -143,7 +143,7 @@ def cmd_experiments(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
-    from atlasnn.experiments.config._config import builtin_config_path, load_config
+    from atlasnn.experiments.config import builtin_config_path, load_config
 
     if args.resume is not None:
         def check(cfg, meta, out):
@@ -159,7 +159,7 @@ def cmd_reproduce(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from atlasnn.experiments.config._config import load_config
+    from atlasnn.experiments.config import load_config
 
     if args.resume is not None:
         def check(cfg, meta, out):
@@ -184,7 +184,7 @@ def cmd_run(args) -> int:
 
 def _sweep_config(name: str) -> Path:
     """A sweep's CONFIG: a TOML file, or the name of a built-in experiment."""
-    from atlasnn.experiments.config._config import builtin_config_path, builtin_experiments
+    from atlasnn.experiments.config import builtin_config_path, builtin_experiments
 
     path = Path(name)
     if path.is_file() or name not in builtin_experiments():
@@ -193,7 +193,7 @@ def _sweep_config(name: str) -> Path:
 
 
 def cmd_sweep(args) -> int:
-    from atlasnn.experiments._sweep import SweepInterrupted, resume_sweep, run_sweep
+    from atlasnn.experiments import SweepInterrupted, resume_sweep, run_sweep
 
     seeds, jobs = _seeds(args), _jobs(args)
     seed_batch = None if args.seed_batch is None else _seed_batch(args)
@@ -229,8 +229,7 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from atlasnn.report._render import summary_lines, write_report
-    from atlasnn.report._tables import load_results
+    from atlasnn.report import load_results, summary_lines, write_report
 
     paths = write_report(Path(args.dir))
     for line in summary_lines(load_results(Path(args.dir)), run_dir=Path(args.dir)):
@@ -239,71 +238,48 @@ def cmd_report(args) -> int:
     return 0
 
 
-def _end_time(flag: str, text: str) -> float:
-    """An end time from the command line: a plain number ("6.0", "100", "1e2") or a multiple of
-    pi ("4*pi", "20pi", "pi/2"); finite, > 0 and at most the configs' time limit."""
-    from atlasnn.experiments.config._config import MAX_TIME, _number
-
-    try:
-        value: float | str = float(text)
-    except ValueError:
-        value = text
-    return _number(flag, value, low=0, low_open=True, high=MAX_TIME, allow_pi=True)
-
-
 def _integrate_problem(args):
     """(system, z0, t0, T, steps) from --system/--T/--steps, or from a config file (its system,
     z0 and evaluation interval; --T and --steps still override)."""
-    from atlasnn.systems._hamiltonian import builtin_system
+    from atlasnn.experiments.config import load_config, parse_end_time
+    from atlasnn.systems import builtin_system
 
     config = args.config_pos or args.config
     if args.config_pos and args.config and args.config_pos != args.config:
         raise AtlasError(f"two configs given ({args.config_pos} and --config {args.config}); give one")
     if config is None:
         system = builtin_system(args.system or "nonlinear_oscillator")
-        T = _end_time("--T", args.T or "4*pi")
+        T = parse_end_time("--T", args.T or "4*pi")
         return system, system.initial_state(), 0.0, T, args.steps or 199
     if args.system is not None:
         raise AtlasError(f"--system {args.system} and a config ({config}) both name a system; give one")
-    from atlasnn.experiments.config._config import load_config
-
     cfg = load_config(config)
     stage = cfg.eval_stage
     system = cfg.system.build()
     z0 = system.initial_state(cfg.system.z0)
-    T = stage.T if args.T is None else _end_time("--T", args.T)
+    T = stage.T if args.T is None else parse_end_time("--T", args.T)
     if T <= stage.t0:
         raise AtlasError(f"--T {args.T}: must be greater than the config's t0 = {stage.t0:g}")
     steps = args.steps or cfg.evaluation.se_steps or stage.train.n_points - 1
     return system, z0, stage.t0, T, steps
 
 
-def _energy64(system, z):
-    """H along a float64 trajectory, evaluated in float64 (JAX computes in float32 otherwise)."""
-    import jax
-    import numpy as np
-
-    with jax.enable_x64(True), np.errstate(all="ignore"):
-        return np.asarray(system.energy(jax.numpy.asarray(z, dtype=jax.numpy.float64)))
-
-
 def cmd_integrate(args) -> int:
     import numpy as np
 
-    from atlasnn.evaluation._integrators import INTEGRATORS, REFERENCE_DESCRIPTION, integrate, reference_solution
-    from atlasnn.evaluation._metrics import energy_drift, error_table
+    from atlasnn.evaluation import INTEGRATORS, REFERENCE_DESCRIPTION, energy_drift, error_table, integrate, reference_solution
 
     if args.steps is not None and args.steps < 1:
         raise AtlasError(f"--steps must be >= 1, got {args.steps}")
     system, z0, t0, T, steps = _integrate_problem(args)
     print(f"{system.name}: z0 = {z0.tolist()}, [{t0:g}, {T:.4f}], {steps} steps; reference: {REFERENCE_DESCRIPTION}")
-    E0 = float(_energy64(system, z0))
+    E0 = float(system.energy64(z0))
     if not system.separable:
         print(f"skipping {', '.join(INTEGRATORS)}: they need a separable H = T(p) + V(q) and "
               f"{system.name!r} is not declared separable")
         t = np.linspace(t0, T, steps + 1)
         ref = reference_solution(system, z0, t)
-        drift = energy_drift(_energy64(system, ref), E0)
+        drift = energy_drift(system.energy64(ref), E0)
         state = ", ".join(f"{n} = {v:.6g}" for n, v in zip(system.state_names, ref[-1]))
         print(f"reference: energy drift {drift:.3e} on {steps + 1} points; at t = {T:.4f}: {state}")
         return 0
@@ -315,7 +291,7 @@ def cmd_integrate(args) -> int:
             key = t.tobytes()  # every method has the same grid: solve the reference once
             ref = refs[key] = refs[key] if key in refs else reference_solution(system, z0, t)
             tab = error_table(t, z, ref, system.state_names)
-            drift = energy_drift(_energy64(system, z), E0)
+            drift = energy_drift(system.energy64(z), E0)
         if not np.all(np.isfinite(z)):
             unstable.append(method)
         cells = "".join(f"{tab['components'][n]['l2_discrete']:12.3e}" for n in system.state_names)
@@ -327,7 +303,7 @@ def cmd_integrate(args) -> int:
 
 
 def cmd_init(args) -> int:
-    from atlasnn.experiments.config._templates import write_template
+    from atlasnn.experiments.config import write_template
 
     z0 = None
     if args.z0 is not None:
@@ -346,7 +322,7 @@ def cmd_init(args) -> int:
 
 
 def cmd_config(args) -> int:
-    from atlasnn.experiments.config._reference import reference_markdown, reference_text
+    from atlasnn.experiments.config import reference_markdown, reference_text
 
     try:
         sys.stdout.write(reference_markdown() if args.markdown else reference_text())

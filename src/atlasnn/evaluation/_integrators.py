@@ -28,7 +28,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from atlasnn.errors import AtlasError, ConfigError
-from atlasnn.systems._hamiltonian import HamiltonianSystem
+from atlasnn.systems import HamiltonianSystem
 
 __all__ = [
     "symplectic_euler",

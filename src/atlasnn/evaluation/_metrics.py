@@ -16,7 +16,10 @@ returns one float for the whole state. The two L2 errors of SPEC §5:
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+import math
+
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -24,18 +27,20 @@ from scipy.interpolate import CubicSpline
 from atlasnn.errors import ConfigError
 
 __all__ = [
+    "Metric",
+    "METRICS",
+    "register_metric",
+    "state_metric_names",
     "l2_integral",
     "l2_discrete",
     "mse",
     "max_abs_error",
     "energy_drift",
+    "drift_denominator",
     "improvement",
     "interpolate_to",
     "error_table",
-    "METRIC_NAMES",
 ]
-
-METRIC_NAMES = ("l2_integral", "l2_discrete", "mse", "max_abs")
 
 
 # ------------------------------------------------------------------------------ helpers
@@ -138,11 +143,18 @@ def max_abs_error(z_pred: Any, z_ref: Any, whole: bool = False) -> np.ndarray | 
     return _out(err.max() if whole else err.max(axis=0))
 
 
-def energy_drift(energies: Any, E0: float) -> float:
-    """Largest relative energy error max_i |H(t_i) − E0| / |E0|.
+def drift_denominator(E0: float, scale: float | None = None) -> float:
+    """The denominator of the relative energy drift: max(|E0|, scale); 0 when E0 = 0 and no scale."""
+    return max(abs(float(E0)), float(scale or 0.0))
 
-    If E0 == 0 the relative error is undefined and the ABSOLUTE drift max_i |H(t_i) − E0| is
-    returned instead.
+
+def energy_drift(energies: Any, E0: float, scale: float | None = None) -> float:
+    """The energy drift max_i |H(t_i) − E0| / max(|E0|, scale) — the one definition in atlasnn.
+
+    Relative to |E0|, or to ``scale`` when that is larger (a floor for systems whose E0 is 0 or
+    tiny). When the denominator is 0 (E0 = 0 and no scale) a relative drift has no meaning and
+    the ABSOLUTE drift max_i |H(t_i) − E0| is returned (:func:`drift_denominator` tells which).
+    ``inf`` when an energy is not finite.
     """
     try:
         H = np.asarray(energies, dtype=np.float64).reshape(-1)
@@ -153,8 +165,11 @@ def energy_drift(energies: Any, E0: float) -> float:
         raise ConfigError("energies must contain at least one value, got an empty array")
     if not np.isfinite(e0):
         raise ConfigError(f"E0 must be finite, got {E0!r}")
+    if not np.all(np.isfinite(H)):
+        return math.inf
+    denom = drift_denominator(e0, scale)
     drift = float(np.max(np.abs(H - e0)))
-    return drift if e0 == 0.0 else drift / abs(e0)
+    return drift / denom if denom > 0 else drift
 
 
 def improvement(e_base: Any, e_model: Any) -> np.ndarray | float:
@@ -228,6 +243,67 @@ def interpolate_to(t_src: Any, z_src: Any, t_dst: Any, kind: str = "cubic") -> n
     return np.asarray(CubicSpline(ts, zs, axis=0)(td), dtype=np.float64)
 
 
+# ------------------------------------------------------------------------------ registry
+@dataclass(frozen=True)
+class Metric:
+    """One error measure, declared once: how it is computed and how tables name it.
+
+    ``compute(t, z_pred, z_ref, whole)`` returns per-component values (shape (k,)) or, with
+    ``whole=True``, one float for the whole state; ``per_state=False`` marks a scalar measure
+    computed elsewhere (the energy drift). ``short`` prefixes the table-row keys (``l2_x``),
+    ``row`` is the Markdown row label with ``{s}`` for the state, ``latex`` the LaTeX name,
+    ``table`` whether it is a row of the main table, ``paper`` whether the paper tabulates it.
+    """
+
+    name: str
+    short: str
+    row: str
+    latex: str
+    definition: str
+    compute: Callable[..., Any] | None = None
+    per_state: bool = True
+    table: bool = True
+    paper: bool = False
+
+
+#: name -> :class:`Metric`, in table order. A new metric is one :func:`register_metric` call.
+METRICS: dict[str, Metric] = {}
+
+
+def register_metric(metric: Metric) -> Metric:
+    """Add a metric (its name must be new); returns it."""
+    if metric.name in METRICS:
+        raise ConfigError(f"a metric named {metric.name!r} exists already")
+    if metric.per_state and metric.compute is None:
+        raise ConfigError(f"metric {metric.name!r}: a per-state metric needs a compute function")
+    METRICS[metric.name] = metric
+    return metric
+
+
+def state_metric_names() -> tuple[str, ...]:
+    """The per-state metrics, in declaration order."""
+    return tuple(m.name for m in METRICS.values() if m.per_state)
+
+
+register_metric(Metric(
+    "l2_discrete", "l2", "L2({s})", "L^2",
+    "L2, release's discrete form sqrt(sum_i err(t_i)^2), not scaled by dt (the form in the paper's tables)",
+    lambda t, a, b, whole: l2_discrete(a, b, whole=whole), paper=True))
+register_metric(Metric(
+    "mse", "mse", "MSE({s})", "\\mathrm{MSE}", "MSE = mean_i err(t_i)^2",
+    lambda t, a, b, whole: mse(a, b, whole=whole), paper=True))
+register_metric(Metric(
+    "l2_integral", "l2int", "L2∫({s}) [integral def.]", "L^2_{\\int}",
+    "L2, paper's integral definition (int |err|^2 dt)^(1/2), trapezoid rule (no paper value)",
+    lambda t, a, b, whole: l2_integral(t, a, b, whole=whole)))
+register_metric(Metric(
+    "max_abs", "max", "max|err|({s})", "\\max|e|", "max_i |err(t_i)|",
+    lambda t, a, b, whole: max_abs_error(a, b, whole=whole), table=False))
+register_metric(Metric(
+    "energy_drift", "drift", "Energy drift (max rel.)", "Energy drift",
+    "energy drift max_i |H(t_i) - E0| / |E0| (absolute where E0 = 0)", per_state=False))
+
+
 # ------------------------------------------------------------------------------- tables
 def error_table(
     t: Any, z_pred: Any, z_ref: Any, names: Sequence[str] | None = None
@@ -235,7 +311,7 @@ def error_table(
     """All error metrics of a trajectory against a reference on the common grid ``t``.
 
     Returns ``{"components": {name: {metric: value}}, "whole": {metric: value}, "n_points": N}``
-    with metrics ``l2_integral``, ``l2_discrete``, ``mse``, ``max_abs`` (plain floats). ``names``
+    with every per-state metric of :data:`METRICS` (plain floats). ``names``
     label the k components (default ``c0``, ``c1``, …).
     """
     err = _pair(z_pred, z_ref)
@@ -251,17 +327,8 @@ def error_table(
         raise ConfigError(f"names must give one name per component ({k}), got {len(names)}: {names}")
     if len(set(names)) != k:
         raise ConfigError(f"names must be distinct, got {names}")
-    per = {
-        "l2_integral": np.atleast_1d(l2_integral(t, pred, ref)),
-        "l2_discrete": np.atleast_1d(l2_discrete(pred, ref)),
-        "mse": np.atleast_1d(mse(pred, ref)),
-        "max_abs": np.atleast_1d(max_abs_error(pred, ref)),
-    }
-    components = {n: {m: float(per[m][j]) for m in METRIC_NAMES} for j, n in enumerate(names)}
-    whole = {
-        "l2_integral": float(l2_integral(t, pred, ref, whole=True)),
-        "l2_discrete": float(l2_discrete(pred, ref, whole=True)),
-        "mse": float(mse(pred, ref, whole=True)),
-        "max_abs": float(max_abs_error(pred, ref, whole=True)),
-    }
+    names_m = state_metric_names()
+    per = {m: np.atleast_1d(METRICS[m].compute(t, pred, ref, False)) for m in names_m}
+    components = {n: {m: float(per[m][j]) for m in names_m} for j, n in enumerate(names)}
+    whole = {m: float(METRICS[m].compute(t, pred, ref, True)) for m in names_m}
     return {"components": components, "whole": whole, "n_points": int(pred.shape[0])}

@@ -65,6 +65,9 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from atlasnn.evaluation._metrics import drift_denominator, energy_drift
+from atlasnn.nn import MODELS
+
 __all__ = [
     "ENERGY_DRIFT_SUSPECT",
     "ENERGY_DRIFT_FAILED",
@@ -76,7 +79,6 @@ __all__ = [
     "GAMMA_COLLAPSED",
     "STATUSES",
     "Verdict",
-    "energy_drift",
     "judge_training",
 ]
 
@@ -99,8 +101,12 @@ GAMMA_COLLAPSED = 1e-2
 
 STATUSES = ("ok", "suspect", "failed")
 _STOP_REASONS = ("budget", "tolerance", "diverged")
-# γ entries that are rates (f ≤ rate·t); β of the rational-exp scaling is a shape parameter
-_RATE_NAMES = ("m", "alpha")
+
+
+def _rate_names() -> set[str]:
+    """γ entries that are rates (f ≤ rate·t), as the registered scalings declare them."""
+    return {name for kind in MODELS.values() for name in kind.scaling.rate_names}
+
 # what each rule suggests changing, in the order the advice names them
 _LOWER_LR, _MORE_EPOCHS = "lr", "epochs"
 
@@ -137,20 +143,6 @@ class Verdict:
     def marker(self) -> str:
         """A short marker for tables: "" (ok), "?" (suspect) or "!" (failed)."""
         return {"ok": "", "suspect": "?", "failed": "!"}[self.status]
-
-
-def energy_drift(energy: Any, energy0: float, energy_scale: float | None = None) -> float | None:
-    """``max_t |H(ẑ(t)) − E0| / max(|E0|, energy_scale)``; inf if H is not finite somewhere;
-    None when the denominator is 0 (E0 = 0 and no scale)."""
-    e = np.asarray(energy, dtype=np.float64).reshape(-1)
-    denom = max(abs(float(energy0)), float(energy_scale or 0.0))
-    if not denom > 0:
-        return None
-    if e.size == 0:
-        return 0.0
-    if not np.all(np.isfinite(e)):
-        return math.inf
-    return float(np.max(np.abs(e - float(energy0))) / denom)
 
 
 def _pct(x: float) -> str:
@@ -223,7 +215,7 @@ def _rule_gamma(gamma: Mapping[str, float], span: float) -> list[tuple[str, str,
         v = float(value)
         if not math.isfinite(v):
             out.append(("failed", f"gamma {name} = {v} is not finite", _LOWER_LR))
-        elif name in _RATE_NAMES and v * span < GAMMA_COLLAPSED:
+        elif name in _rate_names() and v * span < GAMMA_COLLAPSED:
             out.append(("failed", f"gamma collapsed: {name} = {v:.3g}, {name}·(T−t0) = {v * span:.3g} "
                         f"< {GAMMA_COLLAPSED:g}, so f(t) < 1 % and ẑ ≈ z0", _LOWER_LR))
     return out
@@ -288,7 +280,10 @@ def judge_training(
         returned = float(returned_loss)
     if energy is not None and energy0 is None:
         raise ValueError("energy0 (H(z0)) is needed to judge the energy")
-    drift = None if energy is None else energy_drift(energy, energy0, energy_scale)
+    drift = None
+    if energy is not None and drift_denominator(energy0, energy_scale) > 0:
+        e = np.asarray(energy, dtype=np.float64).reshape(-1)
+        drift = energy_drift(e, energy0, energy_scale) if e.size else 0.0
 
     early = ratio = lowest = None
     lowest_epoch = None

@@ -11,8 +11,9 @@ reference solution on it, every method becomes points (wall time, error):
 
 The errors are the maximum |z − z_ref| over all components and times, the release-form L2 of the
 first coordinate, sqrt(Σ_i err(t_i)²) on the evaluation grid (the paper's tables' number), and the
-relative energy drift max_i |H(z_i) − E0| / |E0|. Times exclude JAX compilation (recorded apart);
-each is the median of repeats that together last at least ``min_seconds``.
+energy drift (:func:`~atlasnn.evaluation.energy_drift`). Times exclude JAX compilation (recorded
+apart); each is the median of repeats that together last at least ``min_seconds``. The figure is
+drawn by :func:`atlasnn.report.plot_work_precision`.
 """
 
 from __future__ import annotations
@@ -21,12 +22,13 @@ import math
 import statistics
 import time
 from dataclasses import asdict, dataclass
-from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from atlasnn.systems._hamiltonian import HamiltonianSystem
+from atlasnn.evaluation._integrators import integrate, reference_solution
+from atlasnn.evaluation._metrics import energy_drift
+from atlasnn.systems import HamiltonianSystem
 
 SYMPLECTIC = {"symplectic_euler": "symplectic Euler", "stormer_verlet": "Störmer–Verlet", "yoshida4": "Yoshida-4"}
 STEP_MULTIPLES = (1, 2, 4, 8, 16, 32)
@@ -59,11 +61,9 @@ def _timed(fn: Callable[[], Any], min_seconds: float, max_repeats: int = 50) -> 
 
 
 def errors(system: HamiltonianSystem, z: np.ndarray, z_ref: np.ndarray, e0: float) -> dict[str, float]:
-    """max |err|, release-form L2 of the first coordinate, relative energy drift."""
-    from atlasnn.experiments._measure import energies
-
+    """max |err|, release-form L2 of the first coordinate, energy drift (:func:`energy_drift`)."""
     err = np.asarray(z, np.float64) - np.asarray(z_ref, np.float64)
-    drift = float(np.max(np.abs(energies(system, z) - e0)) / max(abs(e0), 1e-300))
+    drift = energy_drift(system.energy64(z), e0)
     return {"max_error": float(np.max(np.abs(err))), "l2_first": float(np.sqrt(np.sum(err[:, 0] ** 2))),
             "energy_drift": drift}
 
@@ -71,10 +71,7 @@ def errors(system: HamiltonianSystem, z: np.ndarray, z_ref: np.ndarray, e0: floa
 def symplectic_points(system: HamiltonianSystem, z0: np.ndarray, t_eval: np.ndarray, z_ref: np.ndarray,
                       *, multiples: Sequence[int] = STEP_MULTIPLES, min_seconds: float = 0.2) -> list[WorkPoint]:
     """The three symplectic integrators at N = m·(E − 1) steps for each m in ``multiples``."""
-    from atlasnn.experiments._measure import energy0
-    from atlasnn.evaluation._integrators import integrate
-
-    e0 = energy0(system, z0)
+    e0 = float(system.energy64(z0))
     t0, T, gaps = float(t_eval[0]), float(t_eval[-1]), len(t_eval) - 1
     points = []
     for method in SYMPLECTIC:
@@ -92,10 +89,7 @@ def symplectic_points(system: HamiltonianSystem, z0: np.ndarray, t_eval: np.ndar
 def dop853_points(system: HamiltonianSystem, z0: np.ndarray, t_eval: np.ndarray, z_ref: np.ndarray,
                   *, tolerances: Sequence[float] = TOLERANCES, min_seconds: float = 0.2) -> list[WorkPoint]:
     """DOP853 at rtol = atol = each tolerance (dense output at the evaluation times)."""
-    from atlasnn.experiments._measure import energy0
-    from atlasnn.evaluation._integrators import reference_solution
-
-    e0 = energy0(system, z0)
+    e0 = float(system.energy64(z0))
     points = []
     for tol in tolerances:
         z, seconds = _timed(lambda: reference_solution(system, z0, t_eval, rtol=tol, atol=tol), min_seconds)
@@ -141,43 +135,3 @@ def verdicts(points: Sequence[WorkPoint], error: str = "max_error") -> list[str]
 
 def to_json(points: Sequence[WorkPoint]) -> list[dict]:
     return [asdict(p) for p in points]
-
-
-def plot_work_precision(stem: str | Path, points: Sequence[WorkPoint], *, title: str = "",
-                        first_name: str = "x") -> list[Path]:
-    """Two log–log panels, max error and L2(first coordinate) against seconds: a line per
-    classical method (its settings joined), markers for the network points (one per seed)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.3), constrained_layout=True)
-    classical = [m for m in [*SYMPLECTIC, "dop853"] if any(p.method == m for p in points)]
-    networks = list(dict.fromkeys(p.method for p in points if p.kind == "network"))
-    markers = "os^Dv<>"
-    for ax, field, name in ((axes[0], "max_error", "max |error| (all components)"),
-                            (axes[1], "l2_first", f"L2({first_name}), release form")):
-        for m in classical:
-            pts = sorted((p for p in points if p.method == m), key=lambda p: p.seconds)
-            ax.plot([p.seconds for p in pts], [getattr(p, field) for p in pts], "-o", ms=3,
-                    label=SYMPLECTIC.get(m, "DOP853 (rtol = atol)"))
-        for i, label in enumerate(networks):
-            pts = [p for p in points if p.method == label]
-            ax.scatter([p.seconds for p in pts], [getattr(p, field) for p in pts], marker=markers[i % len(markers)],
-                       s=40, zorder=3, edgecolors="black", linewidths=0.6, label=f"{label} (training, per seed)")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("wall time [s] (classical: one solve; networks: training)")
-        ax.set_ylabel(name)
-        ax.grid(True, which="both", alpha=0.3)
-    axes[1].legend(fontsize=7, loc="best")
-    if title:
-        fig.suptitle(title)
-    paths = []
-    for ext in ("png", "pdf"):
-        path = Path(f"{stem}.{ext}")
-        fig.savefig(path, dpi=150)
-        paths.append(path)
-    plt.close(fig)
-    return paths

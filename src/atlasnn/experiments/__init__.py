@@ -1,1 +1,41 @@
-"""Experiments: config schema (config.py), the runner (runner.py) and the paper's configs (configs/)."""
+"""Experiments: configs → a plan of tasks → executors (local processes, Dask) → a run directory
+with results.json, tables and figures; resume, sweeps, and the training schemes' table."""
+
+from atlasnn.experiments._executor import Executor
+from atlasnn.experiments._executors import EXECUTORS, open_executor, scheduler_address
+from atlasnn.experiments._local import LocalExecutor
+from atlasnn.experiments._plan import columns_of, plan_tasks
+from atlasnn.experiments._runner import RunInterrupted, divergence_advice, resume_experiment, run_experiment
+from atlasnn.experiments._schemes import SCHEMES, Scheme, baseline_column, column_label, column_labels, table_columns
+from atlasnn.experiments._signals import NoGuard, SignalGuard, check_interrupt
+from atlasnn.experiments._store import load_run_config
+from atlasnn.experiments._sweep import SweepInterrupted, resume_sweep, run_sweep
+from atlasnn.experiments._tasks import Task
+
+__all__ = [
+    "run_experiment",
+    "resume_experiment",
+    "RunInterrupted",
+    "divergence_advice",
+    "load_run_config",
+    "run_sweep",
+    "resume_sweep",
+    "SweepInterrupted",
+    "Executor",
+    "LocalExecutor",
+    "EXECUTORS",
+    "open_executor",
+    "scheduler_address",
+    "Scheme",
+    "SCHEMES",
+    "table_columns",
+    "baseline_column",
+    "column_labels",
+    "column_label",
+    "Task",
+    "plan_tasks",
+    "columns_of",
+    "SignalGuard",
+    "NoGuard",
+    "check_interrupt",
+]

@@ -20,14 +20,15 @@ larger but the machine has more cores than parallel jobs.
 
 from __future__ import annotations
 
-import math
 import os
-from dataclasses import dataclass
 
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config._config import ExperimentConfig, Stage
+from atlasnn.experiments._schemes import SCHEMES
+from atlasnn.experiments._tasks import Task
+from atlasnn.experiments.config import ExperimentConfig, Stage
+from atlasnn.limits import check_integration_memory
 
 #: "auto" batches the seeds of a column when K · width² of its largest stage is at most this
 #: (oscillator-short, K = 200 and 50×2: 5.0e5, batches; Hénon–Heiles, K ≥ 500 and 80×2: ≥ 3.2e6,
@@ -54,62 +55,14 @@ def _makespan(size: int, n_seeds: int, columns: int, jobs: int) -> float:
     return max(loads)
 
 
-@dataclass(frozen=True)
-class Task:
-    """The trainings of one column (role and model) for a batch of seeds."""
-
-    role: str  # "short" | "transfer" | "baseline" | "march"
-    model: str  # "hnn" | "atlas_tanh" | "atlas_exp"
-    seeds: tuple[int, ...]
-
-    @property
-    def column(self) -> str:
-        """The table column this task's trainings fill."""
-        if self.role == "short":
-            return self.model
-        if self.role == "baseline":
-            return "hnn_baseline"
-        if self.role == "march":
-            return f"{self.model}_march"
-        return f"{self.model}_transfer"
-
-    @property
-    def seed(self) -> int:
-        """The seed of a one-seed task."""
-        if len(self.seeds) != 1:
-            raise ValueError(f"task {self.column} holds seeds {list(self.seeds)}, not one")
-        return self.seeds[0]
-
-    def one(self, seed: int) -> "Task":
-        """The one-seed task of ``seed`` (records and state files are kept per seed)."""
-        return Task(self.role, self.model, (seed,))
-
-    def trainings(self) -> list["Task"]:
-        return [self.one(s) for s in self.seeds]
-
-
 def columns_of(cfg: ExperimentConfig) -> list[tuple[str, str]]:
-    """(role, model) of every trained column, in table order."""
-    marched = [("march", m) for m in cfg.march.models] if cfg.march is not None else []
-    if cfg.kind == "short":
-        return [("short", m) for m in cfg.models] + marched
-    return ([("baseline", "hnn")] if cfg.baseline else []) + [("transfer", m) for m in cfg.models] + marched
-
-
-def _stages(cfg: ExperimentConfig, role: str) -> list[Stage]:
-    if role == "short":
-        return [cfg.stage]
-    if role == "baseline":
-        return [cfg.target]
-    return [cfg.source, cfg.target]
+    """(scheme, model) of every trained column, in table order."""
+    return [(s.name, m) for s in SCHEMES.values() for m in s.models(cfg)]
 
 
 def epoch_work(cfg: ExperimentConfig, role: str) -> float:
-    """K · width² of the largest stage of a column (a window for time-marching): the size of one
-    epoch, roughly."""
-    if role == "march":
-        return cfg.march.scheme.train.n_points * float(cfg.march.width) ** 2
-    return max(st.train.n_points for st in _stages(cfg, role)) * float(cfg.width) ** 2
+    """K · width² of the largest training of a column's scheme: the size of one epoch, roughly."""
+    return SCHEMES[role].epoch_work(cfg)
 
 
 def batch_size(cfg: ExperimentConfig, role: str, n_seeds: int, jobs: int, seed_batch: int | str) -> int:
@@ -150,23 +103,8 @@ def eval_grid(stage: Stage, points: int | None) -> np.ndarray:
 def check_memory(cfg: ExperimentConfig, tasks: list[Task], state_dim: int) -> None:
     """Refuse, as one line naming the key, a plan whose trainings or classical integrations will
     not fit in the memory available (:mod:`atlasnn.limits`), before anything is written."""
-    from atlasnn.limits import check_integration_memory, check_training_memory
-
     for task in tasks:
-        if task.role == "march":
-            m = cfg.march
-            check_training_memory(m.scheme.train.n_points, m.width, m.depth, state_dim, len(task.seeds),
-                                  key="march.train.n_points")
-            continue
-        names = {"short": ["interval"], "baseline": ["target"], "transfer": ["source", "target"]}[task.role]
-        for name, st in zip(names, _stages(cfg, task.role)):
-            key = f"{name}.train.n_points" if "n_points" in ((cfg.raw.get(name) or {}).get("train") or {}) \
-                else "train.n_points"
-            check_training_memory(st.train.n_points, cfg.width, cfg.depth, state_dim, 1, key=key)
-            if len(task.seeds) > 1:  # one seed fits; the batch is what to lower
-                check_training_memory(st.train.n_points, cfg.width, cfg.depth, state_dim, len(task.seeds),
-                                      key="execution.seed_batch", value=len(task.seeds),
-                                      advice="one seed fits: lower execution.seed_batch (or --seed-batch)")
+        SCHEMES[task.role].check_memory(cfg, len(task.seeds), state_dim)
     ev = cfg.evaluation
     steps = (ev.se_steps or cfg.eval_stage.train.n_points - 1) * ev.fine_factor
     if cfg.system.separable or cfg.system.hamiltonian is None:  # built-ins are separable

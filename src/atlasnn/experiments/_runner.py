@@ -33,24 +33,22 @@ import sys
 import time
 import uuid
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config._config import MODEL_LABELS, ExperimentConfig
-from atlasnn.experiments._executors import (
-    NoGuard,
-    SignalGuard,
-    close_dask,
-    connect_dask,
-    dask_threads,
-    run_dask,
-    run_local,
-    scheduler_address,
-)
-from atlasnn.experiments._measure import energies, energy0, integrator_rows, reference_grids, work_precision
-from atlasnn.experiments._plan import Task, check_memory, plan_tasks, trainings
+from atlasnn.evaluation import REFERENCE_DESCRIPTION, TrainingRecord, energy_drift
+from atlasnn.experiments._executor import Executor
+from atlasnn.experiments._executors import open_executor
+from atlasnn.experiments._measure import integrator_rows, reference_grids, work_precision
+from atlasnn.experiments._plan import check_memory, plan_tasks, trainings
+from atlasnn.experiments._schemes import baseline_column, column_labels, table_columns
+from atlasnn.experiments._signals import NoGuard, SignalGuard
+from atlasnn.experiments._tasks import Task
+from atlasnn.experiments.config import ExperimentConfig
+from atlasnn.fileio import json_default
+from atlasnn.report import write_report
 from atlasnn.experiments._store import (
     RunLock,
     check_run_dir,
@@ -69,8 +67,6 @@ from atlasnn.experiments._store import (
 from atlasnn.fileio import write_text
 from atlasnn.experiments._task import lr_key, run_training, system_of
 
-# the names earlier versions exported from here
-_system = system_of
 __all__ = ["RunInterrupted", "run_experiment", "resume_experiment", "divergence_advice", "load_run_config"]
 
 
@@ -91,47 +87,47 @@ class RunInterrupted(KeyboardInterrupt):
 
 def _json_round_trip(obj: Any) -> Any:
     """A JSON round trip (tuples become lists), to compare a config with a recorded one."""
-    from atlasnn.fileio import json_default
-
     return json.loads(json.dumps(obj, default=json_default, allow_nan=True))
 
 
-def divergence_advice(cfg: ExperimentConfig, r: dict) -> str | None:
-    """One line saying that a run diverged, what was kept, and what to change; None otherwise."""
-    if r.get("stop_reason") != "diverged":
+def divergence_advice(cfg: ExperimentConfig, record: Mapping | TrainingRecord) -> str | None:
+    """One line saying that a training diverged, what was kept, and what to change; None otherwise."""
+    r = _as_record(record)
+    if r.stop_reason != "diverged":
         return None
-    key = lr_key(cfg, r.get("role", "short"))
-    who = f"{r['label']}{' source' if r.get('role') == 'source' else ''} seed {r['seed']}"
-    if r.get("best_epoch", -1) >= 0:
-        kept = f"kept the parameters of epoch {r['best_epoch']} (loss {r['returned_loss']:.3e})"
+    key = lr_key(cfg, r.role)
+    if r.best_epoch >= 0:
+        kept = f"kept the parameters of epoch {r.best_epoch} (loss {r.returned_loss:.3e})"
     else:
         kept = "no finite loss was reached; kept the initial parameters"
-    lr, budget = r.get("lr"), r.get("epochs_budget")
-    lr_txt = f"now {lr:g}, e.g. {lr / 10:g}" if isinstance(lr, (int, float)) else "now ?"
-    line = (f"{who} diverged at epoch {r['diverged_epoch']} (non-finite loss); {kept}. "
-            f"Lower {key}.lr ({lr_txt}) and, if it then learns too slowly, raise {key}.epochs (now {budget}).")
-    if r.get("role") == "source":
+    lr_txt = f"now {r.lr:g}, e.g. {r.lr / 10:g}" if isinstance(r.lr, (int, float)) else "now ?"
+    line = (f"{r.who()} diverged at epoch {r.diverged_epoch} (non-finite loss); {kept}. "
+            f"Lower {key}.lr ({lr_txt}) and, if it then learns too slowly, raise {key}.epochs (now {r.epochs_budget}).")
+    if r.role == "source":
         line += " Its target starts from the kept parameters."
     return line
 
 
-def quality_warning(r: dict) -> str | None:
+def quality_warning(record: Mapping | TrainingRecord) -> str | None:
     """One line for a training judged suspect or failed (its reasons and advice); None if ok, and
     for a diverged training (:func:`divergence_advice` already says what happened and what to do)."""
-    q = r.get("quality") or {}
-    if q.get("status") in (None, "ok") or r.get("stop_reason") == "diverged":
+    r = _as_record(record)
+    q = r.quality or {}
+    if r.status in (None, "ok") or r.stop_reason == "diverged":
         return None
-    who = f"{r['label']}{' source' if r.get('role') == 'source' else ''} seed {r['seed']}"
     advice = f" {q['advice']}" if q.get("advice") else ""
-    return f"{who} is {q['status']}: {'; '.join(q.get('reasons') or [])}.{advice}"
+    return f"{r.who()} is {r.status}: {'; '.join(q.get('reasons') or [])}.{advice}"
+
+
+def _as_record(record: Mapping | TrainingRecord) -> TrainingRecord:
+    return record if isinstance(record, TrainingRecord) else TrainingRecord.from_dict(record)
 
 
 def _log_done(log, i: int, n: int, output: dict, cfg: ExperimentConfig | None = None) -> None:
-    for r in output["records"]:
-        if r["role"] != "source":
-            status = (r.get("quality") or {}).get("status")
-            log(f"  [{i}/{n}] {r['label']} seed {r['seed']}: {r['epochs']} epochs ({r['stop_reason']}), "
-                f"loss {r['returned_loss']:.3e}, {r['wall_time']:.1f} s" + (f", {status}" if status else ""))
+    for r in map(TrainingRecord.from_dict, output["records"]):
+        if r.role != "source":
+            log(f"  [{i}/{n}] {r.label} seed {r.seed}: {r.epochs} epochs ({r.stop_reason}), "
+                f"loss {r.returned_loss:.3e}, {r.wall_time:.1f} s" + (f", {r.status}" if r.status else ""))
         for line in (divergence_advice(cfg, r) if cfg is not None else None, quality_warning(r)):
             if line:
                 log(f"  {line}")
@@ -157,6 +153,7 @@ def run_experiment(
     handle_signals: bool = True,
     seed_batch: int | str | None = None,
     scheduler: str | None = None,
+    executor: Executor | None = None,
 ) -> dict[str, Any]:
     """Run every training of ``cfg`` and write the run directory ``out``; returns results.
 
@@ -169,15 +166,13 @@ def run_experiment(
     in ``out`` (use :func:`resume_experiment`, which reads the config from ``out``).
     ``handle_signals``: while running, SIGINT and SIGTERM stop training at the end of the current
     chunk (main thread only). Raises :class:`RunInterrupted` (a KeyboardInterrupt) when
-    interrupted. ``seed_batch`` None takes the config's ``execution.seed_batch``.
+    interrupted. ``seed_batch`` None takes the config's ``execution.seed_batch``. ``executor``:
+    an open :class:`~atlasnn.experiments._executors.Executor` to use (and leave open) instead of
+    one made from ``jobs`` and ``scheduler`` (a sweep runs all its points on one).
     """
     seeds = tuple(seeds if seeds is not None else cfg.seeds)
-    if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+    if executor is None and (isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1):
         raise ConfigError(f"jobs must be an integer >= 1, got {jobs!r}")
-    address = scheduler_address(scheduler, cfg.scheduler)
-    if address is not None and jobs != 1:
-        raise ConfigError(f"jobs = {jobs} and the Dask scheduler {address} cannot be combined: the "
-                          "scheduler's workers run the trainings (unset ATLASNN_SCHEDULER for local processes)")
     checkpoint_seconds()  # a bad ATLASNN_CHECKPOINT_SECONDS fails before anything is written
     out = Path(out)
     if resume:
@@ -191,29 +186,29 @@ def run_experiment(
     else:
         meta = None
         check_run_dir(out, overwrite)
-    client = connect_dask(address) if address is not None else None
+    own = executor is None
+    if own:
+        executor = open_executor(jobs, scheduler, cfg.scheduler)
     lock = None
     try:
         if resume:
             lock = RunLock(out).acquire()
             meta = read_run_meta(out)  # as it is now, under the lock
         else:
-            plan_jobs = dask_threads(client) if client is not None else jobs
-            tasks = plan_tasks(cfg, seeds, jobs=plan_jobs,
+            tasks = plan_tasks(cfg, seeds, jobs=executor.slots(),
                                seed_batch=cfg.seed_batch if seed_batch is None else seed_batch)
-            if client is None:  # Dask workers may be other machines: their memory is their own
+            if executor.local_memory:  # Dask workers may be other machines: their memory is their own
                 check_memory(cfg, tasks, system_of(cfg).state_dim)
             lock = open_run_dir(out, overwrite)
         with SignalGuard() if handle_signals else NoGuard():
-            run = _Run(cfg, out, seeds, tasks, jobs, progress, log, meta)
-            run.client, run.scheduler = client, address
+            run = _Run(cfg, out, seeds, tasks, executor, progress, log, meta)
             return run.go(overwrite=overwrite, config_text=config_text, quick=quick, report=report,
                           config_source=config_source)
     finally:
         if lock is not None:
             lock.release()
-        if client is not None:
-            close_dask(client)
+        if own:
+            executor.close()
 
 
 def _recorded_plan(meta: dict, cfg: ExperimentConfig, seeds: tuple[int, ...], out: Path) -> list[Task]:
@@ -249,14 +244,13 @@ def resume_experiment(
 class _Run:
     """One run of an experiment while it goes: directory, plan, outputs."""
 
-    def __init__(self, cfg, out, seeds, tasks, jobs, progress, log, meta):
+    def __init__(self, cfg, out, seeds, tasks, executor: Executor, progress, log, meta):
         self.cfg, self.out, self.seeds, self.tasks = cfg, Path(out), seeds, tasks
-        self.jobs, self.progress, self.log, self.meta = jobs, progress, log, meta
+        self.executor, self.progress, self.log, self.meta = executor, progress, log, meta
         self.resume = meta is not None
         self.started = time.time()
         self.previous_wall = float(meta.get("wall_time_total") or 0.0) if meta else 0.0
         self.outputs: dict[Task, dict] = {}  # per one-seed training
-        self.client, self.scheduler = None, None  # a Dask client and its scheduler's address
 
     def wall_total(self) -> float:
         return self.previous_wall + time.time() - self.started
@@ -272,16 +266,14 @@ class _Run:
                 raise
 
     def go(self, *, overwrite, config_text, quick, report, config_source) -> dict[str, Any]:
-        from atlasnn.evaluation._integrators import REFERENCE_DESCRIPTION
-
         cfg = self.cfg
         system = system_of(cfg)
         z0 = system.initial_state(cfg.system.z0)
-        e0 = energy0(system, z0)
+        e0 = float(system.energy64(z0))
         grids = reference_grids(cfg, system, z0)
         int_rows, arrays = integrator_rows(cfg, system, z0, e0, self.log)
         arrays.update({"t_eval": grids["eval"], "z_ref": grids["eval_ref"],
-                       "energy_ref": energies(system, grids["eval_ref"])})
+                       "energy_ref": system.energy64(grids["eval_ref"])})
         reference = REFERENCE_DESCRIPTION.replace("1e-12", f"{cfg.evaluation.reference_rtol:g}")
         self.record_start(overwrite, config_text, quick, config_source, reference)
         all_trainings = trainings(self.tasks)
@@ -295,8 +287,6 @@ class _Run:
             write_json(self.out / "results.json", results)
             self.log(f"{cfg.name}: trainings done in {results['wall_time_total']:.1f} s; results in {self.out}")
             if report:
-                from atlasnn.report._render import write_report
-
                 write_report(self.out)
                 self.log(f"{cfg.name}: tables and figures written to {self.out}")
         except KeyboardInterrupt:
@@ -326,7 +316,7 @@ class _Run:
             self.meta.setdefault("plan", plan)
             self.meta.setdefault("resumed", []).append(
                 {"at": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(self.started)),
-                 "command": " ".join(sys.argv), "jobs": self.jobs, "scheduler": self.scheduler})
+                 "command": " ".join(sys.argv), **self.executor.record()})
         else:
             (self.out / "models").mkdir(parents=True, exist_ok=True)
             if overwrite:  # this tool's own files of an earlier run into the same directory
@@ -336,7 +326,7 @@ class _Run:
             write_json(self.out / "config.json", {"resolved": cfg_dict, "as_given": self.cfg.raw})
             self.meta = {
                 "experiment": self.cfg.name, "profile": self.cfg.profile, "quick": quick,
-                "seeds": list(self.seeds), "jobs": self.jobs, "scheduler": self.scheduler,
+                "seeds": list(self.seeds), **self.executor.record(),
                 "versions": versions(),
                 "started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(self.started)),
                 "command": " ".join(sys.argv), "reference": reference, "status": "running",
@@ -359,30 +349,26 @@ class _Run:
         for task in self.tasks:
             left = tuple(s for s in task.seeds if task.one(s) not in self.outputs)
             if left:
-                todo.append(Task(task.role, task.model, left))
+                todo.append(dataclasses.replace(task, seeds=left))
         batches = sorted({len(t.seeds) for t in self.tasks})
-        where = f"jobs={self.jobs}" if self.client is None else \
-            f"Dask scheduler {self.scheduler} ({dask_threads(self.client)} worker threads)"
+        where = self.executor.describe()
         self.log(f"{self.cfg.name}: {len(all_trainings)} training(s) "
                  f"({', '.join(sorted({t.column for t in self.tasks}))}) x seeds {list(self.seeds)}, "
                  f"{where}, seeds per program: {'/'.join(map(str, batches))}")
         # On Dask a task is run again when its worker dies; resume=True makes that attempt continue
         # from the states the earlier one saved. It only ever reads states and sources recorded with
         # this run's run_id, and a new run's directory holds none until its tasks write them.
-        dask = self.client is not None
+        ex = self.executor
         work = functools.partial(run_training, self.cfg, run_dir=str(self.out), grids=grids,
-                                 progress=self.progress and self.jobs == 1 and not dask, run_id=run_id,
-                                 resume=self.resume or dask)
+                                 progress=self.progress and ex.shows_progress, run_id=run_id,
+                                 resume=self.resume or ex.reruns_tasks)
 
         def on_done(task: Task, output: dict[int, dict]) -> None:
             for seed in task.seeds:
                 self.outputs[task.one(seed)] = output[seed]
                 _log_done(self.log, len(self.outputs), len(all_trainings), output[seed], self.cfg)
 
-        if dask:
-            run_dask(todo, work, on_done, self.client, shared_dir=self.out)
-        else:
-            run_local(todo, work, on_done, jobs=self.jobs)
+        ex.run(todo, work, on_done, shared_dir=self.out)
 
     def collect(self, system, e0, grids, arrays, int_rows, quick, reference) -> dict[str, Any]:
         """results.json's content from the outputs of every training (in plan order)."""
@@ -391,8 +377,6 @@ class _Run:
         runs = [r for o in ordered for r in o["records"]]
         for o in ordered:
             arrays.update(o["arrays"])
-        from atlasnn.evaluation import _metrics as metrics
-
         warnings = [w for w in (divergence_advice(cfg, r) for r in runs) if w]
         warnings += [w for w in (quality_warning(r) for r in runs) if w]
         warnings += [n for o in ordered for n in o.get("notes", [])]
@@ -401,11 +385,11 @@ class _Run:
             "kind": cfg.kind, "description": cfg.description,
             "quick": quick,
             "system": system.describe(), "state_names": list(system.state_names), "energy0": e0,
-            "seeds": list(self.seeds), "tolerance": st.train.tolerance, "columns": cfg.columns(),
-            "baseline": cfg.baseline_column(), "labels": {c: MODEL_LABELS.get(c, c) for c in cfg.columns()},
+            "seeds": list(self.seeds), "tolerance": st.train.tolerance, "columns": table_columns(cfg),
+            "baseline": baseline_column(cfg), "labels": column_labels(cfg),
             "interval": [st.t0, st.T], "source_interval": [cfg.source.t0, cfg.source.T] if cfg.source else None,
             "eval_points": int(grids["eval"].size), "reference": reference,
-            "reference_energy_drift": metrics.energy_drift(arrays["energy_ref"], e0),
+            "reference_energy_drift": energy_drift(arrays["energy_ref"], e0),
             "follows": cfg.follows, "runs": runs, "integrators": int_rows,
             "warnings": warnings, "wall_time_total": self.wall_total(),
         }

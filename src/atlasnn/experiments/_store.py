@@ -25,13 +25,12 @@ import math
 import os
 import platform
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.experiments._plan import Task
-from atlasnn.fileio import write_json, write_npz  # noqa: F401  (re-exported: the run's writers)
+from atlasnn.fileio import write_json, write_npz
 
 TASK_DIR = "tasks"
 STATE_DIR = "state"
@@ -66,7 +65,7 @@ def versions() -> dict[str, str]:
     import optax
     import scipy
 
-    from atlasnn import __version__
+    from atlasnn.version import __version__
 
     return {
         "atlasnn": __version__, "jax": jax.__version__, "jaxlib": jaxlib.__version__,
@@ -211,7 +210,20 @@ def load_run_config(out: str | Path):
 
 
 # ------------------------------------------------------------- records and states
-def task_stem(task: Task) -> str:
+class Training(Protocol):
+    """What the store needs of one training (an :class:`~atlasnn.experiments._tasks.Task` of one seed)."""
+
+    role: str
+    model: str
+
+    @property
+    def seed(self) -> int: ...
+
+    @property
+    def state_names(self) -> tuple[str, ...]: ...
+
+
+def task_stem(task: Training) -> str:
     """The file name (without suffix) of a finished training's record in ``tasks/``."""
     return f"{task.role}_{task.model}_seed{task.seed}"
 
@@ -227,12 +239,13 @@ def source_state_path(run_dir: Path, model: str, seed: int) -> Path:
     return state_path(run_dir, f"{model}_source", seed)
 
 
-def state_files(run_dir: Path, training: Task) -> list[Path]:
-    """Every state file one training may leave behind."""
-    files = [state_path(run_dir, training.column, training.seed)]
-    if training.role == "transfer":
-        src = source_state_path(run_dir, training.model, training.seed)
-        files += [src, src.with_suffix(".json")]
+def state_files(run_dir: Path, training: Training) -> list[Path]:
+    """Every state file one training may leave behind: a state per name of its ``state_names``
+    (its column's; a transfer's source too), each with the JSON that may sit beside it."""
+    files = []
+    for name in training.state_names:
+        path = state_path(run_dir, name, training.seed)
+        files += [path, path.with_suffix(".json")]
     return files
 
 
@@ -244,7 +257,7 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def write_record(run_dir: Path, training: Task, run_id: str | None, output: dict) -> None:
+def write_record(run_dir: Path, training: Training, run_id: str | None, output: dict) -> None:
     """Keep a finished training: its trajectories (.npz), then its record (.json, the marker)."""
     tdir = Path(run_dir) / TASK_DIR
     tdir.mkdir(exist_ok=True)
@@ -257,7 +270,7 @@ def write_record(run_dir: Path, training: Task, run_id: str | None, output: dict
     })
 
 
-def load_record(run_dir: Path, training: Task, run_id: str) -> dict | None:
+def load_record(run_dir: Path, training: Training, run_id: str) -> dict | None:
     """The output of a training finished earlier in this run (same run_id, intact files), or None."""
     tdir = Path(run_dir) / TASK_DIR
     path = tdir / f"{task_stem(training)}.json"
@@ -280,7 +293,7 @@ def load_record(run_dir: Path, training: Task, run_id: str) -> dict | None:
     return {"records": records, "arrays": arrays, "notes": list(data.get("notes") or [])}
 
 
-def forget_trainings(run_dir: Path, trainings: list[Task]) -> None:
+def forget_trainings(run_dir: Path, trainings: list[Training]) -> None:
     """Remove this tool's own records and states of these trainings (``--overwrite``)."""
     for t in trainings:
         stem = Path(run_dir) / TASK_DIR / task_stem(t)
@@ -288,7 +301,7 @@ def forget_trainings(run_dir: Path, trainings: list[Task]) -> None:
             path.unlink(missing_ok=True)
 
 
-def clear_states(run_dir: Path, trainings: list[Task]) -> None:
+def clear_states(run_dir: Path, trainings: list[Training]) -> None:
     """After a complete run: the states are no longer needed (foreign files are left alone)."""
     for t in trainings:
         for path in state_files(run_dir, t):

@@ -39,15 +39,21 @@ from typing import Any
 
 import numpy as np
 
+import tomli_w
+
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config._config import ExperimentConfig, apply_profile, parse_config
-from atlasnn.experiments._executors import close_dask, connect_dask, scheduler_address
+from atlasnn.evaluation import METRICS as METRIC_REGISTRY
+from atlasnn.evaluation import TrainingRecord
+from atlasnn.experiments._executor import Executor
+from atlasnn.experiments._executors import open_executor
+from atlasnn.experiments._runner import resume_experiment, run_experiment
 from atlasnn.experiments._store import RunLock, check_run_dir, one_line, write_json
-from atlasnn.evaluation._metrics import METRIC_NAMES
+from atlasnn.experiments.config import ExperimentConfig, apply_profile, parse_config
+from atlasnn.report import format_number, plot_sweep
 
 SWEEP_FILE = "sweep.json"
-#: what the summary can tabulate: a per-state metric (of the first state) or the energy drift
-METRICS = (*METRIC_NAMES, "energy_drift")
+#: what the summary can tabulate: a per-state metric (of the first state) or a scalar one
+METRICS = tuple(METRIC_REGISTRY)
 _KEY_RE = re.compile(r"[A-Za-z0-9_-]+(?:\.[A-Za-z0-9_-]+)*")
 
 
@@ -191,19 +197,12 @@ def _point_state(pdir: Path) -> str:
     return "resumable" if isinstance(meta.get("run_id"), str) else "new"
 
 
-def _check_scheduler(scheduler: str | None) -> None:
-    """Connect once before anything is written: a bad address fails here, in one line."""
-    address = scheduler_address(scheduler)
-    if address is not None:
-        close_dask(connect_dask(address))
-
-
 class _Sweep:
     """A sweep while it runs: its directory, its record (sweep.json) and its executor."""
 
-    def __init__(self, out: Path, spec: dict, *, jobs, scheduler, seed_batch, progress, log):
+    def __init__(self, out: Path, spec: dict, *, executor: Executor, seed_batch, progress, log):
         self.out, self.spec, self.log = Path(out), spec, log
-        self.run_kw = dict(jobs=jobs, scheduler=scheduler, progress=progress, log=log)
+        self.run_kw = dict(executor=executor, progress=progress, log=log)
         self.seed_batch = seed_batch
 
     def save(self) -> None:
@@ -213,13 +212,9 @@ class _Sweep:
         data = tomllib.loads((self.out / "config.toml").read_text(encoding="utf-8"))
         data = apply_profile(data, self.spec.get("profile"), self.spec["config_source"])
         pdata = point_data(data, point["set"], self.spec["quick"])
-        import tomli_w
-
         return parse_config(pdata, quick=self.spec["quick"], source=self.spec["config_source"]), tomli_w.dumps(pdata)
 
     def run_point(self, point: dict) -> None:
-        from atlasnn.experiments._runner import resume_experiment, run_experiment
-
         pdir = self.out / point["dir"]
         state = _point_state(pdir)
         if state == "complete":
@@ -288,7 +283,7 @@ def run_sweep(config: str | Path, sets: list[str], *, seeds: tuple[int, ...] | N
     named = f"-{base.profile}" if profile is not None else ""
     out = Path(out or f"runs/sweep-{base.name}{named}{'-quick' if quick else ''}")
     check_run_dir(out, overwrite)
-    _check_scheduler(scheduler)
+    executor = open_executor(jobs, scheduler, base.scheduler)  # a bad address fails here, in one line
     spec = {
         "config_source": str(config), "experiment": base.name, "quick": bool(quick), "profile": profile,
         "seeds": None if seeds is None else [int(s) for s in seeds], "metric": metric,
@@ -297,16 +292,17 @@ def run_sweep(config: str | Path, sets: list[str], *, seeds: tuple[int, ...] | N
         "seed_batch": seed_batch, "command": " ".join(sys.argv),
         "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
-    lock = _lock(out)
-    try:
-        check_run_dir(out, overwrite)  # again, under the lock
-        (out / "config.toml").write_text(text, encoding="utf-8")
-        sweep = _Sweep(out, spec, jobs=jobs, scheduler=scheduler, seed_batch=seed_batch, progress=progress, log=log)
-        sweep.save()
-        log(f"sweep: {len(points)} point(s) x seeds {'from the config' if seeds is None else list(seeds)} in {out}")
-        return out, sweep.go()
-    finally:
-        lock.release()
+    with executor:
+        lock = _lock(out)
+        try:
+            check_run_dir(out, overwrite)  # again, under the lock
+            (out / "config.toml").write_text(text, encoding="utf-8")
+            sweep = _Sweep(out, spec, executor=executor, seed_batch=seed_batch, progress=progress, log=log)
+            sweep.save()
+            log(f"sweep: {len(points)} point(s) x seeds {'from the config' if seeds is None else list(seeds)} in {out}")
+            return out, sweep.go()
+        finally:
+            lock.release()
 
 
 def read_sweep(out: str | Path) -> dict:
@@ -350,27 +346,26 @@ def resume_sweep(out: str | Path, *, config: str | Path | None = None, sets: lis
         if metric not in METRICS:
             raise ConfigError(f"--metric {metric}: choose one of {list(METRICS)}")
         spec["metric"] = metric
-    _check_scheduler(scheduler)
-    lock = RunLock(out).acquire()
-    try:
-        spec = {**read_sweep(out), "metric": spec["metric"]}  # as it is now, under the lock
-        spec.setdefault("resumed", []).append({"at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                                               "command": " ".join(sys.argv)})
-        sweep = _Sweep(out, spec, jobs=jobs, scheduler=scheduler,
-                       seed_batch=seed_batch if seed_batch is not None else spec.get("seed_batch", "auto"),
-                       progress=progress, log=log)
-        done = sum(_point_state(out / p["dir"]) == "complete" for p in spec["points"])
-        log(f"sweep: resuming {out}: {done} of {len(spec['points'])} point(s) complete")
-        return out, sweep.go()
-    finally:
-        lock.release()
+    with open_executor(jobs, scheduler) as executor:
+        lock = RunLock(out).acquire()
+        try:
+            spec = {**read_sweep(out), "metric": spec["metric"]}  # as it is now, under the lock
+            spec.setdefault("resumed", []).append({"at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                                                   "command": " ".join(sys.argv)})
+            sweep = _Sweep(out, spec, executor=executor,
+                           seed_batch=seed_batch if seed_batch is not None else spec.get("seed_batch", "auto"),
+                           progress=progress, log=log)
+            done = sum(_point_state(out / p["dir"]) == "complete" for p in spec["points"])
+            log(f"sweep: resuming {out}: {done} of {len(spec['points'])} point(s) complete")
+            return out, sweep.go()
+        finally:
+            lock.release()
 
 
 # ------------------------------------------------------------------------ summary
-def _value(record: dict, metric: str, state: str) -> float:
-    m = record["metrics"]
-    value = m["energy_drift"] if metric == "energy_drift" else m[metric][state]
-    return float("nan") if value is None else float(value)
+def _value(record: TrainingRecord, metric: str, state: str) -> float:
+    value = record.metric(metric, state if METRIC_REGISTRY[metric].per_state else None)
+    return float("nan") if value is None else value
 
 
 def summarise_point(pdir: Path, metric: str) -> dict:
@@ -379,8 +374,9 @@ def summarise_point(pdir: Path, metric: str) -> dict:
     results = json.loads((pdir / "results.json").read_text(encoding="utf-8"))
     state = results["state_names"][0]
     columns = {}
+    records = [TrainingRecord.from_dict(r) for r in results["runs"]]
     for col in results["columns"]:
-        runs = [r for r in results["runs"] if r["column"] == col and r["role"] != "source"]
+        runs = [r for r in records if r.column == col and r.in_table]
         if not runs:
             continue  # the classical integrator columns
         values = np.array([_value(r, metric, state) for r in runs], dtype=float)
@@ -391,8 +387,6 @@ def summarise_point(pdir: Path, metric: str) -> dict:
 
 
 def _number(x: float) -> str:
-    from atlasnn.report._tables import format_number
-
     return format_number(x)
 
 
@@ -403,7 +397,7 @@ def write_summary(out: Path, spec: dict) -> list[dict]:
             for p in spec["points"]]
     cols = list(dict.fromkeys(c for r in rows for c in r["columns"]))
     labels = {c: next(r["columns"][c]["label"] for r in rows if c in r["columns"]) for c in cols}
-    what = f"{metric}" if metric == "energy_drift" else f"{metric} of {rows[0]['state']}"
+    what = f"{metric} of {rows[0]['state']}" if METRIC_REGISTRY[metric].per_state else metric
     lines = [f"# Sweep of {spec['experiment']}: {what}, median [min–max] over seeds", "",
              "| point | " + " | ".join(keys) + " | seeds | " + " | ".join(labels[c] for c in cols) + " |",
              "|---" * (len(keys) + len(cols) + 2) + "|"]
@@ -420,7 +414,5 @@ def write_summary(out: Path, spec: dict) -> list[dict]:
         for r in rows:
             stats = [repr(r["columns"][c][s]) if c in r["columns"] else "" for c in cols for s in ("median", "min", "max")]
             w.writerow([r["point"], r["dir"], *(_value_text(r["set"][k]) for k in keys), r["seeds"], *stats])
-    from atlasnn.report._sweep_plot import plot_sweep
-
     plot_sweep(out / "sweep", spec, rows, labels, what)
     return rows

@@ -2,11 +2,12 @@
 
 :func:`run_training` is a plain function of (config, task, run directory, grids): the local
 executor calls it in-process or in worker processes, the Dask executor on any worker that sees
-the run directory. It trains the task's seeds together (:func:`atlasnn.training._train.train_batch`), writes
-one checkpoint and one record per seed, and returns the records and trajectories per seed.
+the run directory. Its scheme (:data:`~atlasnn.experiments._schemes.SCHEMES`) trains the task's
+seeds together through a :class:`TaskRun`, which writes one checkpoint and one record per seed;
+it returns the records and trajectories per seed.
 
 Interrupts and resume. Every chunk of epochs the host copy of each seed's
-:class:`~atlasnn.training._train.TrainState` is kept; it is written to ``state/`` every
+:class:`~atlasnn.training.TrainState` is kept; it is written to ``state/`` every
 ``ATLASNN_CHECKPOINT_SECONDS`` seconds and when the task is interrupted (KeyboardInterrupt,
 re-raised after saving). A transfer chain also keeps each finished source (model, final state with
 its Adam moments, record), so an interrupted target can be rebuilt exactly. With ``resume``, the
@@ -17,25 +18,27 @@ of the same batch — and a missing or unusable state means that training starts
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from pathlib import Path
 from typing import Any, Callable
 
-import jax
 import numpy as np
 
+from atlasnn.checkpoint import load_checkpoint, load_state, save_checkpoint, save_piecewise, save_state
 from atlasnn.errors import CheckpointError
-from atlasnn.experiments.config._config import MODEL_LABELS, ExperimentConfig, Stage
-from atlasnn.experiments._measure import energy0, measure_solution
-from atlasnn.experiments._plan import Task
+from atlasnn.evaluation import MarchSummary, TrainingRecord, judge_training, measure_solution
+from atlasnn.experiments import _schemes
+from atlasnn.experiments._schemes import SCHEMES, column_label, host_state
+from atlasnn.experiments._signals import check_interrupt
+from atlasnn.experiments._tasks import Task
+from atlasnn.experiments.config import ExperimentConfig, Stage
+from atlasnn.nn import make_model
+from atlasnn.solutions import Solution
+from atlasnn.training import polish
 from atlasnn.experiments._store import (
     checkpoint_seconds,
-    one_line,
-    source_state_path,
     state_files,
     state_path,
-    write_json,
     write_record,
 )
 
@@ -53,25 +56,6 @@ def system_of(cfg: ExperimentConfig):
     return sysm
 
 
-def _hook(event: str, task: Task, column: str, state: Any) -> None:
-    """A seam for tests: called per seed after every chunk of epochs (``"chunk"``, with the host
-    copy of that seed's TrainState) and when a transfer source is done (``"source_done"``)."""
-
-
-def _interrupt_check() -> None:
-    """Act on a deferred SIGINT/SIGTERM (the executor's signal guard); a safe point."""
-    from atlasnn.experiments._executors import check_interrupt
-
-    check_interrupt()
-
-
-def _host(state):
-    from atlasnn.training._train import TrainState
-
-    return TrainState(jax.device_get(state.model), jax.device_get(state.opt_state),
-                      jax.device_get(state.track), int(state.epoch), state.history)
-
-
 def lr_key(cfg: ExperimentConfig, role: str) -> str:
     """The config table that sets a training's lr: a stage's own ``train`` table, else ``train``."""
     stage = {"short": "interval", "source": "source", "target": "target"}.get(role, "interval")
@@ -81,8 +65,6 @@ def lr_key(cfg: ExperimentConfig, role: str) -> str:
 
 def verdict(cfg: ExperimentConfig, role: str, result, energy: np.ndarray, e0: float, stage: Stage) -> dict:
     """The quality verdict of a finished training (:mod:`atlasnn.evaluation._quality`), as JSON."""
-    from atlasnn.evaluation._quality import judge_training
-
     returned = float(result.history.loss[result.best_epoch]) if result.best_epoch >= 0 else result.final_loss
     return judge_training(
         result.history.loss, stop_reason=result.stop_reason, tolerance=result.config.tolerance, energy=energy,
@@ -92,58 +74,53 @@ def verdict(cfg: ExperimentConfig, role: str, result, energy: np.ndarray, e0: fl
     ).as_dict()
 
 
-def record(training: Task, role: str, column: str, result, metrics_: dict, ckpt: str, stage: Stage) -> dict:
-    """The results.json entry of one finished training (or transfer source)."""
-    gamma = {k: float(v) for k, v in result.model.scaling.gamma().items()}
-    return {
-        "column": column, "label": MODEL_LABELS.get(column, column), "model": training.model,
-        "seed": training.seed, "role": role, "interval": [stage.t0, stage.T], "metrics": metrics_,
-        "gamma": gamma, "epochs": result.epochs_run, "tolerance_met": result.tolerance_met,
-        "stop_reason": result.stop_reason, "best_epoch": result.best_epoch,
-        "diverged_epoch": result.diverged_epoch,
-        "wall_time": result.wall_time + float(result.info.get("wall_time_before", 0.0)),
-        "compile_time": result.compile_time, "batch_size": result.info.get("batch_size", 1),
-        "final_loss": result.final_loss, "best_loss": result.best_loss,
-        "returned_loss": float(result.history.loss[result.best_epoch]) if result.best_epoch >= 0 else result.final_loss,
-        "lr": result.config.lr, "epochs_budget": result.config.epochs,
-        "resumed_from_epoch": result.info.get("resumed_from_epoch"),
-        "checkpoint": ckpt,
-    }
+def record(training: Task, role: str, column: str, result, metrics_: dict, ckpt: str, stage: Stage) -> TrainingRecord:
+    """The record of one finished training (or transfer source)."""
+    returned = float(result.history.loss[result.best_epoch]) if result.best_epoch >= 0 else result.final_loss
+    return TrainingRecord(
+        column=column, label=column_label(training.model, "short" if role == "source" else training.role),
+        model=training.model, seed=training.seed, role=role, interval=(stage.t0, stage.T), metrics=metrics_,
+        gamma={k: float(v) for k, v in result.model.scaling.gamma().items()}, epochs=result.epochs_run,
+        stop_reason=result.stop_reason, returned_loss=returned, checkpoint=ckpt,
+        tolerance_met=result.tolerance_met, best_epoch=result.best_epoch, diverged_epoch=result.diverged_epoch,
+        wall_time=result.wall_time + float(result.info.get("wall_time_before", 0.0)),
+        compile_time=result.compile_time, batch_size=result.info.get("batch_size", 1),
+        final_loss=result.final_loss, best_loss=result.best_loss, lr=result.config.lr,
+        epochs_budget=result.config.epochs, resumed_from_epoch=result.info.get("resumed_from_epoch"),
+        polish=result.info.get("polish"),
+    )
 
 
-def march_record(training: Task, sol, scheme, metrics_: dict, ckpt: str, stage: Stage) -> dict:
-    """The results.json entry of a time-marching training: the worst window's loss is its loss."""
+def march_record(training: Task, sol, scheme, metrics_: dict, ckpt: str, stage: Stage) -> TrainingRecord:
+    """The record of a time-marching training: the worst window's loss is its loss."""
     windows = sol.windows
     losses = [float(r.loss) for r in windows]
     reasons = {r.stop_reason for r in windows}
     stop = "diverged" if "diverged" in reasons else ("tolerance" if reasons == {"tolerance"} else "budget")
     first = scheme.first or scheme.train
-    return {
-        "column": training.column, "label": MODEL_LABELS.get(training.column, training.column),
-        "model": training.model, "seed": training.seed, "role": "march", "interval": [stage.t0, stage.T],
-        "metrics": metrics_, "gamma": sol.gamma, "epochs": int(sum(r.epochs for r in windows)),
-        "tolerance_met": stop == "tolerance", "stop_reason": stop, "best_epoch": -1, "diverged_epoch": None,
-        "wall_time": float(sum(r.wall_time for r in windows)), "compile_time": float(sum(r.compile_time for r in windows)),
-        "batch_size": int(sol.info.get("batch_size", 1)), "final_loss": losses[-1], "best_loss": min(losses),
-        "returned_loss": max(losses), "lr": scheme.train.lr,
-        "epochs_budget": first.epochs + scheme.train.epochs * (len(windows) - 1),
-        "resumed_from_epoch": None, "checkpoint": ckpt, "n_windows": len(windows), "window": sol.window_length,
-        "window_losses": losses, "window_epochs": [int(r.epochs) for r in windows],
-    }
+    return TrainingRecord(
+        column=training.column, label=column_label(training.model, training.role), model=training.model,
+        seed=training.seed, role="march", interval=(stage.t0, stage.T), metrics=metrics_, gamma=sol.gamma,
+        epochs=int(sum(r.epochs for r in windows)), stop_reason=stop, returned_loss=max(losses), checkpoint=ckpt,
+        tolerance_met=stop == "tolerance", wall_time=float(sum(r.wall_time for r in windows)),
+        compile_time=float(sum(r.compile_time for r in windows)), batch_size=int(sol.info.get("batch_size", 1)),
+        final_loss=losses[-1], best_loss=min(losses), lr=scheme.train.lr,
+        epochs_budget=first.epochs + scheme.train.epochs * (len(windows) - 1),
+        march=MarchSummary(n_windows=len(windows), window=sol.window_length, window_losses=losses,
+                           window_epochs=[int(r.epochs) for r in windows]),
+    )
 
 
-def march_verdict(sol, rec: dict, energy: np.ndarray, e0: float, stage: Stage) -> dict:
+def march_verdict(sol, rec: TrainingRecord, energy: np.ndarray, e0: float, stage: Stage) -> dict:
     """The quality verdict of a time-marching training: its windows' loss histories one after the
     other, the worst window's loss as the returned one."""
-    from atlasnn.evaluation._quality import judge_training
-
     history = np.concatenate([np.asarray(r.history, np.float64) for r in sol.windows if r.history is not None])
-    return judge_training(history, stop_reason=rec["stop_reason"], tolerance=None, energy=energy, energy0=e0,
-                          gamma=rec["gamma"], returned_loss=rec["returned_loss"], interval=(stage.t0, stage.T),
-                          lr=rec["lr"], epochs_budget=rec["epochs_budget"], key="march.train").as_dict()
+    return judge_training(history, stop_reason=rec.stop_reason, tolerance=None, energy=energy, energy0=e0,
+                          gamma=rec.gamma, returned_loss=rec.returned_loss, interval=(stage.t0, stage.T),
+                          lr=rec.lr, epochs_budget=rec.epochs_budget, key="march.train").as_dict()
 
 
-class _TaskRun:
+class TaskRun:
     """The trainings of one task while they run: system, grids, unsaved states, outputs."""
 
     def __init__(self, cfg, task, run_dir, grids, progress, run_id, resume):
@@ -151,7 +128,7 @@ class _TaskRun:
         self.progress, self.run_id, self.resume = progress, run_id, resume
         self.system = system_of(cfg)
         self.z0 = self.system.initial_state(cfg.system.z0)
-        self.e0 = energy0(self.system, self.z0)
+        self.e0 = float(self.system.energy64(self.z0))
         self.names = list(self.system.state_names)
         self.out = {s: {"records": [], "arrays": {}, "notes": []} for s in task.seeds}
         self.unsaved: dict[Path, tuple] = {}  # state file -> (host TrainState, TrainConfig, extra)
@@ -163,8 +140,6 @@ class _TaskRun:
         self.out[seed]["notes"].append(text)
 
     def write_state(self, path: Path) -> None:
-        from atlasnn.checkpoint._single import save_state
-
         state, tc, extra = self.unsaved.pop(path)
         save_state(path, state, self.system, tc, extra=extra)
 
@@ -179,8 +154,6 @@ class _TaskRun:
 
     def load_resume(self, path: Path, seed: int):
         """(saved TrainState of this run or None, wall time it had already taken)."""
-        from atlasnn.checkpoint._single import load_checkpoint, load_state
-
         if not self.resume or not path.is_file():
             return None, 0.0
         try:
@@ -210,16 +183,16 @@ class _TaskRun:
 
         def on_chunk(states) -> None:
             nonlocal last_save
-            snaps = [_host(state) for state in states]
+            snaps = [host_state(state) for state in states]
             for s, path, tc, wall0, snap in zip(seeds, paths, tcs, walls0, snaps):
                 self.keep(path, snap, tc, column, s, wall0 + time.perf_counter() - t_start)
             for s, snap in zip(seeds, snaps):  # every seed is kept before a hook can interrupt
-                _hook("chunk", self.task.one(s), column, snap)
+                _schemes._hook("chunk", self.task.one(s), column, snap)
             if time.monotonic() - last_save >= self.every:
                 for path in paths:
                     self.write_state(path)
                 last_save = time.monotonic()
-            _interrupt_check()
+            check_interrupt()
 
         results = start(None if all(s is None for s in states0) else states0, on_chunk)
         if any(r.stop_reason == "interrupted" for r in results):
@@ -230,10 +203,8 @@ class _TaskRun:
         return results
 
     def new_models(self, model_name: str, stage: Stage, seeds: list[int]) -> list:
-        from atlasnn.nn._trial import MODEL_SCALINGS, make_model
-
         cfg = self.cfg
-        return [make_model(self.z0, scaling=MODEL_SCALINGS[model_name], width=cfg.width, depth=cfg.depth,
+        return [make_model(self.z0, scaling=model_name, width=cfg.width, depth=cfg.depth,
                            t0=stage.t0, gamma=cfg.gamma_init.get(model_name), activation=cfg.activation,
                            first_layer_scale=cfg.first_layer_scale, seed=s) for s in seeds]
 
@@ -241,13 +212,14 @@ class _TaskRun:
         return [stage.train.to_train_config(stage.T, s, self.progress, freeze_gamma=freeze_gamma) for s in seeds]
 
     def label(self, column: str, seeds: list[int]) -> str:
-        who = MODEL_LABELS.get(column, column)
+        if column == self.task.column:
+            who = column_label(self.task.model, self.task.role)
+        else:
+            who = column_label(column, "short") if column == self.task.model else column
         return f"{who} seed {seeds[0]}" if len(seeds) == 1 else f"{who} seeds {seeds[0]}-{seeds[-1]}"
 
     # ---------------------------------------------------------------- results
     def save(self, result, column: str, role: str, stage: Stage, seed: int) -> str:
-        from atlasnn.checkpoint._single import save_checkpoint
-
         rel = f"models/{column}{'_source' if role == 'source' else ''}_seed{seed}.npz"
         save_checkpoint(
             self.run_dir / rel, result.model, self.system, history=result.history,
@@ -261,8 +233,6 @@ class _TaskRun:
     def polished(self, result, stage: Stage) -> None:
         """L-BFGS after Adam ([polish]): the result's model is replaced by the polished one (never
         worse) and the phase is recorded in ``result.info["polish"]``."""
-        from atlasnn.training._polish import polish
-
         pol = polish(result.model, self.system, stage.T, self.cfg.polish.replace(lam_reg=result.config.lam_reg),
                      energy0=self.e0)
         result.info["polish"] = {"steps": pol.steps, "stop_reason": pol.stop_reason,
@@ -270,8 +240,6 @@ class _TaskRun:
         result.model = pol.model
 
     def finish_march(self, sol, scheme, stage: Stage, seed: int) -> None:
-        from atlasnn.checkpoint._single import save_piecewise
-
         column = self.task.column
         rel = f"models/{column}_seed{seed}.npz"
         save_piecewise(self.run_dir / rel, sol, train_config=dataclasses.asdict(scheme),
@@ -279,145 +247,24 @@ class _TaskRun:
                               "role": "march", "seed": seed, "interval": [stage.t0, stage.T]})
         per, z, energy = measure_solution(sol, self.grids["eval"], self.grids["eval_ref"], self.names, self.e0)
         rec = march_record(self.task.one(seed), sol, scheme, per, rel, stage)
-        rec["quality"] = march_verdict(sol, rec, energy, self.e0, stage)
-        self.out[seed]["records"].append(rec)
+        rec.quality = march_verdict(sol, rec, energy, self.e0, stage)
+        self.out[seed]["records"].append(rec.as_dict())
         self.out[seed]["arrays"][f"pred_{column}_seed{seed}"] = z
         self.out[seed]["arrays"][f"energy_{column}_seed{seed}"] = energy
 
     def finish(self, result, column: str, role: str, stage: Stage, t_key: str, seed: int) -> dict:
-        from atlasnn.solutions._solution import Solution
-
         if self.cfg.polish is not None and role != "source":
             self.polished(result, stage)
 
         sol = Solution(result.model, self.system, (stage.t0, stage.T))
         per, z, energy = measure_solution(sol, self.grids[t_key], self.grids[t_key + "_ref"], self.names, self.e0)
         rec = record(self.task.one(seed), role, column, result, per, self.save(result, column, role, stage, seed), stage)
-        rec["quality"] = verdict(self.cfg, role, result, energy, self.e0, stage)
-        if "polish" in result.info:
-            rec["polish"] = result.info["polish"]
-        self.out[seed]["records"].append(rec)
+        rec.quality = verdict(self.cfg, role, result, energy, self.e0, stage)
+        self.out[seed]["records"].append(rec.as_dict())
         if role != "source":
             self.out[seed]["arrays"][f"pred_{column}_seed{seed}"] = z
             self.out[seed]["arrays"][f"energy_{column}_seed{seed}"] = energy
         return rec
-
-
-def _train_alone(run: _TaskRun) -> None:
-    """A short run, or the baseline HNN from scratch on the target interval."""
-    from atlasnn.training._train import train_batch
-
-    task, cfg, seeds = run.task, run.cfg, list(run.task.seeds)
-    short = task.role == "short"
-    st = cfg.stage if short else cfg.target
-    model_name = task.model if short else "hnn"
-    tcs = run.configs(st, seeds)
-    models = run.new_models(model_name, st, seeds)
-    results = run.stage(task.column, seeds, tcs, lambda s0, cb: train_batch(
-        models, run.system, st.T, tcs, resumes=s0, desc=run.label(task.column, seeds), on_chunk=cb))
-    for seed, res in zip(seeds, results):
-        run.finish(res, task.column, "short" if short else "target", st, "eval", seed)
-
-
-def _load_source(run: _TaskRun, seed: int):
-    """A finished source of this run (record, returned model, final Adam state), or None."""
-    from atlasnn.checkpoint._single import load_checkpoint, load_state
-
-    spath = source_state_path(run.run_dir, run.task.model, seed)
-    marker = spath.with_suffix(".json")
-    if not run.resume or not marker.is_file() or not spath.is_file():
-        return None
-    try:
-        data = json.loads(marker.read_text(encoding="utf-8"))
-        if data.get("run_id") != run.run_id:
-            return None
-        rec = data["record"]
-        model = load_checkpoint(run.run_dir / rec["checkpoint"], run.system).model
-        opt_state = load_state(spath, run.system).opt_state
-    except (OSError, ValueError, KeyError, TypeError, CheckpointError) as exc:
-        run.note(seed, f"the saved source of {run.task.column} seed {seed} is not usable ({one_line(exc)}); "
-                       "training it again")
-        return None
-    return rec, model, opt_state
-
-
-def _train_sources(run: _TaskRun, seeds: list[int]) -> dict[int, tuple]:
-    """Train the sources of ``seeds``; keep each finished one for an interrupted target."""
-    from atlasnn.training._train import train_batch
-
-    task, src = run.task, run.cfg.source
-    src_col = f"{task.model}_source"
-    for s in seeds:  # a target state without its source: that chain starts over
-        target_state = state_path(run.run_dir, task.column, s)
-        if run.resume and target_state.is_file():
-            run.note(s, f"no usable source for the saved target state of {task.column} seed {s}; "
-                        "training the chain again")
-            target_state.unlink()
-    tcs = run.configs(src, seeds)
-    models = run.new_models(task.model, src, seeds)
-    results = run.stage(src_col, seeds, tcs, lambda s0, cb: train_batch(
-        models, run.system, src.T, tcs, resumes=s0, on_chunk=cb,
-        desc=f"{run.label(task.model, seeds)} source"))
-    done = {}
-    for seed, tc, res in zip(seeds, tcs, results):
-        rec = run.finish(res, task.model, "source", src, "source", seed)
-        spath = source_state_path(run.run_dir, task.model, seed)
-        run.keep(spath, _host(res.state), tc, src_col, seed, rec["wall_time"])
-        run.write_state(spath)
-        write_json(spath.with_suffix(".json"), {"run_id": run.run_id, "record": rec})
-        done[seed] = (res.model, res.opt_state)
-    for seed in seeds:
-        _hook("source_done", task.one(seed), src_col, None)
-    _interrupt_check()
-    return done
-
-
-def _train_chain(run: _TaskRun) -> None:
-    """Transfer chains: sources (γ learned) → targets (γ frozen or thawed, Adam carried)."""
-    from atlasnn.training._transfer import transfer_batch
-
-    task, cfg, seeds = run.task, run.cfg, list(run.task.seeds)
-    sources: dict[int, tuple] = {}
-    for s in seeds:
-        loaded = _load_source(run, s)
-        if loaded is not None:
-            rec, model, opt = loaded
-            run.out[s]["records"].append(rec)
-            sources[s] = (model, opt)
-    missing = [s for s in seeds if s not in sources]
-    if missing:
-        sources.update(_train_sources(run, missing))
-    tgt = cfg.target
-    tcs = run.configs(tgt, seeds, freeze_gamma=not cfg.thaw)
-    if cfg.lr_from_source:  # the release's target ran at the source's lr (its Adam state carried it)
-        tcs = [tc.replace(lr=cfg.source.train.lr) for tc in tcs]
-    results = run.stage(task.column, seeds, tcs, lambda s0, cb: transfer_batch(
-        [sources[s][0] for s in seeds], [sources[s][1] for s in seeds], run.system, tgt.T, tcs,
-        thaw=cfg.thaw, carry_adam=cfg.carry_adam, desc=run.label(task.column, seeds), resumes=s0, on_chunk=cb))
-    for seed, res in zip(seeds, results):
-        run.finish(res, task.column, "target", tgt, "eval", seed)
-
-
-def _train_march(run: _TaskRun) -> None:
-    """Time-marching on the experiment's interval: every window trains the task's seeds as one
-    batch (:func:`atlasnn.training._marching.march_batch`). Interrupted, it keeps no state: on resume the
-    task starts again (a march of the paper's problems takes seconds per seed)."""
-    from atlasnn.training._marching import march_batch
-    from atlasnn.nn._trial import MODEL_SCALINGS, make_model
-
-    task, cfg, seeds = run.task, run.cfg, list(run.task.seeds)
-    m, st = cfg.march, cfg.eval_stage
-    models = [make_model(run.z0, scaling=MODEL_SCALINGS[task.model], width=m.width, depth=m.depth, t0=st.t0,
-                         gamma=cfg.gamma_init.get(task.model), activation=m.activation,
-                         first_layer_scale=m.first_layer_scale, seed=s) for s in seeds]
-
-    def seeded(tc, s):
-        return None if tc is None else tc.replace(seed=s, progress=run.progress)
-
-    schemes = [m.scheme.replace(train=seeded(m.scheme.train, s), first=seeded(m.scheme.first, s)) for s in seeds]
-    solutions = march_batch(models, run.system, st.T, schemes, on_chunk=lambda states: _interrupt_check())
-    for seed, sol, scheme in zip(seeds, solutions, schemes):
-        run.finish_march(sol, scheme, st, seed)
 
 
 def run_training(cfg: ExperimentConfig, task: Task, run_dir: str, grids: dict[str, np.ndarray],
@@ -426,14 +273,9 @@ def run_training(cfg: ExperimentConfig, task: Task, run_dir: str, grids: dict[st
     ``{seed: {"records", "arrays", "notes"}}`` and writes each seed's record to ``tasks/``.
     On KeyboardInterrupt the current training states are saved to ``state/`` and it is raised
     again."""
-    run = _TaskRun(cfg, task, run_dir, grids, progress, run_id, resume)
+    run = TaskRun(cfg, task, run_dir, grids, progress, run_id, resume)
     try:
-        if task.role in ("short", "baseline"):
-            _train_alone(run)
-        elif task.role == "march":
-            _train_march(run)
-        else:
-            _train_chain(run)
+        SCHEMES[task.role].train(run)
         for seed in task.seeds:
             write_record(run.run_dir, task.one(seed), run_id, run.out[seed])
     except KeyboardInterrupt:

@@ -38,10 +38,18 @@ def inverse_softplus(y: float) -> float:
 
 
 class TimeScaling(eqx.Module):
-    """Base class: a map t ↦ f(t; γ) with f(0) = 0, ḟ > 0, f → 1."""
+    """Base class: a map t ↦ f(t; γ) with f(0) = 0, ḟ > 0, f → 1.
+
+    A subclass states, as class variables, its ``name``, ``gamma_names`` (its positional
+    ``__init__`` arguments, each defaulting to 1.0), ``formula`` (f in text) and ``rate_names``:
+    the γ entries r with 0 ≤ f(t) ≤ r·t, which the quality verdict watches for collapse. A new
+    scaling is such a class and one :func:`atlasnn.nn.register_model` entry.
+    """
 
     name: ClassVar[str] = "base"
     gamma_names: ClassVar[tuple[str, ...]] = ()
+    formula: ClassVar[str] = ""
+    rate_names: ClassVar[tuple[str, ...]] = ()
 
     def __call__(self, t: jax.Array) -> jax.Array:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -69,6 +77,7 @@ class ExpDecay(TimeScaling):
 
     name: ClassVar[str] = "exp_decay"
     gamma_names: ClassVar[tuple[str, ...]] = ()
+    formula: ClassVar[str] = "f(t) = 1 − e^(−t)"
 
     def __call__(self, t):
         return -jnp.expm1(-t)
@@ -82,6 +91,8 @@ class Tanh(TimeScaling):
 
     name: ClassVar[str] = "tanh"
     gamma_names: ClassVar[tuple[str, ...]] = ("m",)
+    formula: ClassVar[str] = "f(t) = tanh(m t)"
+    rate_names: ClassVar[tuple[str, ...]] = ("m",)
     raw_m: jax.Array
 
     def __init__(self, m: float = 1.0):
@@ -111,6 +122,8 @@ class RationalExp(TimeScaling):
 
     name: ClassVar[str] = "rational_exp"
     gamma_names: ClassVar[tuple[str, ...]] = ("alpha", "beta")
+    formula: ClassVar[str] = "f(t) = (1 − e^(−αt))/(1 + β e^(−αt))"
+    rate_names: ClassVar[tuple[str, ...]] = ("alpha",)  # β is a shape parameter (β → 0 is legitimate)
     raw_alpha: jax.Array
     raw_beta: jax.Array
 
@@ -139,35 +152,14 @@ class RationalExp(TimeScaling):
         return {"alpha": self.alpha, "beta": self.beta}
 
 
-SCALINGS: dict[str, type[TimeScaling]] = {
-    "exp_decay": ExpDecay,
-    "tanh": Tanh,
-    "rational_exp": RationalExp,
-}
-
-# Names used in the paper and in configs, mapped to the scaling they select.
-SCALING_ALIASES = {
-    "hnn": "exp_decay",
-    "exp_decay": "exp_decay",
-    "tanh": "tanh",
-    "atlas_tanh": "tanh",
-    "exp": "rational_exp",
-    "rational_exp": "rational_exp",
-    "atlas_exp": "rational_exp",
-}
-
-
-def make_scaling(name: str, gamma: dict[str, float] | None = None) -> TimeScaling:
-    """Build a scaling by name with initial γ (defaults: all 1.0, as the paper says)."""
-    key = SCALING_ALIASES.get(str(name).lower().replace("-", "_"))
-    if key is None:
-        raise ConfigError(f"unknown scaling {name!r}; choose one of {sorted(SCALINGS)}")
-    cls = SCALINGS[key]
+def build_scaling(cls: type[TimeScaling], gamma: dict[str, float] | None = None) -> TimeScaling:
+    """An instance of the scaling class ``cls`` with initial γ (each defaults to
+    ``cls.gamma_defaults``, 1.0 as the paper says), after checking every given γ by name."""
     gamma = dict(gamma or {})
     unknown = set(gamma) - set(cls.gamma_names)
     if unknown:
         raise ConfigError(
-            f"scaling {key!r} has parameters {list(cls.gamma_names) or 'none'}, got unknown {sorted(unknown)}"
+            f"scaling {cls.name!r} has parameters {list(cls.gamma_names) or 'none'}, got unknown {sorted(unknown)}"
         )
     for k, v in gamma.items():
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:

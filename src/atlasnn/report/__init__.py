@@ -1,1 +1,66 @@
-"""atlasnn.report._tables."""
+"""Reading results: statistics over seeds with the paper's numbers beside them, tables (Markdown,
+CSV, LaTeX, JSON), figures, the printed summary, the paper's claims counted seed by seed."""
+
+from atlasnn.report._caveats import QUICK_BANNER, QUICK_TAG, column_verdicts, is_quick
+from atlasnn.report._claims import experiment_claims
+from atlasnn.report._claims import markdown as claims_markdown
+from atlasnn.report._plotkit import DPI, Series, model_style, pi_ticks
+from atlasnn.report._plots import (
+    first_epoch_below,
+    plot_energy,
+    plot_errors,
+    plot_gamma_evolution,
+    plot_loss_curves,
+    plot_scaling_families,
+    plot_seed_spread,
+    plot_target_loss_comparison,
+    plot_trajectories,
+)
+from atlasnn.report._render import SUMMARY_WIDTH, summary_lines, write_figures, write_report
+from atlasnn.report._stats import SCALAR_METRICS, STATE_METRICS, column_label, load_paper, load_results, summarize
+from atlasnn.report._summary_plots import plot_loss_vs_accuracy, plot_overview
+from atlasnn.report._sweep_plot import plot_sweep
+from atlasnn.report._tables import CSV_FIELDS, render_tables, write_tables
+from atlasnn.report._text import format_number, format_percent
+from atlasnn.report._workprecision_plot import plot_work_precision
+
+__all__ = [
+    "load_results",
+    "load_paper",
+    "summarize",
+    "column_label",
+    "STATE_METRICS",
+    "SCALAR_METRICS",
+    "render_tables",
+    "write_tables",
+    "CSV_FIELDS",
+    "format_number",
+    "format_percent",
+    "write_report",
+    "write_figures",
+    "summary_lines",
+    "SUMMARY_WIDTH",
+    "experiment_claims",
+    "claims_markdown",
+    "QUICK_BANNER",
+    "QUICK_TAG",
+    "is_quick",
+    "column_verdicts",
+    "Series",
+    "DPI",
+    "model_style",
+    "pi_ticks",
+    "first_epoch_below",
+    "plot_scaling_families",
+    "plot_loss_curves",
+    "plot_gamma_evolution",
+    "plot_trajectories",
+    "plot_errors",
+    "plot_energy",
+    "plot_target_loss_comparison",
+    "plot_seed_spread",
+    "plot_overview",
+    "plot_loss_vs_accuracy",
+    "plot_sweep",
+    "plot_work_precision",
+]

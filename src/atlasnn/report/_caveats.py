@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from typing import Any, Mapping, Sequence
 
+from atlasnn.evaluation import TrainingRecord
+
 __all__ = [
     "QUICK_BANNER",
     "QUICK_TAG",
@@ -47,13 +49,13 @@ def figure_title(results: Mapping[str, Any], text: str) -> str:
     return f"{QUICK_TAG}\n{text}" if is_quick(results) else text
 
 
-def run_quality(run: Mapping[str, Any]) -> dict | None:
+def run_quality(run: Mapping[str, Any] | TrainingRecord) -> dict | None:
     """A run record's verdict as ``{"status", "reasons", "advice"}``, or None when it has none.
 
     Only a mapping with a string ``status`` counts; ``reasons`` becomes a list of strings (a
     single string is one reason) and ``advice`` a string or None.
     """
-    q = run.get("quality")
+    q = run.quality if isinstance(run, TrainingRecord) else run.get("quality")
     if not isinstance(q, Mapping) or not isinstance(q.get("status"), str):
         return None
     reasons = q.get("reasons") or []
@@ -90,12 +92,12 @@ def column_verdicts(results: Mapping[str, Any]) -> dict[str, dict]:
     """
     columns = list(results.get("columns") or [])
     out: dict[str, dict] = {}
-    for r in results.get("runs") or []:
+    for r in map(TrainingRecord.from_dict, results.get("runs") or []):
         q = run_quality(r)
         if q is None:
             continue
-        is_source = r.get("role") == "source"
-        col = _target_column(str(r.get("column")), columns) if is_source else str(r.get("column"))
+        is_source = r.role == "source"
+        col = _target_column(str(r.column), columns) if is_source else str(r.column)
         v = out.setdefault(col, {"status": "ok", "counts": {}, "n": 0, "seeds_not_ok": [], "notes": [],
                                  "advice": []})
         v["n"] += 1
@@ -103,9 +105,9 @@ def column_verdicts(results: Mapping[str, Any]) -> dict[str, dict]:
         if _rank(q["status"]) > _rank(v["status"]) or (q["status"] not in STATUS_ORDER and v["status"] == "ok"):
             v["status"] = q["status"]
         if q["status"] != "ok":
-            who = f"{'source ' if is_source else ''}seed {r.get('seed')}"
-            if r.get("seed") not in v["seeds_not_ok"]:
-                v["seeds_not_ok"].append(r.get("seed"))
+            who = f"{'source ' if is_source else ''}seed {r.seed}"
+            if r.seed not in v["seeds_not_ok"]:
+                v["seeds_not_ok"].append(r.seed)
             v["notes"].append(f"{who}: {q['status']}" + (f" ({'; '.join(q['reasons'])})" if q["reasons"] else ""))
             if q["advice"] and q["advice"] not in v["advice"]:
                 v["advice"].append(q["advice"])

@@ -20,24 +20,25 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
-from atlasnn.report._tables import load_paper, load_results
+from atlasnn.evaluation import TrainingRecord
+from atlasnn.report._stats import load_paper, load_results
 
-TABLE_ROLES = ("short", "target", "march")
+
+def _table_records(results: dict, column: str) -> list[TrainingRecord]:
+    return [r for r in map(TrainingRecord.from_dict, results.get("runs") or []) if r.column == column and r.in_table]
 
 
 def _by_seed(results: dict, column: str, state: str) -> dict[Any, float]:
     out = {}
-    for r in results.get("runs") or []:
-        if r.get("column") == column and r.get("role", "short") in TABLE_ROLES:
-            v = ((r.get("metrics") or {}).get("l2_discrete") or {}).get(state)
-            if isinstance(v, (int, float)):
-                out[r.get("seed")] = float(v)
+    for r in _table_records(results, column):
+        v = r.metric("l2_discrete", state)
+        if v is not None:
+            out[r.seed] = v
     return out
 
 
 def _epochs_by_seed(results: dict, column: str) -> dict[Any, int]:
-    return {r.get("seed"): int(r["epochs"]) for r in results.get("runs") or []
-            if r.get("column") == column and r.get("role", "short") in TABLE_ROLES and "epochs" in r}
+    return {r.seed: int(r.epochs) for r in _table_records(results, column) if r.epochs is not None}
 
 
 def _se_value(results: dict, state: str) -> float | None:

@@ -25,6 +25,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from atlasnn.errors import ConfigError
+from atlasnn.nn import MODELS
 
 __all__ = ["DPI", "Series", "model_style", "pi_ticks"]
 
@@ -40,15 +41,11 @@ _BASE_STYLES: dict[str, dict[str, Any]] = {
     "SE": {"color": "tab:red", "linestyle": ":", "linewidth": 1.6},
     "SE-100": {"color": "tab:brown", "linestyle": (0, (5, 1, 1, 1)), "linewidth": 1.4},
     "SE-10": {"color": "tab:brown", "linestyle": (0, (5, 1, 1, 1)), "linewidth": 1.4},
-    "HNN": {"color": "tab:purple", "linestyle": "--", "linewidth": 1.4},
-    "HNN baseline": {"color": "tab:purple", "linestyle": "--", "linewidth": 1.4},
-    "HNN transfer": {"color": "tab:green", "linestyle": (0, (6, 2)), "linewidth": 1.4},
-    "ATLAS tanh": {"color": "tab:orange", "linestyle": "-", "linewidth": 1.4},
-    "ATLAS tanh transfer": {"color": "tab:orange", "linestyle": "-", "linewidth": 1.4},
-    "ATLAS tanh thawed": {"color": "goldenrod", "linestyle": "-.", "linewidth": 1.4},
-    "ATLAS exp": {"color": "tab:blue", "linestyle": "-", "linewidth": 1.4},
-    "ATLAS exp transfer": {"color": "tab:blue", "linestyle": "-", "linewidth": 1.4},
-    "ATLAS exp thawed": {"color": "tab:cyan", "linestyle": "-.", "linewidth": 1.4},
+}
+# A model's lines: its registered colour (nn.ModelKind), per scheme word a line style; a scheme
+# may have its own colour (``ModelKind.scheme_colors``: the paper's transferred HNN is green).
+_SCHEME_LINESTYLES: dict[str, Any] = {
+    "": "-", "baseline": "-", "transfer": "-", "thawed": "-.", "time-marching": (0, (3, 1, 1, 1)),
 }
 _ALIASES = {"benchmark": "reference", "ref": "reference", "odeint": "reference"}
 
@@ -66,18 +63,32 @@ def _label_key(label: str) -> frozenset[str]:
     return frozenset(words)
 
 
-_STYLE_BY_KEY = {_label_key(k): v for k, v in _BASE_STYLES.items()}
+def _model_styles() -> dict[frozenset[str], dict[str, Any]]:
+    """Styles of every registered model and scheme word, by label key."""
+    out = {}
+    for kind in MODELS.values():
+        dashed = kind.name == "hnn"  # the baseline's lines are dashed, as in the paper
+        for word, ls in _SCHEME_LINESTYLES.items():
+            color = kind.scheme_colors.get(word, kind.color)
+            if dashed and word in ("", "baseline"):
+                ls = "--"
+            elif dashed and word == "transfer":
+                ls = (0, (6, 2))
+            out[_label_key(f"{kind.label} {word}")] = {"color": color, "linestyle": ls, "linewidth": 1.4}
+    return out
 
 
 def model_style(label: str) -> dict[str, Any]:
     """Line keyword arguments (colour, linestyle, linewidth, ...) for a model label.
 
-    Known labels ("reference", "SE", "SE-100", "SE-10", "HNN", "HNN baseline", "HNN transfer",
-    "ATLAS tanh", "ATLAS exp", their "transfer" and "thawed" variants) have fixed styles; matching
+    Known labels ("reference", "SE", "SE-100", "SE-10", and every registered model's label alone
+    or with a scheme word: "baseline", "transfer", "thawed", "time-marching") have fixed styles
+    (the model's colour from :data:`atlasnn.nn.MODELS`); matching
     ignores case, punctuation and word order. Any other label gets a colour and line style from a
     fallback cycle picked by a CRC32 of the label, so it is the same in every figure and run.
     """
-    style = _STYLE_BY_KEY.get(_label_key(str(label)))
+    key = _label_key(str(label))
+    style = {_label_key(k): v for k, v in _BASE_STYLES.items()}.get(key) or _model_styles().get(key)
     if style is not None:
         return dict(style)
     h = zlib.crc32(str(label).encode("utf-8"))

@@ -32,9 +32,9 @@ import numpy as np
 from matplotlib.axes import Axes
 
 from atlasnn.errors import ConfigError
+from atlasnn.nn import MODELS
 from atlasnn.report._plotkit import (
     _REFERENCE_STYLE,
-    DPI,
     Series,
     _as_runs,
     _check_interval,
@@ -57,9 +57,6 @@ from atlasnn.report._plotkit import (
 )
 
 __all__ = [
-    "Series",
-    "model_style",
-    "pi_ticks",
     "first_epoch_below",
     "plot_scaling_families",
     "plot_loss_curves",
@@ -69,64 +66,63 @@ __all__ = [
     "plot_energy",
     "plot_target_loss_comparison",
     "plot_seed_spread",
-    "plot_overview",
-    "plot_loss_vs_accuracy",
-    "DPI",
 ]
 
 
 # ------------------------------------------------------------------------------ figures
 def plot_scaling_families(stem: str | Path, t_max: float = 10.0, *,
                           title: str = "Temporal scaling functions f(t; γ)") -> list[Path]:
-    """The two families of f(t; γ): tanh(m t) and (1 − e^{−αt}) / (1 + β e^{−αt}).
-
-    Left: tanh(m t) for m ∈ {0.25, 0.5, 1, 2, 4}, with the plain HNN's 1 − e^{−t} dashed.
-    Right: the rational-exp form for a few (α, β), including β = 1 (equal to tanh(αt/2)) and
-    β → 0 (equal to 1 − e^{−αt}).
+    """One panel per registered model with learnable γ: f(t; γ) for the γ values its registry
+    entry lists as ``examples`` (e.g. tanh(m t) for m ∈ {0.25, …, 4}; the rational-exp form with
+    β = 1, equal to tanh(αt/2), and β → 0, close to 1 − e^{−αt}), each with the fixed HNN-like
+    scalings (no γ) dashed for comparison. The curves are the scalings' own code, evaluated.
     """
     t_max = float(t_max)
     if not (math.isfinite(t_max) and t_max > 0):
         raise ConfigError(f"t_max must be a positive number, got {t_max}")
     t = np.linspace(0.0, t_max, 600)
-    fig = _new_figure((11.0, 4.2))
-    ax_tanh, ax_exp = fig.subplots(1, 2, sharey=True)
-
-    m_values = (0.25, 0.5, 1.0, 2.0, 4.0)
-    shades = np.linspace(0.35, 0.95, len(m_values))
-    oranges = mpl.colormaps["Oranges"]
+    learnable = [k for k in MODELS.values() if k.gamma_names and k.examples]
+    fixed = [k for k in MODELS.values() if not k.gamma_names]
+    fig = _new_figure((5.5 * max(len(learnable), 1), 4.2))
+    axes = np.atleast_1d(fig.subplots(1, max(len(learnable), 1), sharey=True))
     cycle = mpl.colormaps["viridis"]
-    for m, s in zip(m_values, shades):
-        ax_tanh.plot(t, np.tanh(m * t), color=oranges(s), lw=1.8, label=f"$m={m:g}$")
-    hnn = model_style("HNN")
-    ax_tanh.plot(t, 1.0 - np.exp(-t), color=hnn["color"], ls="--", lw=1.6,
-                 label="HNN: $1-e^{-t}$")
-    ax_tanh.set_title(r"$f(t;m)=\tanh(mt)$")
-
-    pairs = ((1.0, 0.0), (1.0, 0.25), (1.0, 1.0), (1.0, 4.0), (0.5, 1.0), (2.0, 1.0))
-    shades = np.linspace(0.0, 0.85, len(pairs))
-    for (alpha, beta), s in zip(pairs, shades):
-        e = np.exp(-alpha * t)
-        f = (1.0 - e) / (1.0 + beta * e)
-        if beta == 0.0:
-            lab = rf"$\alpha={alpha:g},\ \beta\to0$"
-            ax_exp.plot(t, f, color="black", ls=":", lw=1.8, label=lab)
-        else:
-            ax_exp.plot(t, f, color=cycle(s), lw=1.8, ls="-" if alpha == 1.0 else "--",
-                        label=rf"$\alpha={alpha:g},\ \beta={beta:g}$")
-    ax_exp.set_title(r"$f(t;\alpha,\beta)=\dfrac{1-e^{-\alpha t}}{1+\beta e^{-\alpha t}}$")
-
-    for ax in (ax_tanh, ax_exp):
+    for ax, kind in zip(axes, learnable):
+        shades = np.linspace(0.0, 0.85, len(kind.examples))
+        for gamma, shade in zip(kind.examples, shades):
+            f = np.asarray(kind.make_scaling(gamma)(t))
+            text = ", ".join(f"{_greek(n)}={v:g}" for n, v in gamma.items())
+            ax.plot(t, f, color=cycle(shade), lw=1.8, label=f"${text}$")
+        for other in fixed:
+            style = model_style(other.label)
+            ax.plot(t, np.asarray(other.make_scaling()(t)), color=style["color"], ls="--", lw=1.6,
+                    label=f"{other.label}: {other.scaling.formula.removeprefix('f(t) = ')}")
+        ax.set_title(f"{kind.label}: {kind.scaling.formula}")
         ax.set_xlim(0.0, t_max)
         pi_ticks(ax, t_max)
         ax.set_xlabel("$t$")
         ax.axhline(1.0, color="0.7", lw=0.8, zorder=0)
         ax.grid(alpha=0.3)
         ax.legend(fontsize="small", loc="lower right")
-    ax_tanh.set_ylabel("$f(t;\\gamma)$")
-    ax_tanh.set_ylim(-0.02, 1.08)
+    axes[0].set_ylabel("$f(t;\\gamma)$")
+    axes[0].set_ylim(-0.02, 1.08)
     if title:
         fig.suptitle(title)
     return _save(fig, stem)
+
+
+_GREEK = {"alpha": "\\alpha", "beta": "\\beta", "gamma": "\\gamma", "omega": "\\omega", "α": "\\alpha",
+          "β": "\\beta"}
+
+
+def _greek(name: str) -> str:
+    """A γ name in LaTeX (alpha → \\alpha); other names as they are."""
+    return _GREEK.get(name, name)
+
+
+def _owner(name: str) -> Any:
+    """The registered model whose scaling has a γ called ``name`` (α, β spelt in Greek count), or None."""
+    plain = {"α": "alpha", "β": "beta"}.get(name, name)
+    return next((k for k in MODELS.values() if plain in k.gamma_names), None)
 
 
 def _loss_axes(ax: Axes, ylabel: str, title: str) -> None:
@@ -177,27 +173,26 @@ def plot_loss_curves(stem: str | Path, histories: Mapping[str, Any],
     return _save(fig, stem)
 
 
-_TANH_NAMES = {"m"}
-_EXP_NAMES = {"alpha": r"\alpha", "α": r"\alpha", "beta": r"\beta", "β": r"\beta"}
-
-
 def plot_gamma_evolution(stem: str | Path, gammas: Mapping[str, Mapping[str, Any]], *,
                          title: str = "Evolution of the scaling parameters γ") -> list[Path]:
-    """Per-epoch γ parameters: a panel for m (tanh) and a panel for α, β (exp).
+    """Per-epoch γ parameters: one panel per time scaling (the registered model whose scaling has
+    that γ; e.g. m of tanh, α and β of the rational-exp form), any unknown name in an extra panel.
 
-    ``gammas`` maps a model label to {parameter name → per-epoch array}; names "m", "alpha"/"α",
-    "beta"/"β" go to their panels, any other name to an extra panel. Models with no γ (HNN) may be
-    left out or given an empty mapping. The final value is written at the end of each curve.
+    ``gammas`` maps a model label to {parameter name → per-epoch array}. Models with no γ (HNN)
+    may be left out or given an empty mapping. The final value is written at the end of each curve.
     """
-    groups: dict[str, list[tuple[str, str, np.ndarray]]] = {"m": [], "exp": [], "other": []}
+    groups: dict[str, list[tuple[str, str, np.ndarray]]] = {}
+    titles: dict[str, str] = {}
     for label, params in gammas.items():
         for name, values in (params or {}).items():
             arr = _float_array(values, f"gammas[{label!r}][{name!r}]", 1)
             if arr.size == 0:
                 continue
-            key = "m" if name in _TANH_NAMES else ("exp" if name in _EXP_NAMES else "other")
-            groups[key].append((label, name, arr))
-    panels = [k for k in ("m", "exp", "other") if groups[k]]
+            kind = _owner(name)
+            key = kind.scaling.name if kind else "other"
+            titles[key] = f"{kind.scaling.formula} ({kind.label})" if kind else "other γ"
+            groups.setdefault(key, []).append((label, name, arr))
+    panels = sorted(groups, key=lambda k: k == "other")
     fig = _new_figure((5.0 * max(len(panels), 1) + 1.0, 4.2))
     if not panels:
         ax = fig.subplots()
@@ -207,20 +202,16 @@ def plot_gamma_evolution(stem: str | Path, gammas: Mapping[str, Mapping[str, Any
         fig.suptitle(title)
         return _save(fig, stem)
     axes = np.atleast_1d(fig.subplots(1, len(panels)))
-    names_title = {"m": "$m$ (tanh)", "exp": r"$\alpha$, $\beta$ (exp)", "other": "other γ"}
+    dashes = ("-", "--", ":", "-.")
     for ax, key in zip(axes, panels):
         for label, name, arr in groups[key]:
             style = model_style(label)
-            if key == "exp":
-                is_beta = _EXP_NAMES[name] == r"\beta"
-                style["linestyle"] = "--" if is_beta else "-"
-                shown = f"${_EXP_NAMES[name]}$"
-            elif key == "m":
-                shown = "$m$"
-            else:
-                shown = name
+            kind = _owner(name)
+            if kind is not None:
+                plain = {"α": "alpha", "β": "beta"}.get(name, name)
+                style["linestyle"] = dashes[kind.gamma_names.index(plain) % len(dashes)]
             x = np.arange(arr.size)
-            ax.plot(x, arr, label=f"{label}: {shown}", **style)
+            ax.plot(x, arr, label=f"{label}: ${_greek(name)}$", **style)
             last = arr[np.isfinite(arr)]
             if last.size:
                 ax.annotate(f"{last[-1]:.3f}", (x[-1], arr[-1]), xytext=(3, 0),
@@ -228,7 +219,7 @@ def plot_gamma_evolution(stem: str | Path, gammas: Mapping[str, Mapping[str, Any
                             color=style["color"])
         ax.set_xlabel("epoch")
         ax.set_ylabel("value")
-        ax.set_title(names_title[key])
+        ax.set_title(titles[key])
         ax.grid(alpha=0.3)
         n_max = max(arr.size for _, _, arr in groups[key])
         ax.set_xlim(0, max(n_max - 1, 1) * 1.13)  # room for the final-value notes
@@ -474,8 +465,3 @@ def plot_seed_spread(stem: str | Path, values: Mapping[str, Sequence[float]], me
         ax.legend(fontsize="small")
     ax.set_title(title or f"{metric_name} over seeds")
     return _save(fig, stem)
-
-
-# The figures that summarise a run or many runs live in their own module; they are part of this
-# module's public interface (imported last: plots_summary uses only plotkit, not this module).
-from atlasnn.report._summary_plots import plot_loss_vs_accuracy, plot_overview  # noqa: E402

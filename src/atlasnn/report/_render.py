@@ -13,11 +13,17 @@ from pathlib import Path
 
 import numpy as np
 
+from atlasnn.checkpoint import load_checkpoint, load_piecewise
+from atlasnn.errors import AtlasError, CheckpointError
+from atlasnn.evaluation import TrainingRecord, WorkPoint
 from atlasnn.report import _plots as plots
-from atlasnn.errors import AtlasError
-from atlasnn.experiments.config._config import MODEL_LABELS
 from atlasnn.report._caveats import QUICK_BANNER, column_verdicts, figure_title, is_quick, verdict_detail, verdict_status_text
-from atlasnn.report._tables import format_number, load_paper, load_results, summarize, write_tables
+from atlasnn.report._plotkit import Series
+from atlasnn.report._stats import column_label, load_paper, load_results, summarize
+from atlasnn.report._summary_plots import plot_overview
+from atlasnn.report._tables import write_tables
+from atlasnn.report._text import format_number
+from atlasnn.report._workprecision_plot import plot_work_precision
 
 
 def _paper_name(results: dict) -> str:
@@ -36,17 +42,14 @@ def _histories(run_dir: Path, results: dict) -> dict[str, dict]:
 
     Every checkpoint must belong to the run: the system of ``results.json`` (identity, z0), the
     record's interval, column, role and seed; anything else is refused with one line."""
-    from atlasnn.checkpoint._single import load_checkpoint, load_piecewise
-    from atlasnn.errors import CheckpointError
-
     out = {}
     owner = f"the run in {run_dir}"
-    for r in results["runs"]:
-        path = run_dir / r["checkpoint"]
+    for r in map(TrainingRecord.from_dict, results["runs"]):
+        path = run_dir / r.checkpoint
         if not path.exists():
             continue
-        expect = {"system": results.get("system"), "interval": r.get("interval")}
-        if r.get("role") == "march":  # one file of all windows; its loss: the windows' one after the other
+        expect = {"system": results.get("system"), "interval": list(r.interval)}
+        if r.march is not None:  # one file of all windows; its loss: the windows' one after the other
             sol = load_piecewise(path, expect=expect, owner=owner)
             extra, gam = sol.info.get("extra") or {}, {}
             loss = np.concatenate([np.asarray(w.history) for w in sol.windows if w.history is not None])
@@ -59,11 +62,11 @@ def _histories(run_dir: Path, results: dict) -> dict[str, dict]:
             gam = {name: h.gamma[:, i] for i, name in enumerate(h.gamma_names)}
             loss = h.loss
         for key in ("column", "role", "seed"):
-            if key in extra and key in r and extra[key] != r[key]:
+            if key in extra and extra[key] != getattr(r, key):
                 raise CheckpointError(f"checkpoint {path}: not a model of {owner}: its {key} is "
-                                      f"{extra[key]!r}, the run's record says {r[key]!r}")
-        key = r["column"] + (":source" if r["role"] == "source" else "")
-        out[(key, r["seed"])] = {"loss": loss, "gamma": gam}
+                                      f"{extra[key]!r}, the run's record says {getattr(r, key)!r}")
+        key = r.column + (":source" if r.role == "source" else "")
+        out[(key, r.seed)] = {"loss": loss, "gamma": gam}
     return out
 
 
@@ -76,7 +79,7 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
     labels = results["labels"]
     seeds = results["seeds"]
     seed0 = seeds[0]
-    runs = results["runs"]
+    runs = [TrainingRecord.from_dict(r) for r in results["runs"]]
     src_iv = tuple(results["source_interval"]) if results.get("source_interval") else None
     hist = _histories(run_dir, results)
     written: list[Path] = []
@@ -94,12 +97,12 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
                                           title=figure_title(results, f"{results['experiment']}: training loss"))
         gam = {labels[c]: hist[(c, seed0)]["gamma"] for c in table_cols if (c, seed0) in hist and hist[(c, seed0)]["gamma"]}
     else:
-        src_cols = sorted({r["column"] for r in runs if r["role"] == "source"})
+        src_cols = sorted({r.column for r in runs if r.role == "source"})
 
         def _src_loss(column):
             return [hist[(column + ":source", s)]["loss"] for s in seeds if (column + ":source", s) in hist]
 
-        histories = {f"{MODEL_LABELS.get(c, c)} (source)": _src_loss(c) for c in src_cols if _src_loss(c)}
+        histories = {f"{column_label(results, c)} (source)": _src_loss(c) for c in src_cols if _src_loss(c)}
         if histories:
             written += plots.plot_loss_curves(fig_dir / "loss_source", histories, tolerance=_tolerance(results),
                                               title=figure_title(results, f"{results['experiment']}: source-task loss"))
@@ -111,7 +114,7 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
             written += plots.plot_target_loss_comparison(
                 fig_dir / "target_loss_comparison", first, _tolerance(results),
                 title=figure_title(results, f"{results['experiment']}: target-task loss, seed {seed0}"))
-        gam = {f"{MODEL_LABELS.get(c, c)} (source)": hist[(c + ":source", seed0)]["gamma"]
+        gam = {f"{column_label(results, c)} (source)": hist[(c + ":source", seed0)]["gamma"]
                for c in src_cols if (c + ":source", seed0) in hist and hist[(c + ":source", seed0)]["gamma"]}
     if gam:
         written += plots.plot_gamma_evolution(
@@ -123,15 +126,15 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
     for ir in results.get("integrators", []):
         c = ir["column"]
         if f"int_t_{c}" in arrays:
-            series.append(plots.Series(ir["label"], arrays[f"int_t_{c}"], arrays[f"int_z_{c}"],
+            series.append(Series(ir["label"], arrays[f"int_t_{c}"], arrays[f"int_z_{c}"],
                                        arrays[f"int_zref_{c}"], arrays[f"int_energy_{c}"]))
     for c in table_cols:
         key = f"pred_{c}_seed{seed0}"
         if key in arrays:
-            series.append(plots.Series(labels[c], t, arrays[key], arrays["z_ref"], arrays[f"energy_{c}_seed{seed0}"]))
-    ref = plots.Series("reference", t, arrays["z_ref"], arrays["z_ref"], arrays["energy_ref"])
+            series.append(Series(labels[c], t, arrays[key], arrays["z_ref"], arrays[f"energy_{c}_seed{seed0}"]))
+    ref = Series("reference", t, arrays["z_ref"], arrays["z_ref"], arrays["energy_ref"])
     title = figure_title(results, f"{results['experiment']} (seed {seed0})")
-    written += plots.plot_overview(fig_dir / "overview", [ref] + series, names, results["energy0"], src_iv,
+    written += plot_overview(fig_dir / "overview", [ref] + series, names, results["energy0"], src_iv,
                                    title=figure_title(results, f"{results['experiment']}: overview (seed {seed0})"))
     written += plots.plot_trajectories(fig_dir / "trajectories", series, names, src_iv, title=title)
     written += plots.plot_errors(fig_dir / "errors", series, names, src_iv, title=title)
@@ -139,11 +142,9 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
 
     # ---- cost against accuracy, when the run measured it
     if results.get("work_precision"):
-        from atlasnn.evaluation import _workprecision as wp
-
         wpr = results["work_precision"]
-        pts = [wp.WorkPoint(**p) for p in wpr["points"]]
-        written += wp.plot_work_precision(fig_dir / "work_precision", pts, first_name=wpr.get("first_state", "x"),
+        pts = [WorkPoint(**p) for p in wpr["points"]]
+        written += plot_work_precision(fig_dir / "work_precision", pts, first_name=wpr.get("first_state", "x"),
                                           title=f"{results['experiment']}: cost against accuracy "
                                                 f"({wpr.get('grid_points', '?')}-point grid)")
 
@@ -153,7 +154,7 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
     except AtlasError:
         paper_rows = {}
     first = names[0]
-    values = {labels[c]: [r["metrics"]["l2_discrete"][first] for r in runs if r["column"] == c and r["role"] != "source"]
+    values = {labels[c]: [r.metric("l2_discrete", first) for r in runs if r.column == c and r.in_table]
               for c in table_cols}
     paper = {labels[c]: v for c, v in paper_rows.get(f"l2_{first}", {}).items() if c in labels and c != "se"}
     written += plots.plot_seed_spread(fig_dir / f"seed_spread_l2_{first}", values, f"L2({first}) (release form)",

@@ -23,20 +23,18 @@ import numpy as np
 
 from atlasnn.report._caveats import column_verdicts
 from atlasnn.errors import ConfigError
-from atlasnn.nn._labels import MODEL_LABELS
+from atlasnn.evaluation import METRICS, TrainingRecord, state_metric_names
+from atlasnn.nn import MODELS
 
-__all__ = ["load_results", "load_paper", "summarize", "DEFAULT_LABELS", "STATE_METRICS", "SCALAR_METRICS"]
+__all__ = ["load_results", "load_paper", "summarize", "column_label", "STATE_METRICS", "SCALAR_METRICS"]
 
 PAPER_FILE = "paper_results.json"
 
-DEFAULT_LABELS = MODEL_LABELS
-
-#: the per-state metrics a run may carry (metric name in results.json -> short row prefix)
-STATE_METRICS = ("l2_discrete", "mse", "l2_integral", "max_abs")
+#: the per-state metrics a run may carry, in table order (the registry of atlasnn.evaluation)
+STATE_METRICS = state_metric_names()
 #: scalar metrics
-SCALAR_METRICS = ("energy_drift",)
+SCALAR_METRICS = tuple(m.name for m in METRICS.values() if not m.per_state)
 
-_TABLE_ROLES = ("short", "target", "march")
 
 
 # ============================================================================ loading
@@ -204,29 +202,33 @@ def _source_target(source_col: str, table_cols: Sequence[str]) -> str:
     return source_col
 
 
-def _training_stats(runs: list[dict]) -> dict:
-    seeds = [r.get("seed") for r in runs]
-    tol = [r.get("tolerance_met") for r in runs]
+def _training_stats(runs: list[TrainingRecord]) -> dict:
+    seeds = [r.seed for r in runs]
+    tol = [r.tolerance_met for r in runs]
     tol_known = [bool(t) for t in tol if t is not None]
-    gamma_params: list[str] = []
-    for r in runs:
-        for p in (r.get("gamma") or {}):
-            if p not in gamma_params:
-                gamma_params.append(p)
+    gamma_params = list(dict.fromkeys(p for r in runs for p in r.gamma))
     return {
         "n_runs": len(runs),
         "seeds": seeds,
-        "epochs": _stats([r.get("epochs") for r in runs], seeds),
+        "epochs": _stats([r.epochs for r in runs], seeds),
         "tolerance_met": {"k": int(sum(tol_known)), "n": len(tol_known), "values": tol},
-        "stop_reasons": dict(Counter(str(r["stop_reason"]) for r in runs if r.get("stop_reason") is not None)),
-        "wall_time": _stats([r.get("wall_time") for r in runs], seeds),
-        "final_loss": _stats([r.get("final_loss") for r in runs], seeds),
+        "stop_reasons": dict(Counter(str(r.stop_reason) for r in runs if r.stop_reason is not None)),
+        "wall_time": _stats([r.wall_time for r in runs], seeds),
+        "final_loss": _stats([r.final_loss for r in runs], seeds),
         # +inf: no epoch of the best-parameter window was reached (a tolerance stop), not a bad loss
-        "best_loss": _stats([None if _f(r.get("best_loss")) == math.inf else r.get("best_loss") for r in runs],
-                            seeds),
-        "gamma": {p: _stats([(r.get("gamma") or {}).get(p) for r in runs], seeds) for p in gamma_params},
-        "checkpoints": [r.get("checkpoint") for r in runs],
+        "best_loss": _stats([None if _f(r.best_loss) == math.inf else r.best_loss for r in runs], seeds),
+        "gamma": {p: _stats([r.gamma.get(p) for r in runs], seeds) for p in gamma_params},
+        "checkpoints": [r.checkpoint for r in runs],
     }
+
+
+def column_label(results: Mapping, column: str) -> str:
+    """A column's display label: as the run recorded it (``labels``), else the registered model's
+    label for a bare model name, else the column name itself."""
+    recorded = (results.get("labels") or {}).get(column)
+    if recorded:
+        return str(recorded)
+    return MODELS[column].label if column in MODELS else column
 
 
 def summarize(results: Any) -> dict:
@@ -251,19 +253,18 @@ def summarize(results: Any) -> dict:
     cols: list[str] = list(res["columns"])
     states: list[str] = list(res["state_names"])
     base_col: str = res["baseline"]
-    runs = list(res.get("runs") or [])
+    runs = [TrainingRecord.from_dict(r) for r in res.get("runs") or []]
     integ = list(res.get("integrators") or [])
-    labels = {c: (res.get("labels") or {}).get(c, DEFAULT_LABELS.get(c, c)) for c in cols}
+    labels = {c: column_label(res, c) for c in cols}
 
     integ_cols = {e.get("column") for e in integ}
-    table_runs = {c: [r for r in runs if r.get("column") == c and r.get("role", "short") in _TABLE_ROLES]
-                  for c in cols}
+    table_runs = {c: [r for r in runs if r.column == c and r.in_table] for c in cols}
     models = [c for c in cols if c != base_col and c not in integ_cols]
 
     # the metric names present anywhere
     present_state, present_scalar = [], []
-    for r in [*runs, *integ]:
-        for k, v in (r.get("metrics") or {}).items():
+    for metrics in [*(r.metrics for r in runs), *(e.get("metrics") or {} for e in integ)]:
+        for k, v in metrics.items():
             if isinstance(v, Mapping):
                 if k not in present_state:
                     present_state.append(k)
@@ -276,10 +277,10 @@ def summarize(results: Any) -> dict:
         if col in integ_cols:
             e = next(e for e in integ if e.get("column") == col)
             return {None: _metric_value(e.get("metrics"), metric, state)}
-        return {r.get("seed"): _metric_value(r.get("metrics"), metric, state) for r in table_runs[col]}
+        return {r.seed: _metric_value(r.metrics, metric, state) for r in table_runs[col]}
 
     def epochs_by_seed(col: str) -> dict:
-        return {r.get("seed"): _f(r.get("epochs")) for r in table_runs[col]}
+        return {r.seed: _f(r.epochs) for r in table_runs[col]}
 
     col_summ: dict[str, dict] = {}
     for c in cols:
@@ -309,8 +310,8 @@ def summarize(results: Any) -> dict:
 
     sources: dict[str, dict] = {}
     for r in runs:
-        if r.get("role") == "source":
-            sources.setdefault(r["column"], []).append(r)
+        if r.role == "source":
+            sources.setdefault(r.column, []).append(r)
     src_summ = {}
     for sc, rs in sources.items():
         st = _training_stats(rs)
@@ -319,7 +320,7 @@ def summarize(results: Any) -> dict:
 
     seeds = res.get("seeds")
     if seeds is None:
-        seeds = sorted({r.get("seed") for r in runs if r.get("seed") is not None}, key=lambda s: (str(type(s)), s))
+        seeds = sorted({r.seed for r in runs if r.seed is not None}, key=lambda s: (str(type(s)), s))
     return {
         "experiment": res["experiment"],
         "kind": res["kind"],

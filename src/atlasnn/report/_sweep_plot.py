@@ -17,6 +17,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from atlasnn.report._plotkit import DPI, model_style
+
 
 def _numeric(values: list[Any]) -> bool:
     return all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
@@ -33,8 +35,6 @@ def _stats(rows: list[dict], key: str, value: Any, col: str) -> tuple[float, flo
 
 def _panel(ax, rows: list[dict], key: str, values: list[Any], labels: dict[str, str]) -> bool:
     """One axis's panel; returns whether every drawn value is positive (for a log y-axis)."""
-    from atlasnn.report._plots import model_style
-
     numeric = _numeric(values)
     xs = [float(v) for v in values] if numeric else list(range(len(values)))
     positive = True
@@ -64,8 +64,6 @@ def _panel(ax, rows: list[dict], key: str, values: list[Any], labels: dict[str, 
 
 def plot_sweep(stem: Path, spec: dict, rows: list[dict], labels: dict[str, str], what: str) -> list[Path]:
     """Write ``stem.png`` and ``stem.pdf``; returns their paths."""
-    from atlasnn.report._plots import DPI
-
     axes = spec["axes"]
     fig = Figure(figsize=(4.4 * len(axes) + 0.6, 3.8), layout="constrained")
     FigureCanvasAgg(fig)

@@ -38,7 +38,7 @@ import numpy as np
 
 from atlasnn.report._caveats import QUICK_BANNER, verdict_detail, verdict_status_text
 from atlasnn.errors import ConfigError
-from atlasnn.report._stats import DEFAULT_LABELS, _f, load_paper, load_results, summarize
+from atlasnn.report._stats import _f, load_results
 from atlasnn.report._text import (
     _ascii,
     _build,
@@ -63,21 +63,9 @@ from atlasnn.report._text import (
     _tol_text,
     _verdict_marks,
     format_number,
-    format_percent,
 )
 
-__all__ = [
-    "load_results",
-    "load_paper",
-    "summarize",
-    "render_tables",
-    "write_tables",
-    "format_number",
-    "format_percent",
-    "DEFAULT_LABELS",
-    "CSV_FIELDS",
-    "main",
-]
+__all__ = ["render_tables", "write_tables", "CSV_FIELDS", "main"]
 
 
 # ============================================================================ renderers

@@ -13,19 +13,13 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from atlasnn.evaluation import METRICS
 from atlasnn.report._caveats import QUICK_BANNER
 from atlasnn.report._stats import _f, _resolve_paper, load_results, summarize
 
 __all__ = ["format_number", "format_percent"]
 
-_DEFINITIONS = {
-    "l2_discrete": "L2, release's discrete form sqrt(sum_i err(t_i)^2), not scaled by dt (the form in the paper's tables)",
-    "mse": "MSE = mean_i err(t_i)^2",
-    "l2_integral": "L2, paper's integral definition (int |err|^2 dt)^(1/2), trapezoid rule (no paper value)",
-    "max_abs": "max_i |err(t_i)|",
-    "energy_drift": "energy drift max_i |H(t_i) - E0| / |E0|",
-    "epochs": "training epochs run (target task for transfer)",
-}
+_EPOCHS_DEFINITION = "training epochs run (target task for transfer)"
 
 
 # ============================================================================ formatting
@@ -113,30 +107,24 @@ def _rows_spec(summary: dict) -> list[dict]:
     """The rows of the main table: (key, metric, state, labels, paper key)."""
     rows = []
     states = summary["state_names"]
-    for metric, short, md_name, tex_name in (
-        ("l2_discrete", "l2", "L2", "L^2"),
-        ("mse", "mse", "MSE", "\\mathrm{MSE}"),
-        ("l2_integral", "l2int", "L2∫ (paper's integral def.)", "L^2_{\\int}"),
-    ):
+    for m in (m for m in METRICS.values() if m.table and m.per_state):
         for s in states:
             rows.append({
-                "key": f"{short}_{s}",
-                "metric": metric,
+                "key": f"{m.short}_{s}",
+                "metric": m.name,
                 "state": s,
-                "label": f"{md_name}({s})" if metric != "l2_integral" else f"L2∫({s}) [integral def.]",
-                "latex": f"${tex_name}({_latex_state(s)})$",
-                "paper_key": f"{short}_{s}" if metric in ("l2_discrete", "mse") else None,
-                "definition": _DEFINITIONS[metric],
+                "label": m.row.format(s=s),
+                "latex": f"${m.latex}({_latex_state(s)})$",
+                "paper_key": f"{m.short}_{s}" if m.paper else None,
+                "definition": m.definition,
             })
-    rows.append({
-        "key": "energy_drift", "metric": "energy_drift", "state": None,
-        "label": "Energy drift (max rel.)", "latex": "Energy drift",
-        "paper_key": None, "definition": _DEFINITIONS["energy_drift"],
-    })
+    for m in (m for m in METRICS.values() if m.table and not m.per_state):
+        rows.append({"key": m.name, "metric": m.name, "state": None, "label": m.row, "latex": m.latex,
+                     "paper_key": None, "definition": m.definition})
     if summary["kind"] == "transfer":
         rows.append({
             "key": "epochs", "metric": "epochs", "state": None, "label": "Epochs",
-            "latex": "Epochs", "paper_key": "epochs", "definition": _DEFINITIONS["epochs"],
+            "latex": "Epochs", "paper_key": "epochs", "definition": _EPOCHS_DEFINITION,
         })
     return rows
 

@@ -25,9 +25,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.nn._trial import TrialSolution
+from atlasnn.nn import TrialSolution
 from atlasnn.solutions._solution import check_inside, check_outside_mode
-from atlasnn.systems._hamiltonian import HamiltonianSystem
+from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["WindowRecord", "PiecewiseSolution", "stack_models", "unstack_models", "window_edges"]
 

@@ -24,8 +24,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.errors import AtlasError
-from atlasnn.nn._trial import TrialSolution
-from atlasnn.systems._hamiltonian import HamiltonianSystem
+from atlasnn.nn import TrialSolution
+from atlasnn.systems import HamiltonianSystem
 
 OUTSIDE_MODES = ("warn", "raise", "allow")
 

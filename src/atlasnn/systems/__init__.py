@@ -1,1 +1,43 @@
-"""atlasnn.systems._hamiltonian."""
+"""Hamiltonian systems: H(q, p), the vector field J∇H, built-ins and Hamiltonians written as text.
+
+A new built-in system is a factory and one :func:`register_system` entry (``_builtins.py``).
+"""
+
+from atlasnn.systems._builtins import (
+    BUILTIN_SYSTEMS,
+    BuiltinSystem,
+    builtin_system,
+    harmonic_exact,
+    harmonic_oscillator,
+    henon_heiles,
+    nonlinear_oscillator,
+    register_system,
+    system_from_spec,
+)
+from atlasnn.systems._compile import CompiledExpression, compile_expression
+from atlasnn.systems._expression import expression_system, is_syntactically_separable
+from atlasnn.systems._hamiltonian import HamiltonianFn, HamiltonianSystem
+from atlasnn.systems._parse import CONSTANTS, FUNCTIONS, MAX_DEPTH, MAX_EXPRESSION_LENGTH, MAX_OPERATIONS
+
+__all__ = [
+    "HamiltonianSystem",
+    "HamiltonianFn",
+    "BuiltinSystem",
+    "BUILTIN_SYSTEMS",
+    "register_system",
+    "builtin_system",
+    "system_from_spec",
+    "nonlinear_oscillator",
+    "henon_heiles",
+    "harmonic_oscillator",
+    "harmonic_exact",
+    "expression_system",
+    "is_syntactically_separable",
+    "compile_expression",
+    "CompiledExpression",
+    "FUNCTIONS",
+    "CONSTANTS",
+    "MAX_EXPRESSION_LENGTH",
+    "MAX_OPERATIONS",
+    "MAX_DEPTH",
+]

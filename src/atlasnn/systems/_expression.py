@@ -17,14 +17,13 @@ over :mod:`jax.numpy`, so the result is an ordinary JAX-traceable function (``ja
 ``jax.jit`` and ``jax.vmap`` work on it).
 
 :func:`expression_system` wraps such an expression into a
-:class:`~atlasnn.systems._hamiltonian.HamiltonianSystem` whose ``spec`` lets
-:func:`atlasnn.systems._hamiltonian.system_from_spec` rebuild it (e.g. from a checkpoint).
+:class:`~atlasnn.systems.HamiltonianSystem` whose ``spec`` lets
+:func:`~atlasnn.systems.system_from_spec` rebuild it (e.g. from a checkpoint).
 
 The parts: :mod:`atlasnn.systems._parse` holds the whitelist's names and limits and parses the
 text, :mod:`atlasnn.systems._compile` checks the tree and builds the JAX function
 (:func:`compile_expression`); this module holds the separability analysis
-(:func:`is_syntactically_separable`) and :func:`expression_system`, and re-exports the names of
-the other two.
+(:func:`is_syntactically_separable`) and :func:`expression_system`.
 """
 
 from __future__ import annotations
@@ -38,46 +37,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.errors import ExpressionError
+from atlasnn.systems._hamiltonian import HamiltonianSystem
 
-# the parser's and the compiler's names are also re-exported here under their old names
-from atlasnn.systems._compile import (  # noqa: F401
-    _BINARY_OPS,
-    _MAX_INTEGER_EXPONENT,
-    _NODE_WORDS,
-    _OTHER_OPERATORS,
-    _UNARY_OPS,
-    CompiledExpression,
-    _Compiler,
-    _Evaluator,
-    compile_expression,
-)
-from atlasnn.systems._parse import (  # noqa: F401
-    CONSTANTS,
-    FUNCTIONS,
-    MAX_DEPTH,
-    MAX_EXPRESSION_LENGTH,
-    MAX_OPERATIONS,
-    _check_name,
-    _check_names,
-    _check_size,
-    _one_line,
-    _param_value,
-    _parse,
-    _Source,
-    _top_level_terms,
-)
+from atlasnn.systems._compile import CompiledExpression, compile_expression
+from atlasnn.systems._parse import _check_name
 
-__all__ = [
-    "FUNCTIONS",
-    "CONSTANTS",
-    "MAX_EXPRESSION_LENGTH",
-    "MAX_OPERATIONS",
-    "MAX_DEPTH",
-    "CompiledExpression",
-    "compile_expression",
-    "expression_system",
-    "is_syntactically_separable",
-]
+__all__ = ["expression_system", "is_syntactically_separable"]
 
 
 def _state_names(node: ast.AST, state: frozenset[str]) -> set[str]:
@@ -161,7 +126,7 @@ def expression_system(
     separable: bool | str = False,
     z0: Sequence[float] | None = None,
 ):
-    """A :class:`~atlasnn.systems._hamiltonian.HamiltonianSystem` from a Hamiltonian written as text.
+    """A :class:`~atlasnn.systems.HamiltonianSystem` from a Hamiltonian written as text.
 
     Example::
 
@@ -180,10 +145,8 @@ def expression_system(
         z0: default initial state, coordinates then momenta.
 
     Returns:
-        The system; its ``spec`` rebuilds it with :func:`atlasnn.systems._hamiltonian.system_from_spec`.
+        The system; its ``spec`` rebuilds it with :func:`~atlasnn.systems.system_from_spec`.
     """
-    from atlasnn.systems._hamiltonian import HamiltonianSystem
-
     qs = _coerce_names(coordinates, "coordinates", "coordinate")
     ps = _coerce_names(momenta, "momenta", "momentum")
     if len(qs) < 1:

@@ -1,4 +1,4 @@
-"""Hamiltonian systems: H(q, p), the vector field J∇H, and the built-in examples.
+"""A Hamiltonian system: H(q, p), the vector field J∇H and its Jacobian, energies in float64.
 
 A state is z = (q, p) in R^{2d}, stored as one array with the d coordinates first and the d
 momenta after them. Hamilton's equations read
@@ -12,7 +12,7 @@ shape (d,); nothing in the package needs to change for it.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Mapping
 
 import jax
 import jax.numpy as jnp
@@ -121,6 +121,12 @@ class HamiltonianSystem:
         out = jax.vmap(self._h_single)(flat)
         return out.reshape(z.shape[:-1])
 
+    def energy64(self, z: Any) -> np.ndarray:
+        """H(z) evaluated in float64 (whatever the global precision), as a NumPy array of shape
+        (...) for states of shape (..., 2d): the one place energies for measuring are computed."""
+        with jax.enable_x64(True), np.errstate(all="ignore"):
+            return np.asarray(self.energy(jnp.asarray(np.asarray(z, dtype=np.float64))))
+
     def grad(self, z: jax.Array) -> jax.Array:
         """∇H(z) = (∂H/∂q, ∂H/∂p) for z of shape (..., 2d)."""
         z = jnp.asarray(z)
@@ -132,6 +138,13 @@ class HamiltonianSystem:
         """J ∇H(z) = (∂H/∂p, -∂H/∂q) for z of shape (..., 2d)."""
         g = self.grad(z)
         return jnp.concatenate([g[..., self.dim :], -g[..., : self.dim]], axis=-1)
+
+    def jacobian(self, z: jax.Array) -> jax.Array:
+        """A(z) = D(J∇H)(z), the Jacobian of the vector field, shape (..., 2d, 2d)."""
+        z = jnp.asarray(z)
+        flat = z.reshape(-1, self.state_dim)
+        jac = jax.vmap(jax.jacfwd(lambda x: self.vector_field(x[None])[0]))(flat)
+        return jac.reshape(z.shape + (self.state_dim,))
 
     def dH_dq(self, q: jax.Array, p: jax.Array) -> jax.Array:
         """∂H/∂q at one state (q, p of shape (d,)); for a separable H this is V'(q)."""
@@ -162,100 +175,3 @@ class HamiltonianSystem:
             "separable": bool(self.separable),
             "spec": None if self.spec is None else dict(self.spec),
         }
-
-
-# ---------------------------------------------------------------------- built-ins
-def nonlinear_oscillator(lam: float = 1.0, z0: Sequence[float] = (1.3, 1.0)) -> HamiltonianSystem:
-    """H = p²/2 + x²/2 + lam·x⁴/4 (paper §4.1); default z0 = (x, p) = (1.3, 1)."""
-    lam = float(lam)
-
-    def H(q, p):
-        x = q[0]
-        return p[0] ** 2 / 2 + x**2 / 2 + lam * x**4 / 4
-
-    return HamiltonianSystem(
-        H, 1, name="nonlinear_oscillator", q_names=("x",), p_names=("p",), z0=np.asarray(z0, float),
-        separable=True, params={"lam": lam},
-        spec={"kind": "builtin", "name": "nonlinear_oscillator", "params": {"lam": lam}},
-    )
-
-
-def henon_heiles(
-    lam: float = 1.0, z0: Sequence[float] = (0.3, -0.3, 0.3, 0.15)
-) -> HamiltonianSystem:
-    """H = (px²+py²)/2 + (x²+y²)/2 + lam·(x²y − y³/3) (paper §4.2); z = (x, y, px, py)."""
-    lam = float(lam)
-
-    def H(q, p):
-        x, y = q[0], q[1]
-        return (p[0] ** 2 + p[1] ** 2) / 2 + (x**2 + y**2) / 2 + lam * (x**2 * y - y**3 / 3)
-
-    return HamiltonianSystem(
-        H, 2, name="henon_heiles", q_names=("x", "y"), p_names=("px", "py"), z0=np.asarray(z0, float),
-        separable=True, params={"lam": lam},
-        spec={"kind": "builtin", "name": "henon_heiles", "params": {"lam": lam}},
-    )
-
-
-def harmonic_oscillator(omega: float = 1.0, z0: Sequence[float] = (1.0, 0.0)) -> HamiltonianSystem:
-    """H = p²/2 + ω² x²/2; exact solution x = x0 cos ωt + (p0/ω) sin ωt. Used for testing."""
-    omega = float(omega)
-
-    def H(q, p):
-        return p[0] ** 2 / 2 + omega**2 * q[0] ** 2 / 2
-
-    return HamiltonianSystem(
-        H, 1, name="harmonic_oscillator", q_names=("x",), p_names=("p",), z0=np.asarray(z0, float),
-        separable=True, params={"omega": omega},
-        spec={"kind": "builtin", "name": "harmonic_oscillator", "params": {"omega": omega}},
-    )
-
-
-def harmonic_exact(t: np.ndarray, z0: Sequence[float] = (1.0, 0.0), omega: float = 1.0) -> np.ndarray:
-    """Exact solution of :func:`harmonic_oscillator`, shape (len(t), 2)."""
-    t = np.asarray(t, dtype=np.float64)
-    x0, p0 = float(z0[0]), float(z0[1])
-    x = x0 * np.cos(omega * t) + p0 / omega * np.sin(omega * t)
-    p = -x0 * omega * np.sin(omega * t) + p0 * np.cos(omega * t)
-    return np.stack([x, p], axis=-1)
-
-
-BUILTIN_SYSTEMS: dict[str, Callable[..., HamiltonianSystem]] = {
-    "nonlinear_oscillator": nonlinear_oscillator,
-    "henon_heiles": henon_heiles,
-    "harmonic_oscillator": harmonic_oscillator,
-}
-
-BUILTIN_DESCRIPTIONS = {
-    "nonlinear_oscillator": ("d=1", "H = p²/2 + x²/2 + lam·x⁴/4", "x=1.3, p=1"),
-    "henon_heiles": ("d=2", "H = (px²+py²)/2 + (x²+y²)/2 + lam·(x²y − y³/3)", "x=0.3, y=-0.3, px=0.3, py=0.15"),
-    "harmonic_oscillator": ("d=1", "H = p²/2 + omega²·x²/2", "x=1, p=0"),
-}
-
-
-def builtin_system(name: str, **params: float) -> HamiltonianSystem:
-    """A built-in system by name, e.g. ``builtin_system("henon_heiles", lam=1.0)``."""
-    key = name.replace("-", "_")
-    if key not in BUILTIN_SYSTEMS:
-        raise SystemError_(f"unknown system {name!r}; built-ins are {sorted(BUILTIN_SYSTEMS)}")
-    try:
-        return BUILTIN_SYSTEMS[key](**params)
-    except TypeError as exc:
-        raise SystemError_(f"bad parameters for system {name!r}: {exc}") from None
-
-
-def system_from_spec(spec: Mapping[str, Any]) -> HamiltonianSystem:
-    """Rebuild a system from the ``spec`` a built-in or expression system records."""
-    kind = spec.get("kind")
-    if kind == "builtin":
-        return builtin_system(spec["name"], **dict(spec.get("params", {})))
-    if kind == "expression":
-        from atlasnn.systems._expression import expression_system
-
-        return expression_system(
-            spec["hamiltonian"], coordinates=spec["coordinates"], momenta=spec["momenta"],
-            params=spec.get("params", {}), name=spec.get("name", "custom"),
-            separable=bool(spec.get("separable", False)), z0=spec.get("z0"),
-        )
-    raise SystemError_(f"cannot rebuild a system from spec kind {kind!r}; pass the system explicitly")
-

@@ -26,8 +26,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from atlasnn.nn._trial import TrialSolution
-from atlasnn.systems._hamiltonian import HamiltonianSystem
+from atlasnn.nn import TrialSolution
+from atlasnn.systems import HamiltonianSystem
 
 
 def energy_and_vector_field(system: HamiltonianSystem, z: jax.Array) -> tuple[jax.Array, jax.Array]:

@@ -41,10 +41,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.nn._trial import TrialSolution
-from atlasnn.solutions._piecewise import PiecewiseSolution, WindowRecord, window_edges
+from atlasnn.nn import TrialSolution
+from atlasnn.solutions import PiecewiseSolution, WindowRecord, window_edges
 from atlasnn.training._polish import PolishConfig, PolishResult, polish
-from atlasnn.systems._hamiltonian import HamiltonianSystem
+from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._train import TrainConfig, TrainResult, train_batch
 from atlasnn.training._transfer import restrict_opt_state
 

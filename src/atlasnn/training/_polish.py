@@ -46,8 +46,8 @@ from jax.flatten_util import ravel_pytree
 from atlasnn.training._collocation import check_interval, uniform_grid
 from atlasnn.errors import ConfigError
 from atlasnn.training._loss import physics_loss
-from atlasnn.nn._trial import TrialSolution
-from atlasnn.systems._hamiltonian import HamiltonianSystem
+from atlasnn.nn import TrialSolution
+from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["PolishConfig", "PolishResult", "polish", "polish_steps", "PolishCarry", "make_lbfgs"]
 

@@ -29,8 +29,8 @@ import optax
 
 from atlasnn.training._collocation import jittered, uniform_grid, with_release_fixed_point
 from atlasnn.training._loss import causal_physics_loss, physics_loss
-from atlasnn.nn._trial import TrialSolution
-from atlasnn.systems._hamiltonian import HamiltonianSystem
+from atlasnn.nn import TrialSolution
+from atlasnn.systems import HamiltonianSystem
 
 # One Adam transformation for every run; lr and betas live in its state (inject_hyperparams),
 # so runs with other hyperparameters reuse the same compiled step.

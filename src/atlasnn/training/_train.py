@@ -52,10 +52,9 @@ import numpy as np
 
 from atlasnn.training._collocation import check_interval
 from atlasnn.errors import ConfigError
-from atlasnn.nn._trial import TrialSolution
-from atlasnn.systems._hamiltonian import HamiltonianSystem
-from atlasnn.training._step import (  # noqa: F401  (trainable_filter, init_opt_state: public here too)
-    _ADAM,
+from atlasnn.nn import TrialSolution
+from atlasnn.systems import HamiltonianSystem
+from atlasnn.training._step import (
     Mode,
     compiled_chunk,
     init_opt_state,
@@ -64,8 +63,6 @@ from atlasnn.training._step import (  # noqa: F401  (trainable_filter, init_opt_
     set_hyperparams,
     trainable_filter,
 )
-
-_initial_track = initial_track  # the name checkpoint.load_state and older code use
 
 BEST_RULES = ("release", "lowest", "last", "release_exact")
 LR_SCHEDULES = ("constant", "cosine", "exponential")
@@ -188,9 +185,19 @@ class TrainState:
 
     model: TrialSolution
     opt_state: Any
-    track: dict[str, Any]  # device-side bookkeeping (best params, flags); see _initial_track
+    track: dict[str, Any]  # device-side bookkeeping (best params, flags); see training._step.initial_track
     epoch: int  # the next epoch to run
     history: History
+
+
+def state_template(model: TrialSolution, config: "TrainConfig") -> TrainState:
+    """An empty :class:`TrainState` of ``model`` under ``config``: the structure (trainable
+    partition, Adam state, bookkeeping) a saved state is restored into."""
+    params, _ = eqx.partition(model, trainable_filter(model, config.freeze_gamma))
+    dtype = model.z0.dtype
+    return TrainState(model=model, opt_state=init_opt_state(params, config, dtype),
+                      track=initial_track(params, dtype), epoch=0,
+                      history=History.empty(tuple(model.scaling.gamma_names)))
 
 
 @dataclass

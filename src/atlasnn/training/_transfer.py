@@ -12,11 +12,10 @@ from __future__ import annotations
 from typing import Any, Callable, Sequence
 
 import equinox as eqx
-import jax
 
 from atlasnn.errors import ConfigError
-from atlasnn.nn._trial import TrialSolution
-from atlasnn.systems._hamiltonian import HamiltonianSystem
+from atlasnn.nn import TrialSolution
+from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._train import TrainConfig, TrainResult, TrainState, train_batch, trainable_filter
 
 

@@ -1,1 +1,65 @@
-"""atlasnn.experiments.config._config."""
+"""Experiment configs: every key declared once in a schema (validation, reference, templates),
+parsed into typed settings; the built-in experiments' files live in ``experiments/configs``."""
+
+from atlasnn.experiments.config._config import (
+    EvaluationConfig,
+    ExperimentConfig,
+    MarchSettings,
+    Stage,
+    SystemConfig,
+    TrainSettings,
+    apply_profile,
+    builtin_config_dir,
+    builtin_config_path,
+    builtin_experiments,
+    load_config,
+    parse_config,
+    parse_end_time,
+)
+from atlasnn.experiments.config._reference import reference_markdown, reference_text, toml_value
+from atlasnn.experiments.config._schema import (
+    MAX_DEPTH,
+    MAX_EPOCHS,
+    MAX_POINTS,
+    MAX_SEED,
+    MAX_SEEDS,
+    MAX_STEPS,
+    MAX_TIME,
+    MAX_WIDTH,
+    SCHEMA,
+    key_spec,
+    parse_table,
+)
+from atlasnn.experiments.config._templates import init_template, write_template
+
+__all__ = [
+    "ExperimentConfig",
+    "Stage",
+    "MarchSettings",
+    "SystemConfig",
+    "TrainSettings",
+    "EvaluationConfig",
+    "parse_config",
+    "load_config",
+    "apply_profile",
+    "builtin_config_dir",
+    "builtin_config_path",
+    "builtin_experiments",
+    "parse_end_time",
+    "SCHEMA",
+    "key_spec",
+    "parse_table",
+    "reference_text",
+    "reference_markdown",
+    "toml_value",
+    "init_template",
+    "write_template",
+    "MAX_EPOCHS",
+    "MAX_POINTS",
+    "MAX_WIDTH",
+    "MAX_DEPTH",
+    "MAX_SEED",
+    "MAX_SEEDS",
+    "MAX_TIME",
+    "MAX_STEPS",
+]

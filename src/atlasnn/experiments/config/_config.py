@@ -36,22 +36,16 @@ from pathlib import Path
 from typing import Any
 
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config._schema import (  # noqa: F401  (the limits, re-exported as before)
-    MAX_DEPTH,
-    MAX_EPOCHS,
-    MAX_POINTS,
-    MAX_SEED,
-    MAX_SEEDS,
+from atlasnn.experiments.config._schema import (
     MAX_STEPS,
     MAX_TIME,
-    MAX_WIDTH,
     SCHEMA,
     parse_table,
+    parse_value,
     settings_fields,
 )
-from atlasnn.experiments.config._types import _fail, _number, _one_line, _table  # noqa: F401  (_number: cli integrate)
-from atlasnn.nn._labels import MODEL_LABELS  # noqa: F401  (re-exported for the runner)
-from atlasnn.training._train import TrainConfig
+from atlasnn.experiments.config._types import _fail, _number, _one_line, _table
+from atlasnn.training import TrainConfig
 
 
 def _deep_merge(base: dict, over: dict) -> dict:
@@ -68,10 +62,10 @@ def _deep_merge(base: dict, over: dict) -> dict:
 class _SystemMethods:
     def build(self):
         """The :class:`~atlasnn.systems._hamiltonian.HamiltonianSystem` this describes."""
-        from atlasnn.systems._hamiltonian import builtin_system
+        from atlasnn.systems import builtin_system
 
         if self.hamiltonian is not None:
-            from atlasnn.systems._expression import expression_system
+            from atlasnn.systems import expression_system
 
             return expression_system(
                 self.hamiltonian, coordinates=list(self.coordinates), momenta=list(self.momenta),
@@ -135,9 +129,6 @@ class MarchSettings:
     first_layer_scale: float
     scheme: Any  # atlasnn.training._marching.MarchConfig (progress and seed are set per training)
 
-    def columns(self) -> list[str]:
-        return [f"{m}_march" for m in self.models]
-
 
 @dataclass(frozen=True)
 class ExperimentConfig:
@@ -176,36 +167,19 @@ class ExperimentConfig:
         """The stage whose interval the tables are measured on (the target for transfer)."""
         return self.stage if self.kind == "short" else self.target
 
-    def columns(self) -> list[str]:
-        """Table columns: SE, then the models (transfer: baseline HNN and the transferred models)."""
-        marched = self.march.columns() if self.march is not None else []
-        if self.kind == "short":
-            return ["se", *self.models, *marched]
-        cols = ["se"] + (["hnn_baseline"] if self.baseline else [])
-        return cols + [f"{m}_transfer" for m in self.models] + marched
-
-    def baseline_column(self) -> str:
-        """The column improvements are measured against: the (baseline) HNN when there is one,
-        else the first network column."""
-        if self.kind == "short":
-            return "hnn" if "hnn" in self.models else self.models[0]
-        if self.baseline:
-            return "hnn_baseline"
-        return "hnn_transfer" if "hnn" in self.models else f"{self.models[0]}_transfer"
-
 
 # ------------------------------------------------------------------ cross-key rules
 def _default_name(values: dict, source: str) -> str:
     """name defaults to the file's name, which must then be a valid name too."""
     if values["name"] is not None:
         return values["name"]
-    return SCHEMA[""].key("name").type.parse("name", Path(source).stem)
+    return parse_value(SCHEMA[""].key("name").type, "name", Path(source).stem)
 
 
 def _system_config(v: dict, given: dict) -> SystemConfig:
     """A built-in name or a hamiltonian; with a hamiltonian, as many momenta as coordinates and
     z0 of length 2d. Without one, coordinates and momenta are not used."""
-    from atlasnn.systems._hamiltonian import BUILTIN_SYSTEMS
+    from atlasnn.systems import BUILTIN_SYSTEMS
 
     if v["hamiltonian"] is None:
         if v["name"] is None:
@@ -304,7 +278,7 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
         q = data.get("quick")
         if q is None:
             raise ConfigError(f"{source}: has no [quick] table for --quick")
-        SCHEMA[""].key("quick").type.parse("quick", q)
+        parse_value(SCHEMA[""].key("quick").type, "quick", q)
         data = _deep_merge(data, q)
     data = {k: v for k, v in data.items() if k != "quick"}
     raw = copy.deepcopy(data)
@@ -338,7 +312,7 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
 def apply_profile(data: dict[str, Any], profile: str | None, source: str) -> dict[str, Any]:
     """The file with the named profile merged over it (its ``profile`` key set to that name)."""
     own = data.get("profile", "default")
-    variants = SCHEMA[""].key("profiles").type.parse("profiles", data.get("profiles", {}))
+    variants = parse_value(SCHEMA[""].key("profiles").type, "profiles", data.get("profiles", {}))
     if profile is None or profile == own:
         return {k: v for k, v in data.items() if k != "profiles"}
     if profile not in variants:
@@ -350,7 +324,7 @@ def apply_profile(data: dict[str, Any], profile: str | None, source: str) -> dic
 
 
 def _polish_config(path: str, v: dict[str, Any]):
-    from atlasnn.training._polish import PolishConfig
+    from atlasnn.training import PolishConfig
 
     return PolishConfig(**{k: v[k] for k in ("steps", "n_points", "memory", "patience", "precision")})
 
@@ -370,7 +344,7 @@ def _window_train(path: str, given: dict[str, Any], base, length: float):
 
 def _march_settings(v: dict[str, Any], given: dict[str, Any], stage: Stage) -> MarchSettings:
     """The [march] table as a MarchSettings (the scheme's train configs over the measured defaults)."""
-    from atlasnn.training._marching import DEFAULT_WINDOW_TRAIN, MarchConfig, n_windows_for
+    from atlasnn.training import DEFAULT_WINDOW_TRAIN, MarchConfig, n_windows_for
 
     if v.get("window") is not None and v.get("n_windows") is not None:
         _fail("march.window", given.get("window"), "give window or n_windows, not both")
@@ -478,3 +452,13 @@ def builtin_config_path(name: str) -> Path:
     if not path.exists():
         raise ConfigError(f"unknown experiment {name!r}; choose one of {builtin_experiments()}")
     return path
+
+
+def parse_end_time(flag: str, text: str) -> float:
+    """An end time from the command line: a plain number ("6.0", "100", "1e2") or a multiple of
+    pi ("4*pi", "20pi", "pi/2"); finite, > 0 and at most the configs' time limit."""
+    try:
+        value: float | str = float(text)
+    except ValueError:
+        value = text
+    return _number(flag, value, low=0, low_open=True, high=MAX_TIME, allow_pi=True)

@@ -30,6 +30,7 @@ How to add a key
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from typing import Any
 
 from atlasnn.experiments.config._types import (
@@ -53,8 +54,8 @@ from atlasnn.experiments.config._types import (
     _key,
     _table,
 )
-from atlasnn.nn._trial import ACTIVATIONS, MODEL_SCALINGS
-from atlasnn.training._train import BEST_RULES, LR_SCHEDULES
+from atlasnn.nn import ACTIVATIONS, MODELS, model_aliases
+from atlasnn.training import BEST_RULES, LR_SCHEDULES
 
 # Upper limits: far beyond any sensible experiment, low enough that a typo (an extra digit, a
 # float such as 1e20 where an integer belongs) fails here, as one line, and not as an overflow or
@@ -68,9 +69,19 @@ MAX_SEEDS = 10_000
 MAX_TIME = 1e6  # |t0|, |T|
 MAX_STEPS = 100_000_000  # classical integrator steps (se_steps × fine_factor)
 
-# The paper's model names, and the Python API's scaling names accepted for them in configs.
-MODEL_NAMES = tuple(sorted(MODEL_SCALINGS))
-MODEL_ALIASES = {scaling: model for model, scaling in MODEL_SCALINGS.items()}
+
+
+def _model_names() -> tuple[str, ...]:
+    return tuple(sorted(MODELS))
+
+
+def _model_spellings() -> dict[str, str]:
+    """Other names accepted for a model in configs (its scaling's name, its aliases)."""
+    return {a: n for a, n in model_aliases().items() if a != n}
+
+
+_MODEL_LIST = NameList(lambda: f"expected a non-empty list drawn from {sorted(MODELS)}", _model_names,
+                       _model_spellings, unique=True)
 
 
 
@@ -91,10 +102,28 @@ def parse_table(table: str, path: str, given: Any, *, sparse: bool = False) -> d
     out: dict[str, Any] = {}
     for k in spec.keys:
         if k.name in spelled:
-            out[k.name] = k.type.parse(_key(path, spelled[k.name]), d[spelled[k.name]])
+            out[k.name] = parse_value(k.type, _key(path, spelled[k.name]), d[spelled[k.name]])
         elif not (sparse or spec.sparse):
-            out[k.name] = k.fill(_key(path, k.name))
+            if isinstance(k.type, Sub) and k.default is not None and k.missing is None:
+                out[k.name] = parse_table(k.type.table, _key(path, k.name), {}, sparse=k.type.sparse)
+            else:
+                out[k.name] = k.fill(_key(path, k.name))
     return out
+
+
+def top_level_keys() -> set[str]:
+    """The keys a variant ([quick], a profile) may set: the top level's, but not ``quick``."""
+    return {k.name for k in SCHEMA[""].keys} - {"quick"}
+
+
+def parse_value(typ: Any, path: str, value: Any) -> Any:
+    """Check and convert one value of type ``typ`` at ``path``: sub-tables and variants by the
+    schema, every other type by itself."""
+    if isinstance(typ, Sub):
+        return parse_table(typ.table, path, value, sparse=typ.sparse)
+    if isinstance(typ, (Variant, Profiles)):
+        return typ.check(path, value, top_level_keys())
+    return typ.parse(path, value)
 
 
 def settings_fields(table: str) -> list[tuple[str, Any, Any]]:
@@ -110,13 +139,13 @@ def settings_fields(table: str) -> list[tuple[str, Any, Any]]:
 
 
 def _builtin_systems() -> str:
-    from atlasnn.systems._hamiltonian import BUILTIN_SYSTEMS
+    from atlasnn.systems import BUILTIN_SYSTEMS
 
     return "built-ins: " + ", ".join(sorted(BUILTIN_SYSTEMS))
 
 
 def _integrators() -> tuple[str, ...]:
-    from atlasnn.evaluation._integrators import INTEGRATORS
+    from atlasnn.evaluation import INTEGRATORS
 
     return tuple(sorted(INTEGRATORS))
 
@@ -137,7 +166,7 @@ _GAMMA = Number(low=0, low_open=True)
 
 # Every table, by id. A table's id is its path, except that [interval], [source] and [target]
 # share "stage" and their train tables share "train".
-SCHEMA: dict[str, TableSpec] = {
+_STATIC_TABLES: dict[str, TableSpec] = {
     "": TableSpec("The top level of an experiment file.", (
         Key("name", String(r"[A-Za-z0-9_.-]+", "use letters, digits, '-', '_' and '.' only",
                            "letters, digits, '-', '_', '.'"), None,
@@ -155,11 +184,10 @@ SCHEMA: dict[str, TableSpec] = {
             missing="expected a table", default_text="required"),
         Key("network", Sub("network"), {}, "The network N(t; θ) of the trial solution ẑ(t) = z0 + f(t − t0; γ)·N(t; θ)."),
         Key("train", Sub("train"), {}, "Training settings of every interval (a stage's own train table overrides them key by key)."),
-        Key("models", NameList(f"expected a non-empty list drawn from {list(MODEL_NAMES)}", MODEL_NAMES,
-                               MODEL_ALIASES, unique=True), ["hnn", "atlas_tanh", "atlas_exp"],
-            "The models to train: hnn (HNN, f = 1 − e^(−t)), atlas_tanh (ATLAS-NN (tanh), f = tanh(m t)) and "
-            "atlas_exp (ATLAS-NN (exp), f = (1 − e^(−αt))/(1 + β e^(−αt))); the Python API's scaling names "
-            "exp_decay, tanh and rational_exp are accepted for them."),
+        Key("models", _MODEL_LIST, ["hnn", "atlas_tanh", "atlas_exp"],
+            "The models to train, e.g. hnn (HNN, f = 1 − e^(−t)), atlas_tanh (ATLAS-NN (tanh), f = tanh(m t)) and "
+            "atlas_exp (ATLAS-NN (exp), f = (1 − e^(−αt))/(1 + β e^(−αt))); their scalings' names "
+            "(exp_decay, tanh, rational_exp) are accepted for them. The list is atlasnn.nn.MODELS."),
         Key("gamma_init", Sub("gamma_init", sparse=True), {},
             "Initial values of each model's time-scaling parameters γ (learned on the first interval)."),
         Key("interval", Sub("stage"), None, "The interval of a short run, [t0, T], and its training settings.",
@@ -211,8 +239,7 @@ SCHEMA: dict[str, TableSpec] = {
         50, 1.0, "higher initial frequencies of the sin network; 1 is PyTorch's init")),
     "march": TableSpec("Time-marching ATLAS-NN (atlasnn.training._marching): windows [t_k, t_k+1] of equal length, window "
                        "k exact at its own start z_k = the previous window's end state.", (
-        Key("models", NameList(f"expected a non-empty list drawn from {list(MODEL_NAMES)}", MODEL_NAMES,
-                               MODEL_ALIASES, unique=True), ["atlas_exp"],
+        Key("models", _MODEL_LIST, ["atlas_exp"],
             "The models marched (their initial γ from [gamma_init]); one column each, e.g. atlas_exp_march."),
         Key("window", Number(low=0, low_open=True, high=MAX_TIME, pi=True), None, "The longest window: the "
             "interval is cut into ⌈(T − t0)/window⌉ equal windows; give window or n_windows.",
@@ -284,19 +311,6 @@ SCHEMA: dict[str, TableSpec] = {
             missing="missing (the end of the interval)", default_text="required"),
         Key("train", Sub("train", sparse=True), {}, "Training settings for this interval only, overriding [train] key by key."),
     )),
-    "gamma_init": TableSpec("Initial γ per model; a γ left out starts at 1.0, as in the paper.", (
-        Key("hnn", Sub("gamma_init.hnn"), {}, "HNN's scaling f = 1 − e^(−t) has no γ."),
-        Key("atlas_tanh", Sub("gamma_init.atlas_tanh"), {}, "ATLAS-NN (tanh): f = tanh(m t)."),
-        Key("atlas_exp", Sub("gamma_init.atlas_exp"), {}, "ATLAS-NN (exp): f = (1 − e^(−αt))/(1 + β e^(−αt))."),
-    ), aliases=dict(MODEL_ALIASES), sparse=True),
-    "gamma_init.hnn": TableSpec("HNN (also spelt exp_decay): no γ.", (), sparse=True),
-    "gamma_init.atlas_tanh": TableSpec("ATLAS-NN (tanh) (also spelt tanh).", (
-        Key("m", _GAMMA, 1.0, "Initial m of f(t) = tanh(m t)."),
-    ), sparse=True),
-    "gamma_init.atlas_exp": TableSpec("ATLAS-NN (exp) (also spelt rational_exp).", (
-        Key("alpha", _GAMMA, 1.0, "Initial α of f(t) = (1 − e^(−αt))/(1 + β e^(−αt))."),
-        Key("beta", _GAMMA, 1.0, "Initial β of f(t) = (1 − e^(−αt))/(1 + β e^(−αt))."),
-    ), sparse=True),
     "transfer": TableSpec("Source → target: the target model starts from the source's weights and γ.", (
         Key("thaw", Bool(), False, "Train γ on the target too (the paper's future work); false keeps γ frozen, as in the paper."),
         Key("carry_adam", Bool(), True, "Start the target's Adam from the source's moments, as the authors' release does."),
@@ -328,6 +342,44 @@ SCHEMA: dict[str, TableSpec] = {
             "tolerances) beside each network's training time: results.json and figures/work_precision.png."),
     )),
 }
+
+
+def _gamma_tables() -> dict[str, TableSpec]:
+    """[gamma_init] and one sub-table per registered model, from the model registry."""
+    keys, out = [], {}
+    for kind in MODELS.values():
+        formula = kind.scaling.formula
+        meaning = f"{kind.label}: {formula}." if kind.gamma_names else f"{kind.label}'s scaling {formula} has no γ."
+        keys.append(Key(kind.name, Sub(f"gamma_init.{kind.name}"), {}, meaning))
+        also = ", ".join(a for a in kind.aliases if a != kind.name)
+        out[f"gamma_init.{kind.name}"] = TableSpec(
+            f"{kind.label}" + (f" (also spelt {also})" if also else "") + ("." if kind.gamma_names else ": no γ."),
+            tuple(Key(g, _GAMMA, 1.0, f"Initial {g} of {formula}.") for g in kind.gamma_names), sparse=True)
+    out["gamma_init"] = TableSpec("Initial γ per model; a γ left out starts at 1.0, as in the paper.", tuple(keys),
+                                  aliases=_model_spellings(), sparse=True)
+    return out
+
+
+class _Schema(Mapping):
+    """Every table by id: the static tables above and the [gamma_init] tables of the models
+    registered now (so a model registered at run time is configurable at once)."""
+
+    def _all(self) -> dict[str, TableSpec]:
+        return {**_STATIC_TABLES, **_gamma_tables()}
+
+    def __getitem__(self, table: str) -> TableSpec:
+        if table in _STATIC_TABLES:
+            return _STATIC_TABLES[table]
+        return _gamma_tables()[table]
+
+    def __iter__(self):
+        return iter(self._all())
+
+    def __len__(self) -> int:
+        return len(self._all())
+
+
+SCHEMA: Mapping[str, TableSpec] = _Schema()
 
 
 def table_id(path: str) -> str:

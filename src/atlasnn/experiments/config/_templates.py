@@ -17,6 +17,8 @@ import tomllib
 from pathlib import Path
 from typing import Any, Sequence
 
+from atlasnn.nn import MODELS
+from atlasnn.systems import BUILTIN_SYSTEMS, builtin_system
 from atlasnn.errors import ConfigError
 from atlasnn.experiments.config._config import parse_config
 from atlasnn.experiments.config._reference import toml_value
@@ -31,11 +33,9 @@ QUICK = [("train.epochs", 300), ("evaluation.eval_points", 200), ("evaluation.fi
 def _system_items(system: str | None, hamiltonian: str | None, coordinates: Sequence[str],
                   momenta: Sequence[str], z0: Sequence[float] | None, separable: bool) -> list[tuple[str, Any]]:
     if system is not None:
-        from atlasnn.systems._hamiltonian import BUILTIN_SYSTEMS, builtin_system
-
         sysm = builtin_system(system)  # refuses an unknown name (one line)
         key = system.replace("-", "_")
-        params = {n: p.default for n, p in inspect.signature(BUILTIN_SYSTEMS[key]).parameters.items()
+        params = {n: p.default for n, p in inspect.signature(BUILTIN_SYSTEMS[key].factory).parameters.items()
                   if isinstance(p.default, (int, float)) and not isinstance(p.default, bool)}
         items = [("name", key)] + ([("params", {k: float(v) for k, v in params.items()})] if params else [])
         return items + [("z0", [float(x) for x in (z0 if z0 is not None else sysm.z0)])]
@@ -48,7 +48,7 @@ def _tables(name: str, transfer: bool, system_items: list, what: str) -> list[tu
     """(table, [(key, value)]) in file order: the paper's oscillator settings."""
     interval = "source [0, 4pi] -> target [0, 20pi]" if transfer else "one interval [0, 4pi]"
     top = [("name", name), ("description", f"{what}: {interval}"), ("kind", "transfer" if transfer else "short"),
-           ("models", ["hnn", "atlas_tanh", "atlas_exp"]), ("seeds", [0])]
+           ("models", list(MODELS)), ("seeds", [0])]
     train = [("epochs", 40000 if transfer else 100000), ("lr", 5e-3 if transfer else 8e-3),
              ("betas", [0.999, 0.9999]), ("lam_reg", 1.0), ("n_points", 200), ("sigma_per_T", 0.03)]
     train += [("tolerance", 4e-5)] if transfer else []
@@ -60,8 +60,8 @@ def _tables(name: str, transfer: bool, system_items: list, what: str) -> list[tu
                    ("target", [("t0", 0.0), ("T", "20*pi")]), ("target.train", [("n_points", 500)])]
     else:
         tables += [("interval", [("t0", 0.0), ("T", "4*pi")])]
-    tables += [("train", train), ("gamma_init.atlas_tanh", [("m", 1.0)]),
-               ("gamma_init.atlas_exp", [("alpha", 1.0), ("beta", 1.0)])]
+    tables += [("train", train)]
+    tables += [(f"gamma_init.{k.name}", [(g, 1.0) for g in k.gamma_names]) for k in MODELS.values() if k.gamma_names]
     if transfer:
         tables += [("transfer", [("thaw", False), ("carry_adam", True), ("baseline", True)])]
     tables += [("evaluation", [("eval_points", 5000 if transfer else 2000), ("fine_factor", 100)])]

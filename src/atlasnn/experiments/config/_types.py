@@ -234,30 +234,35 @@ class NameList(ValueType):
     """A list of names: free names (all strings), or names from ``choices`` (with ``aliases``
     accepted for some and replaced by the name they stand for)."""
 
-    why: str
+    why: str | Callable[[], str]
     choices: tuple[str, ...] | Callable[[], tuple[str, ...]] | None = None
-    aliases: dict[str, str] = field(default_factory=dict)
+    aliases: dict[str, str] | Callable[[], dict[str, str]] = field(default_factory=dict)
     nonempty: bool = True
     unique: bool = False
     label = "list of names"
 
+    def spellings(self) -> dict[str, str]:
+        return self.aliases() if callable(self.aliases) else dict(self.aliases)
+
     def parse(self, path, v):
         options = None if self.choices is None else Choice(self.choices).options()
+        aliases = self.spellings()
         if not isinstance(v, list) or (self.nonempty and not v) or (
                 options is None and not all(isinstance(s, str) for s in v)):
-            _fail(path, v, self.why)
+            _fail(path, v, self.why() if callable(self.why) else self.why)
         names = []
         for i, name in enumerate(v):
-            if options is not None and not (isinstance(name, str) and name in self.aliases):
+            if options is not None and not (isinstance(name, str) and name in aliases):
                 _string(f"{path}[{i}]", name, options)
-            names.append(self.aliases.get(name, name))
+            names.append(aliases.get(name, name))
         if self.unique and len(set(names)) != len(names):
             _fail(path, v, "names must not repeat")
         return tuple(names)
 
     def limits(self):
         parts = [] if self.choices is None else ["from " + ", ".join(Choice(self.choices).options())]
-        parts += ["also " + ", ".join(self.aliases)] if self.aliases else []
+        aliases = self.spellings()
+        parts += ["also " + ", ".join(aliases)] if aliases else []
         parts += ["non-empty"] if self.nonempty else []
         return "; ".join(parts + (["no repeats"] if self.unique else []))
 
@@ -325,10 +330,8 @@ class Sub(ValueType):
     sparse: bool = False
     label = "table"
 
-    def parse(self, path, v):
-        from atlasnn.experiments.config._schema import parse_table
-
-        return parse_table(self.table, path, v, sparse=self.sparse)
+    def parse(self, path, v):  # pragma: no cover - the schema parses sub-tables (parse_value)
+        raise TypeError(f"{path}: a sub-table is parsed by the schema, not by its type")
 
 
 @dataclass(frozen=True)
@@ -338,10 +341,9 @@ class Variant(ValueType):
 
     label = "table"
 
-    def parse(self, path, v):
-        from atlasnn.experiments.config._schema import SCHEMA
-
-        return _table(path, v, {k.name for k in SCHEMA[""].keys} - {"quick"})
+    def check(self, path, v, allowed: set[str]) -> dict:
+        """The variant's table, its keys checked against ``allowed`` (the top level's, by the schema)."""
+        return _table(path, v, allowed)
 
 
 @dataclass(frozen=True)
@@ -351,14 +353,15 @@ class Profiles(ValueType):
 
     label = "table of variants"
 
-    def parse(self, path, v):
+    def check(self, path, v, allowed: set[str]) -> dict:
+        """The named variants, each checked as a :class:`Variant` against ``allowed``."""
         if not isinstance(v, dict):
             _fail(path, v, "expected a table of named variants, e.g. [profiles.release]")
         out = {}
         for name, variant in v.items():
             if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_-]+", name):
                 _fail(_key(path, name), variant, "profile names use letters, digits, '-' and '_' only")
-            out[name] = Variant().parse(_key(path, name), variant)
+            out[name] = Variant().check(_key(path, name), variant, allowed)
             for inner in ("profile", "profiles"):
                 if inner in variant:
                     _fail(_key(_key(path, name), inner), variant[inner], "a profile cannot set the profiles")
@@ -399,11 +402,9 @@ class Key:
     note: Callable[[], str] | None = None
 
     def fill(self, path: str) -> Any:
-        """The value when the key is absent."""
+        """The value when the key is absent (a sub-table's default is filled by the schema)."""
         if self.missing is not None:
             _fail(path, None, self.missing)
-        if isinstance(self.type, Sub) and self.default is not None:
-            return self.type.parse(path, {})
         if isinstance(self.default, list):  # list values are parsed to tuples
             return tuple(self.default)
         return copy.deepcopy(self.default)

@@ -1,0 +1,136 @@
+"""The built-in systems, one registry: a built-in is a factory and one :func:`register_system` entry.
+
+Each factory returns a :class:`~atlasnn.systems.HamiltonianSystem` whose ``spec`` names the factory
+and its parameters, so :func:`system_from_spec` rebuilds it (e.g. from a checkpoint).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from atlasnn.errors import SystemError_
+from atlasnn.systems._expression import expression_system
+from atlasnn.systems._hamiltonian import HamiltonianSystem
+
+__all__ = ["BuiltinSystem", "BUILTIN_SYSTEMS", "register_system", "builtin_system", "system_from_spec",
+           "nonlinear_oscillator", "henon_heiles", "harmonic_oscillator", "harmonic_exact"]
+
+
+@dataclass(frozen=True)
+class BuiltinSystem:
+    """One entry of the registry: the factory and what ``atlasnn systems`` prints of it."""
+
+    name: str
+    factory: Callable[..., HamiltonianSystem]
+    dims: str  # e.g. "d=1"
+    formula: str  # H in words
+    default_z0: str  # e.g. "x=1.3, p=1"
+
+    def __post_init__(self) -> None:
+        if not self.name or not self.name.replace("_", "").isalnum():
+            raise SystemError_(f"a built-in system name must be letters, digits and '_', got {self.name!r}")
+        if not callable(self.factory):
+            raise SystemError_(f"built-in system {self.name!r}: factory must be callable")
+
+
+#: name -> :class:`BuiltinSystem`, in the order they were registered.
+BUILTIN_SYSTEMS: dict[str, BuiltinSystem] = {}
+
+
+def register_system(entry: BuiltinSystem) -> BuiltinSystem:
+    """Add a built-in system (its name must be new); returns the entry."""
+    if entry.name in BUILTIN_SYSTEMS:
+        raise SystemError_(f"a built-in system named {entry.name!r} exists already")
+    BUILTIN_SYSTEMS[entry.name] = entry
+    return entry
+
+
+def nonlinear_oscillator(lam: float = 1.0, z0: Sequence[float] = (1.3, 1.0)) -> HamiltonianSystem:
+    """H = p²/2 + x²/2 + lam·x⁴/4 (paper §4.1); default z0 = (x, p) = (1.3, 1)."""
+    lam = float(lam)
+
+    def H(q, p):
+        x = q[0]
+        return p[0] ** 2 / 2 + x**2 / 2 + lam * x**4 / 4
+
+    return HamiltonianSystem(
+        H, 1, name="nonlinear_oscillator", q_names=("x",), p_names=("p",), z0=np.asarray(z0, float),
+        separable=True, params={"lam": lam},
+        spec={"kind": "builtin", "name": "nonlinear_oscillator", "params": {"lam": lam}},
+    )
+
+
+def henon_heiles(
+    lam: float = 1.0, z0: Sequence[float] = (0.3, -0.3, 0.3, 0.15)
+) -> HamiltonianSystem:
+    """H = (px²+py²)/2 + (x²+y²)/2 + lam·(x²y − y³/3) (paper §4.2); z = (x, y, px, py)."""
+    lam = float(lam)
+
+    def H(q, p):
+        x, y = q[0], q[1]
+        return (p[0] ** 2 + p[1] ** 2) / 2 + (x**2 + y**2) / 2 + lam * (x**2 * y - y**3 / 3)
+
+    return HamiltonianSystem(
+        H, 2, name="henon_heiles", q_names=("x", "y"), p_names=("px", "py"), z0=np.asarray(z0, float),
+        separable=True, params={"lam": lam},
+        spec={"kind": "builtin", "name": "henon_heiles", "params": {"lam": lam}},
+    )
+
+
+def harmonic_oscillator(omega: float = 1.0, z0: Sequence[float] = (1.0, 0.0)) -> HamiltonianSystem:
+    """H = p²/2 + ω² x²/2; exact solution x = x0 cos ωt + (p0/ω) sin ωt. Used for testing."""
+    omega = float(omega)
+
+    def H(q, p):
+        return p[0] ** 2 / 2 + omega**2 * q[0] ** 2 / 2
+
+    return HamiltonianSystem(
+        H, 1, name="harmonic_oscillator", q_names=("x",), p_names=("p",), z0=np.asarray(z0, float),
+        separable=True, params={"omega": omega},
+        spec={"kind": "builtin", "name": "harmonic_oscillator", "params": {"omega": omega}},
+    )
+
+
+def harmonic_exact(t: np.ndarray, z0: Sequence[float] = (1.0, 0.0), omega: float = 1.0) -> np.ndarray:
+    """Exact solution of :func:`harmonic_oscillator`, shape (len(t), 2)."""
+    t = np.asarray(t, dtype=np.float64)
+    x0, p0 = float(z0[0]), float(z0[1])
+    x = x0 * np.cos(omega * t) + p0 / omega * np.sin(omega * t)
+    p = -x0 * omega * np.sin(omega * t) + p0 * np.cos(omega * t)
+    return np.stack([x, p], axis=-1)
+
+
+register_system(BuiltinSystem("nonlinear_oscillator", nonlinear_oscillator, "d=1",
+                              "H = p²/2 + x²/2 + lam·x⁴/4", "x=1.3, p=1"))
+register_system(BuiltinSystem("henon_heiles", henon_heiles, "d=2",
+                              "H = (px²+py²)/2 + (x²+y²)/2 + lam·(x²y − y³/3)", "x=0.3, y=-0.3, px=0.3, py=0.15"))
+register_system(BuiltinSystem("harmonic_oscillator", harmonic_oscillator, "d=1", "H = p²/2 + omega²·x²/2",
+                              "x=1, p=0"))
+
+
+def builtin_system(name: str, **params: float) -> HamiltonianSystem:
+    """A built-in system by name, e.g. ``builtin_system("henon_heiles", lam=1.0)``."""
+    key = name.replace("-", "_")
+    if key not in BUILTIN_SYSTEMS:
+        raise SystemError_(f"unknown system {name!r}; built-ins are {sorted(BUILTIN_SYSTEMS)}")
+    try:
+        return BUILTIN_SYSTEMS[key].factory(**params)
+    except TypeError as exc:
+        raise SystemError_(f"bad parameters for system {name!r}: {exc}") from None
+
+
+def system_from_spec(spec: Mapping[str, Any]) -> HamiltonianSystem:
+    """Rebuild a system from the ``spec`` a built-in or expression system records."""
+    kind = spec.get("kind")
+    if kind == "builtin":
+        return builtin_system(spec["name"], **dict(spec.get("params", {})))
+    if kind == "expression":
+        return expression_system(
+            spec["hamiltonian"], coordinates=spec["coordinates"], momenta=spec["momenta"],
+            params=spec.get("params", {}), name=spec.get("name", "custom"),
+            separable=bool(spec.get("separable", False)), z0=spec.get("z0"),
+        )
+    raise SystemError_(f"cannot rebuild a system from spec kind {kind!r}; pass the system explicitly")
