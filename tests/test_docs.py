@@ -174,7 +174,7 @@ def _capped(cfg):
 @pytest.fixture
 def epoch_cap(monkeypatch):
     """Cap the trainings of in-process CLI runs (and draw their figures at a lower resolution)."""
-    import atlasnn.experiments.config._config as config
+    import atlasnn.experiments.config as config
     import atlasnn.report._plotkit as plotkit
 
     real = config.load_config

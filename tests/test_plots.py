@@ -171,14 +171,14 @@ def test_series_validates_shapes():
 
 # ------------------------------------------------------------------------------ figures
 def test_plot_scaling_families(tmp_path):
-    import atlasnn.report._plots as plots
+    import atlasnn.report._plotkit as plotkit
 
     paths = plot_scaling_families(tmp_path / "sub" / "scaling")  # parent dir is created
     _check_outputs(paths)
     h, w = imread(paths[0]).shape[:2]
     fig_w, fig_h = 11.0, 4.2  # the figure size in inches, at the module's DPI
-    assert w == pytest.approx(fig_w * plots.DPI, abs=2)
-    assert h == pytest.approx(fig_h * plots.DPI, abs=2)
+    assert w == pytest.approx(fig_w * plotkit.DPI, abs=2)
+    assert h == pytest.approx(fig_h * plotkit.DPI, abs=2)
 
 
 def test_plot_loss_curves_single_and_multi_seed(tmp_path):

@@ -53,7 +53,7 @@ _X64_SCRIPT = textwrap.dedent(
     import jax, numpy as np
     import atlasnn
     from atlasnn.nn._trial import make_model
-    from atlasnn.systems._hamiltonian import harmonic_oscillator
+    from atlasnn.systems import harmonic_oscillator
     from atlasnn.training._train import TrainConfig, train
 
     system = harmonic_oscillator()

@@ -63,5 +63,7 @@ def test_plot_writes_png_and_pdf(problem, tmp_path):
     system, z0, t, z_ref = problem
     pts = wp.symplectic_points(system, z0, t, z_ref, multiples=(1, 2), min_seconds=0.0)
     pts.append(wp.network_point("net", "seed 0", 3.0, system, z_ref + 1e-3, z_ref, 0.5))
-    paths = wp.plot_work_precision(tmp_path / "wp", pts, title="t")
+    from atlasnn.report import plot_work_precision
+
+    paths = plot_work_precision(tmp_path / "wp", pts, title="t")
     assert [p.suffix for p in paths] == [".png", ".pdf"] and all(p.stat().st_size > 5000 for p in paths)

@@ -231,13 +231,16 @@ def resume_experiment(
     log=print,
     handle_signals: bool = True,
     scheduler: str | None = None,
+    executor: Executor | None = None,
 ) -> dict[str, Any]:
     """Continue an interrupted run directory (see the module docstring); returns the results.
-    It may run on other executors than the run started on (``jobs``, ``scheduler``)."""
+    It may run on other executors than the run started on (``jobs``, ``scheduler``, or an open
+    ``executor``)."""
     cfg, meta = load_run_config(out)
     return run_experiment(
         cfg, out, seeds=tuple(meta["seeds"]), jobs=jobs, progress=progress, quick=bool(meta.get("quick")),
         report=report, log=log, resume=True, handle_signals=handle_signals, scheduler=scheduler,
+        executor=executor,
     )
 
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
-from atlasnn.solutions._solution import check_inside, check_outside_mode
+from atlasnn.solutions._solution import bucket_size, check_inside, check_outside_mode
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["WindowRecord", "PiecewiseSolution", "stack_models", "unstack_models", "window_edges"]
@@ -144,9 +144,7 @@ class PiecewiseSolution:
         s = flat - self.edges[k]  # local time, in float64 before the cast
         n = len(self.models)
         counts = np.bincount(k, minlength=n)
-        width = 8
-        while width < counts.max(initial=0):  # pad to a power of two: few compiled shapes
-            width *= 2
+        width = bucket_size(int(counts.max(initial=0)))  # few compiled shapes
         order = np.argsort(k, kind="stable")
         starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
         col = np.empty(flat.size, dtype=np.int64)

@@ -71,6 +71,17 @@ def _evaluate(model: TrialSolution, t: jax.Array):
     return model.value_and_rate(t)
 
 
+def bucket_size(n: int) -> int:
+    """The padded length of ``n`` evaluation times: 8, 16, 32, ... up to 4096, then multiples of
+    4096 (a few compiled shapes instead of one per length, at most about 2× the work)."""
+    if n <= 4096:
+        size = 8
+        while size < n:
+            size *= 2
+        return size
+    return -(-n // 4096) * 4096
+
+
 @dataclass(eq=False)
 class Solution:
     """A trained trial solution for one system.
@@ -105,24 +116,33 @@ class Solution:
     def _check_inside(self, arr: np.ndarray) -> None:
         check_inside(self, self.interval, arr)
 
-    def _times(self, t) -> tuple[jax.Array, tuple[int, ...]]:
+    def _times(self, t) -> tuple[np.ndarray, tuple[int, ...]]:
         arr = np.asarray(t, dtype=np.float64)
         if not np.all(np.isfinite(arr)):
             raise ValueError("times must be finite")
         self._check_inside(arr)
-        return jnp.asarray(arr.reshape(-1), dtype=self.model.z0.dtype), arr.shape
+        return arr.reshape(-1), arr.shape
+
+    def _evaluate(self, t) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
+        """(ẑ, dẑ/dt, shape of t): the times padded to a bucket size so that a new number of
+        times rarely compiles again (:func:`bucket_size`)."""
+        flat, shape = self._times(t)
+        n = flat.size
+        padded = np.zeros(bucket_size(n), dtype=np.float64)
+        padded[:n] = flat
+        if n:
+            padded[n:] = flat[-1]
+        z, dz = _evaluate(self.model, jnp.asarray(padded, dtype=self.model.z0.dtype))
+        d = self.system.state_dim
+        return np.asarray(z)[:n].reshape(shape + (d,)), np.asarray(dz)[:n].reshape(shape + (d,)), shape
 
     def __call__(self, t) -> np.ndarray:
         """ẑ(t): shape t.shape + (2d,)."""
-        tt, shape = self._times(t)
-        z, _ = _evaluate(self.model, tt)
-        return np.asarray(z).reshape(shape + (self.system.state_dim,))
+        return self._evaluate(t)[0]
 
     def derivative(self, t) -> np.ndarray:
         """dẑ/dt(t): shape t.shape + (2d,)."""
-        tt, shape = self._times(t)
-        _, dz = _evaluate(self.model, tt)
-        return np.asarray(dz).reshape(shape + (self.system.state_dim,))
+        return self._evaluate(t)[1]
 
     def energy(self, t) -> np.ndarray:
         """H(ẑ(t)), evaluated in float64: shape t.shape."""
@@ -132,10 +152,8 @@ class Solution:
 
     def residual(self, t) -> np.ndarray:
         """dẑ/dt − J∇H(ẑ) at t: how far the network is from Hamilton's equations there."""
-        tt, shape = self._times(t)
-        z, dz = _evaluate(self.model, tt)
-        r = dz - self.system.vector_field(z)
-        return np.asarray(r).reshape(shape + (self.system.state_dim,))
+        z, dz, _ = self._evaluate(t)
+        return dz - np.asarray(self.system.vector_field(jnp.asarray(z)))
 
     @property
     def scaling_name(self) -> str:
