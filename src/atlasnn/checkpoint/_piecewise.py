@@ -32,6 +32,7 @@ from atlasnn.checkpoint._format import (
 )
 from atlasnn.errors import AtlasError, CheckpointError
 from atlasnn.checkpoint._identity import interval_mismatch, system_mismatch
+from atlasnn.solutions import PiecewiseSolution, WindowRecord, stack_models, unstack_models
 from atlasnn.nn import make_model
 from atlasnn.systems import HamiltonianSystem
 
@@ -63,8 +64,6 @@ def save_piecewise(
     The content hash covers all of it. ``train_config``: a TrainConfig, a MarchConfig's dict, or
     any JSON-able dict.
     """
-    from atlasnn.solutions import PiecewiseSolution, stack_models
-
     p = os.fspath(path)
     if not isinstance(solution, PiecewiseSolution):
         raise _fail(p, f"save_piecewise needs a PiecewiseSolution, got {type(solution).__name__}")
@@ -96,8 +95,6 @@ def save_piecewise(
 
 
 def _window_records(path: str, records: Any, arrays: Mapping[str, np.ndarray]) -> list:
-    from atlasnn.solutions import WindowRecord
-
     out = []
     for k, rec in enumerate(records):
         if not isinstance(rec, dict) or set(rec) != set(_WINDOW_RECORD_FIELDS):
@@ -119,8 +116,6 @@ def load_piecewise(path: str | os.PathLike, system: HamiltonianSystem | None = N
     ``expect`` (keys ``"system"`` and ``"interval"``, as for :func:`load_checkpoint`) refuses a
     solution of another problem with one line naming ``owner``.
     """
-    from atlasnn.solutions import PiecewiseSolution, stack_models, unstack_models
-
     p = os.fspath(path)
     arrays, meta = _read(p)
     if meta.get("kind") != KIND_PIECEWISE or not isinstance(meta.get("piecewise"), dict):

@@ -24,12 +24,14 @@ import json
 import math
 import os
 import platform
+import tomllib
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
 from atlasnn.errors import ConfigError
+from atlasnn.experiments.config import parse_config
 from atlasnn.fileio import write_json, write_npz
 
 TASK_DIR = "tasks"
@@ -189,10 +191,6 @@ def read_run_meta(out: str | Path) -> dict[str, Any]:
 def load_run_config(out: str | Path):
     """The config and meta of a resumable run directory: ``config.toml`` as given, parsed with the
     run's ``--quick`` flag (or the recorded config when there is no ``config.toml``)."""
-    import tomllib
-
-    from atlasnn.experiments.config._config import parse_config
-
     out = Path(out)
     meta = read_run_meta(out)
     quick = bool(meta.get("quick"))

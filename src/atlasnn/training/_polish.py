@@ -46,6 +46,7 @@ from jax.flatten_util import ravel_pytree
 from atlasnn.training._collocation import check_interval, uniform_grid
 from atlasnn.errors import ConfigError
 from atlasnn.training._loss import physics_loss
+from atlasnn.training._step import trainable_filter
 from atlasnn.nn import TrialSolution
 from atlasnn.systems import HamiltonianSystem
 
@@ -305,8 +306,6 @@ def _cast(model: TrialSolution, dtype) -> TrialSolution:
 
 def _polish(model: TrialSolution, system: HamiltonianSystem, T: float, config: PolishConfig,
             e0: float) -> PolishResult:
-    from atlasnn.training._train import trainable_filter
-
     dtype = model.z0.dtype
     data = polish_data(config, float(model.t0), float(T), e0, dtype)
     params, rest = eqx.partition(model, trainable_filter(model, config.freeze_gamma))

@@ -35,7 +35,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from atlasnn.errors import ConfigError
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.experiments.config._schema import (
     MAX_STEPS,
     MAX_TIME,
@@ -45,7 +49,8 @@ from atlasnn.experiments.config._schema import (
     settings_fields,
 )
 from atlasnn.experiments.config._types import _fail, _number, _one_line, _table
-from atlasnn.training import TrainConfig
+from atlasnn.systems import BUILTIN_SYSTEMS, builtin_system, expression_system
+from atlasnn.training import DEFAULT_WINDOW_TRAIN, MarchConfig, PolishConfig, TrainConfig, n_windows_for
 
 
 def _deep_merge(base: dict, over: dict) -> dict:
@@ -61,12 +66,8 @@ def _deep_merge(base: dict, over: dict) -> dict:
 # ----------------------------------------------------------------- settings dataclasses
 class _SystemMethods:
     def build(self):
-        """The :class:`~atlasnn.systems._hamiltonian.HamiltonianSystem` this describes."""
-        from atlasnn.systems import builtin_system
-
+        """The :class:`~atlasnn.systems.HamiltonianSystem` this describes."""
         if self.hamiltonian is not None:
-            from atlasnn.systems import expression_system
-
             return expression_system(
                 self.hamiltonian, coordinates=list(self.coordinates), momenta=list(self.momenta),
                 params=dict(self.params), name=self.name or "custom", separable=self.separable,
@@ -179,8 +180,6 @@ def _default_name(values: dict, source: str) -> str:
 def _system_config(v: dict, given: dict) -> SystemConfig:
     """A built-in name or a hamiltonian; with a hamiltonian, as many momenta as coordinates and
     z0 of length 2d. Without one, coordinates and momenta are not used."""
-    from atlasnn.systems import BUILTIN_SYSTEMS
-
     if v["hamiltonian"] is None:
         if v["name"] is None:
             _fail("system", given, "give a built-in system name or a hamiltonian expression")
@@ -240,8 +239,6 @@ def _stage(path: str, values: dict, given: dict, base: TrainSettings) -> Stage:
 
 def _check_float32_spacing(path: str, t0: float, T: float, n_points: int, given_T: Any) -> None:
     """The K collocation times must be distinct in float32 (the training precision)."""
-    import numpy as np
-
     dt = (T - t0) / (n_points - 1)
     if dt <= 4 * float(np.spacing(np.float32(max(abs(t0), abs(T))))):
         _fail(f"{path}.T", given_T, f"[{t0:g}, {T:g}] is too short for {n_points} distinct collocation "
@@ -324,8 +321,6 @@ def apply_profile(data: dict[str, Any], profile: str | None, source: str) -> dic
 
 
 def _polish_config(path: str, v: dict[str, Any]):
-    from atlasnn.training import PolishConfig
-
     return PolishConfig(**{k: v[k] for k in ("steps", "n_points", "memory", "patience", "precision")})
 
 
@@ -344,8 +339,6 @@ def _window_train(path: str, given: dict[str, Any], base, length: float):
 
 def _march_settings(v: dict[str, Any], given: dict[str, Any], stage: Stage) -> MarchSettings:
     """The [march] table as a MarchSettings (the scheme's train configs over the measured defaults)."""
-    from atlasnn.training import DEFAULT_WINDOW_TRAIN, MarchConfig, n_windows_for
-
     if v.get("window") is not None and v.get("n_windows") is not None:
         _fail("march.window", given.get("window"), "give window or n_windows, not both")
     scheme = MarchConfig(n_windows=v.get("n_windows"), window=v.get("window"), thaw=v["thaw"],
@@ -370,8 +363,6 @@ def _check_system_builds(system: SystemConfig) -> None:
     except ConfigError:
         raise
     except Exception as exc:  # AtlasError subclasses carry one-line messages
-        from atlasnn.errors import AtlasError
-
         if isinstance(exc, AtlasError):
             raise ConfigError(_one_line(f"system: {exc}")) from None
         raise
@@ -381,10 +372,6 @@ def _check_system_builds(system: SystemConfig) -> None:
 def _check_finite_at_z0(sysm, z0, system: SystemConfig) -> None:
     """H and J∇H must be finite at z0 (in float64): a singular or overflowing start would give
     non-finite losses from the first epoch and a reference solver that cannot start."""
-    import jax
-    import jax.numpy as jnp
-    import numpy as np
-
     with jax.enable_x64(True):
         z = jnp.asarray(z0, jnp.float64)
         energy = float(sysm.energy(z))
@@ -403,10 +390,6 @@ def _check_finite_at_z0(sysm, z0, system: SystemConfig) -> None:
 def _check_separable(sysm, z0) -> None:
     """``separable = true`` lets the symplectic integrators run (they need H = T(p) + V(q)): the
     mixed second derivatives ∂²H/∂q∂p must vanish (checked at z0 and three nearby states)."""
-    import jax
-    import jax.numpy as jnp
-    import numpy as np
-
     d = sysm.dim
     shifts = [np.zeros_like(z0), np.full_like(z0, 0.1), np.resize([0.3, -0.2], z0.shape), np.full_like(z0, -0.25)]
     with jax.enable_x64(True):

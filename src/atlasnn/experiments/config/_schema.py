@@ -54,7 +54,9 @@ from atlasnn.experiments.config._types import (
     _key,
     _table,
 )
+from atlasnn.evaluation import INTEGRATORS
 from atlasnn.nn import ACTIVATIONS, MODELS, model_aliases
+from atlasnn.systems import BUILTIN_SYSTEMS
 from atlasnn.training import BEST_RULES, LR_SCHEDULES
 
 # Upper limits: far beyond any sensible experiment, low enough that a typo (an extra digit, a
@@ -139,14 +141,10 @@ def settings_fields(table: str) -> list[tuple[str, Any, Any]]:
 
 
 def _builtin_systems() -> str:
-    from atlasnn.systems import BUILTIN_SYSTEMS
-
     return "built-ins: " + ", ".join(sorted(BUILTIN_SYSTEMS))
 
 
 def _integrators() -> tuple[str, ...]:
-    from atlasnn.evaluation import INTEGRATORS
-
     return tuple(sorted(INTEGRATORS))
 
 
