@@ -1,7 +1,11 @@
 """Trained networks as solutions of Hamilton's equations: callable at any time, differentiable,
 with their residual; one trial solution (:class:`Solution`) or a time-marching chain of windows
-(:class:`PiecewiseSolution`)."""
+(:class:`PiecewiseSolution`); and their a-posteriori error estimate, with no reference needed."""
 
+from atlasnn.solutions._base import AbstractSolution
+from atlasnn.solutions._bounds import log_norm, residual_bound
+from atlasnn.solutions._estimate import TRUST_FRACTION, ErrorEstimate, estimate_error, state_range
+from atlasnn.solutions._linearised import propagate, residual_and_jacobian
 from atlasnn.solutions._piecewise import PiecewiseSolution, WindowRecord, stack_models, unstack_models, window_edges
 from atlasnn.solutions._solution import (
     INTERVAL_SLACK,
@@ -12,6 +16,15 @@ from atlasnn.solutions._solution import (
 )
 
 __all__ = [
+    "AbstractSolution",
+    "ErrorEstimate",
+    "estimate_error",
+    "state_range",
+    "TRUST_FRACTION",
+    "residual_and_jacobian",
+    "propagate",
+    "residual_bound",
+    "log_norm",
     "Solution",
     "PiecewiseSolution",
     "WindowRecord",

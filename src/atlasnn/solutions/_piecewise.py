@@ -26,6 +26,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
+from atlasnn.solutions._base import AbstractSolution
 from atlasnn.solutions._solution import bucket_size, check_inside, check_outside_mode
 from atlasnn.systems import HamiltonianSystem
 
@@ -95,7 +96,7 @@ class WindowRecord:
 
 
 @dataclass(eq=False)
-class PiecewiseSolution:
+class PiecewiseSolution(AbstractSolution):
     """A time-marching solution over [t0, T], callable at any times like a Solution.
 
     Attributes:
@@ -157,25 +158,8 @@ class PiecewiseSolution:
         d = self.system.state_dim
         return z.reshape(shape + (d,)), dz.reshape(shape + (d,)), shape
 
-    def __call__(self, t) -> np.ndarray:
-        """ẑ(t): shape t.shape + (2d,)."""
-        return self._evaluate(t)[0]
-
-    def derivative(self, t) -> np.ndarray:
-        """dẑ/dt(t): shape t.shape + (2d,) (dt = ds inside a window)."""
-        return self._evaluate(t)[1]
-
-    def energy(self, t) -> np.ndarray:
-        """H(ẑ(t)), evaluated in float64: shape t.shape."""
-        z = self(t)
-        with jax.enable_x64(True):
-            return np.asarray(self.system.energy(jnp.asarray(z, dtype=jnp.float64)))
-
-    def residual(self, t) -> np.ndarray:
-        """dẑ/dt − J∇H(ẑ) at t."""
-        z, dz, shape = self._evaluate(t)
-        r = dz - np.asarray(self.system.vector_field(jnp.asarray(z)))
-        return r.reshape(shape + (self.system.state_dim,))
+    def pieces(self) -> list[tuple[TrialSolution, float, float, float]]:
+        return [(m, float(a), float(b - a), 0.0) for m, a, b in zip(self.models, self.edges[:-1], self.edges[1:])]
 
     # ------------------------------------------------------------------ attributes
     @property

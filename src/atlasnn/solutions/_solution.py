@@ -25,6 +25,7 @@ import numpy as np
 
 from atlasnn.errors import AtlasError
 from atlasnn.nn import TrialSolution
+from atlasnn.solutions._base import AbstractSolution
 from atlasnn.systems import HamiltonianSystem
 
 OUTSIDE_MODES = ("warn", "raise", "allow")
@@ -83,7 +84,7 @@ def bucket_size(n: int) -> int:
 
 
 @dataclass(eq=False)
-class Solution:
+class Solution(AbstractSolution):
     """A trained trial solution for one system.
 
     Attributes:
@@ -136,24 +137,11 @@ class Solution:
         d = self.system.state_dim
         return np.asarray(z)[:n].reshape(shape + (d,)), np.asarray(dz)[:n].reshape(shape + (d,)), shape
 
-    def __call__(self, t) -> np.ndarray:
-        """ẑ(t): shape t.shape + (2d,)."""
-        return self._evaluate(t)[0]
-
-    def derivative(self, t) -> np.ndarray:
-        """dẑ/dt(t): shape t.shape + (2d,)."""
-        return self._evaluate(t)[1]
-
-    def energy(self, t) -> np.ndarray:
-        """H(ẑ(t)), evaluated in float64: shape t.shape."""
-        z = self(t)
-        with jax.enable_x64(True):
-            return np.asarray(self.system.energy(jnp.asarray(z, dtype=jnp.float64)))
-
-    def residual(self, t) -> np.ndarray:
-        """dẑ/dt − J∇H(ẑ) at t: how far the network is from Hamilton's equations there."""
-        z, dz, _ = self._evaluate(t)
-        return dz - np.asarray(self.system.vector_field(jnp.asarray(z)))
+    def pieces(self) -> list[tuple[TrialSolution, float, float, float]]:
+        if self.interval is None:
+            raise ValueError("a Solution without an interval has no error estimate; give interval=(t0, T)")
+        t0, T = self.interval
+        return [(self.model, t0, T - t0, t0)]
 
     @property
     def scaling_name(self) -> str:

@@ -1,0 +1,74 @@
+"""What every solution offers on top of ẑ(t) and dẑ/dt(t): H(ẑ(t)), the residual, and the
+a-posteriori error estimate (computed once per solution and kept)."""
+
+from __future__ import annotations
+
+import abc
+from typing import Any
+
+import jax.numpy as jnp
+import numpy as np
+
+from atlasnn.solutions._estimate import ErrorEstimate, estimate_error
+
+__all__ = ["AbstractSolution"]
+
+
+class AbstractSolution(abc.ABC):
+    """A solution of Hamilton's equations made of trained trial solutions (one, or one per window).
+
+    A subclass provides ``system``, ``interval``, ``_evaluate(t) -> (ẑ, dẑ/dt, shape)`` and
+    ``pieces()``; the rest is shared.
+    """
+
+    system: Any
+
+    @abc.abstractmethod
+    def _evaluate(self, t) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
+        """(ẑ(t), dẑ/dt(t), t's shape)."""
+
+    @abc.abstractmethod
+    def pieces(self) -> list[tuple[Any, float, float, float]]:
+        """(model, start, length, the model's own time at the start) per window, in order."""
+
+    def __call__(self, t) -> np.ndarray:
+        """ẑ(t): shape t.shape + (2d,)."""
+        return self._evaluate(t)[0]
+
+    def derivative(self, t) -> np.ndarray:
+        """dẑ/dt(t): shape t.shape + (2d,)."""
+        return self._evaluate(t)[1]
+
+    def energy(self, t) -> np.ndarray:
+        """H(ẑ(t)), evaluated in float64: shape t.shape."""
+        return self.system.energy64(self(t))
+
+    def residual(self, t) -> np.ndarray:
+        """dẑ/dt − J∇H(ẑ) at t: how far the network is from Hamilton's equations there."""
+        z, dz, _ = self._evaluate(t)
+        return dz - np.asarray(self.system.vector_field(jnp.asarray(z)))
+
+    def estimate(self, z0: Any = None) -> ErrorEstimate:
+        """The a-posteriori error estimate over the whole interval (no reference needed; see
+        :mod:`atlasnn.solutions._estimate`), computed on first use. ``z0``: the exact initial
+        state when it is known (the network holds it rounded to float32); default: the system's
+        z0 if the model's is its rounding, else δ(t0) = 0."""
+        cache = self.__dict__.setdefault("_estimates", {})
+        key = None if z0 is None else tuple(np.asarray(z0, np.float64).reshape(-1))
+        if key not in cache:
+            cache[key] = estimate_error(self.system, self.pieces(), z0=self._exact_z0(z0))
+        return cache[key]
+
+    def error_estimate(self, t) -> np.ndarray:
+        """The estimated error z(t) − ẑ(t) at any times of the interval: shape t.shape + (2d,)."""
+        return self.estimate().at(t)
+
+    def _exact_z0(self, z0: Any) -> np.ndarray | None:
+        if z0 is not None:
+            return np.asarray(z0, dtype=np.float64).reshape(-1)
+        model = self.pieces()[0][0]
+        own = np.asarray(model.z0)
+        given = getattr(self.system, "z0", None)
+        if given is not None and np.array_equal(np.asarray(given, dtype=own.dtype), own):
+            return np.asarray(given, dtype=np.float64)
+        return None
