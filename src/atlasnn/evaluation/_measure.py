@@ -11,6 +11,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from atlasnn.evaluation._metrics import energy_drift, error_table, state_metric_names
+from atlasnn.solutions import state_range
 
 __all__ = ["error_metrics", "measure_solution"]
 
@@ -22,6 +23,8 @@ def error_metrics(t: np.ndarray, z: np.ndarray, z_ref: np.ndarray, names: Sequen
     per: dict[str, Any] = {m: {n: table["components"][n][m] for n in names} for m in state_metric_names()}
     per["whole"] = table["whole"]
     per["energy_drift"] = energy_drift(energy, e0)
+    scale = state_range(z_ref)
+    per["relative_max"] = per["whole"]["max_abs"] / scale if scale > 0 else float("inf")
     return per
 
 

@@ -302,6 +302,14 @@ register_metric(Metric(
 register_metric(Metric(
     "energy_drift", "drift", "Energy drift (max rel.)", "Energy drift",
     "energy drift max_i |H(t_i) - E0| / |E0| (absolute where E0 = 0)", per_state=False))
+register_metric(Metric(
+    "relative_max", "relmax", "Max error / range", "\\max|e|/\\mathrm{range}",
+    "max_i,k |err_k(t_i)| / the state's range (the largest max - min of a reference component)",
+    per_state=False))
+register_metric(Metric(
+    "estimate_relative", "estrel", "Estimated max error / range", "\\widehat{\\max|e|}/\\mathrm{range}",
+    "the a-posteriori estimate of max_i,k |err_k(t_i)| / range, computed without the reference "
+    "(the linearised error equation along the solution)", per_state=False))
 
 
 # ------------------------------------------------------------------------------- tables

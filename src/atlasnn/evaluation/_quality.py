@@ -9,6 +9,18 @@ one line of advice. Inputs are plain arrays and numbers; nothing is read or writ
 
 The rules and their thresholds (named constants below):
 
+0. **The error estimate** (when the caller gives one: :meth:`atlasnn.solutions.AbstractSolution.estimate`,
+   the linearised error equation integrated along ẑ, no reference needed). With
+   ``rel`` = the estimated max error / the state's range: ``rel ≥ estimate_failed`` (5 %) is
+   failed, ``≥ estimate_suspect`` (1 %) suspect; a non-finite estimate is failed. With an
+   estimate, the rules that only look at the loss and the energy's small drift (3, 4, 5 and
+   rule 2's suspect level) no longer set the status — they miss phase errors and flag accurate
+   runs — and are kept as notes; divergence, a non-finite H, an energy drift of 10 % and γ
+   collapse still fail a training. Why these thresholds: measured, the estimate is within
+   0.87–1.05 of the true max error wherever it is below 5 % of the range, and never under by more
+   than 3× (docs/ESTIMATE.md); so a true error above 5 % gives an estimate above 1.7 % (suspect at
+   least) and a true error below 0.1 % one below 0.3 % (never suspect by this rule).
+
 1. **Divergence.** ``stop_reason == "diverged"``, or a non-finite returned loss: failed.
 2. **Energy drift.** Hamilton's flow conserves H, so the trained ẑ should too. With
    ``drift = max_t |H(ẑ(t)) − E0| / max(|E0|, energy_scale)`` over a grid of the training
@@ -77,6 +89,9 @@ __all__ = [
     "TOLERANCE_FACTOR_SUSPECT",
     "LOSS_RISE_FACTOR",
     "GAMMA_COLLAPSED",
+    "ESTIMATE_SUSPECT",
+    "ESTIMATE_FAILED",
+    "Thresholds",
     "STATUSES",
     "Verdict",
     "judge_training",
@@ -98,6 +113,27 @@ TOLERANCE_FACTOR_SUSPECT = 10.0
 LOSS_RISE_FACTOR = 100.0
 #: γ·(T − t0) below which the time scaling counts as collapsed (f < 1 % on the interval).
 GAMMA_COLLAPSED = 1e-2
+#: The estimated max error / the state's range from which a training is suspect (1 %).
+ESTIMATE_SUSPECT = 1e-2
+#: The estimated max error / the state's range from which a training has failed (5 %).
+ESTIMATE_FAILED = 5e-2
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """The estimate rule's thresholds (``[quality]`` in a config), as fractions of the state's range."""
+
+    estimate_suspect: float = ESTIMATE_SUSPECT
+    estimate_failed: float = ESTIMATE_FAILED
+
+    def __post_init__(self) -> None:
+        for name in ("estimate_suspect", "estimate_failed"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                raise ValueError(f"quality.{name} must be a finite number > 0, got {v!r}")
+        if self.estimate_suspect > self.estimate_failed:
+            raise ValueError(f"quality.estimate_suspect = {self.estimate_suspect:g} must not exceed "
+                             f"quality.estimate_failed = {self.estimate_failed:g}")
 
 STATUSES = ("ok", "suspect", "failed")
 _STOP_REASONS = ("budget", "tolerance", "diverged")
@@ -108,7 +144,7 @@ def _rate_names() -> set[str]:
     return {name for kind in MODELS.values() for name in kind.scaling.rate_names}
 
 # what each rule suggests changing, in the order the advice names them
-_LOWER_LR, _MORE_EPOCHS = "lr", "epochs"
+_LOWER_LR, _MORE_EPOCHS, _ESTIMATE = "lr", "epochs", "estimate"
 
 
 @dataclass(frozen=True)
@@ -151,6 +187,24 @@ def _pct(x: float) -> str:
 
 def _finite(a: np.ndarray) -> np.ndarray:
     return a[np.isfinite(a)]
+
+
+def _rule_estimate(estimate: Mapping[str, Any], th: Thresholds) -> list[tuple[str, str, str | None]]:
+    rel = estimate.get("relative_max")
+    if rel is None or not math.isfinite(float(rel)):
+        return [("failed", "the error estimate is not finite (ẑ leaves the region where the flow is defined, "
+                 "or its linearised error blows up)", _ESTIMATE)]
+    rel = float(rel)
+    out = []
+    if rel >= th.estimate_failed:
+        out.append(("failed", f"estimated max error {_pct(rel)} of the state's range "
+                    f"(failed from {_pct(th.estimate_failed)})", _ESTIMATE))
+    elif rel >= th.estimate_suspect:
+        out.append(("suspect", f"estimated max error {_pct(rel)} of the state's range "
+                    f"(suspect from {_pct(th.estimate_suspect)})", _ESTIMATE))
+    if not estimate.get("converged", True):
+        out.append(("note", "the error estimate's grid did not converge to 1 %", None))
+    return out
 
 
 def _rule_divergence(stop_reason, returned) -> list[tuple[str, str, str | None]]:
@@ -221,7 +275,11 @@ def _rule_gamma(gamma: Mapping[str, float], span: float) -> list[tuple[str, str,
     return out
 
 
-def _advice(kinds: set[str], key: str, lr: float | None, epochs: int | None) -> str:
+def _advice(kinds: set[str], key: str, lr: float | None, epochs: int | None, estimate_advice: str = "") -> str:
+    if _ESTIMATE in kinds and kinds <= {_ESTIMATE, _MORE_EPOCHS}:
+        text = estimate_advice or (f"train longer ({key}.epochs) or, on a long interval, march with adaptive "
+                                   "windows ([march] window = \"auto\")")
+        return text[0].upper() + text[1:] + "; see docs/TROUBLESHOOTING.md (a training judged suspect or failed)."
     parts = []
     if _LOWER_LR in kinds:
         now = f" (now {lr:g}, e.g. {lr / 5:g})" if lr else ""
@@ -249,6 +307,9 @@ def judge_training(
     lr: float | None = None,
     epochs_budget: int | None = None,
     key: str = "train",
+    estimate: Mapping[str, Any] | None = None,
+    thresholds: Thresholds | None = None,
+    estimate_advice: str = "",
 ) -> Verdict:
     """Judge one finished training by the rules of this module's docstring.
 
@@ -265,6 +326,9 @@ def judge_training(
         interval: (t0, T) of the training, for rule 6 (default: a span of 1).
         energy_scale: a floor for the drift's denominator, for systems whose E0 is 0 or tiny.
         lr, epochs_budget, key: only for the advice ("lower train.lr (now 0.005, e.g. 0.001)").
+        estimate: the error estimate's summary (``ErrorEstimate.summary()``: ``relative_max``,
+            ``converged``), for rule 0; ``thresholds`` its thresholds; ``estimate_advice`` what
+            to say when it fires (default: train longer, or march with adaptive windows).
 
     Returns:
         A :class:`Verdict`.
@@ -303,11 +367,16 @@ def judge_training(
         found += _rule_tolerance(stop_reason, tolerance, returned)
         found += _rule_rise(returned, lowest, lowest_epoch)
     found += _rule_gamma(dict(gamma or {}), span)
+    if estimate is not None:  # the estimate decides; the loss rules and a small drift become notes
+        found = [("note" if level == "suspect" or (level == "failed" and text.startswith("the loss stayed flat"))
+                  else level, text, kind) for level, text, kind in found]
+        found = _rule_estimate(estimate, thresholds or Thresholds()) + found
 
     levels = {level for level, _, _ in found}
     status = "failed" if "failed" in levels else ("suspect" if "suspect" in levels else "ok")
     kinds = {kind for level, _, kind in found if kind is not None and level != "note"}
-    advice = "" if status == "ok" else _advice(kinds, key, lr, epochs_budget)
+    advice = "" if status == "ok" else _advice(kinds, key, lr, epochs_budget, estimate_advice)
     measures = {"energy_drift": drift, "returned_loss": returned, "early_loss": early, "loss_ratio": ratio,
-                "lowest_loss": lowest}
+                "lowest_loss": lowest,
+                "estimate_relative": None if estimate is None else estimate.get("relative_max")}
     return Verdict(status, tuple(text for _, text, _ in found), advice, measures)

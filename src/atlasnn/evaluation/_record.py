@@ -64,6 +64,7 @@ class TrainingRecord:
     resumed_from_epoch: int | None = None
     quality: dict[str, Any] | None = None
     polish: dict[str, Any] | None = None
+    estimate: dict[str, Any] | None = None
     march: MarchSummary | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
@@ -84,6 +85,15 @@ class TrainingRecord:
             value = (value or {}).get(state) if isinstance(value, Mapping) else None
         return None if value is None else float(value)
 
+    @property
+    def effectivity(self) -> float | None:
+        """The estimate's max error over the true one (when both are known and the true one is not 0)."""
+        est = (self.estimate or {}).get("max_abs")
+        true = (self.metrics.get("whole") or {}).get("max_abs")
+        if est is None or true is None or not true > 0:
+            return None
+        return float(est) / float(true)
+
     def who(self) -> str:
         """How messages name it: ``"ATLAS-NN (exp) source seed 3"``."""
         return f"{self.label}{' source' if self.role == 'source' else ''} seed {self.seed}"
@@ -91,10 +101,12 @@ class TrainingRecord:
     def as_dict(self) -> dict[str, Any]:
         """The JSON object results.json stores (the same keys as earlier versions wrote)."""
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
-               if f.name not in ("march", "extra", "polish")}
+               if f.name not in ("march", "extra", "polish", "estimate")}
         out["interval"] = [float(x) for x in self.interval]
         if self.polish is not None:
             out["polish"] = self.polish
+        if self.estimate is not None:
+            out["estimate"] = self.estimate
         if self.march is not None:
             out.update(dataclasses.asdict(self.march))
         out.update(self.extra)

@@ -63,14 +63,16 @@ def lr_key(cfg: ExperimentConfig, role: str) -> str:
     return f"{stage}.train" if isinstance(per_stage, dict) and "lr" in per_stage else "train"
 
 
-def verdict(cfg: ExperimentConfig, role: str, result, energy: np.ndarray, e0: float, stage: Stage) -> dict:
-    """The quality verdict of a finished training (:mod:`atlasnn.evaluation._quality`), as JSON."""
+def verdict(cfg: ExperimentConfig, role: str, result, energy: np.ndarray, e0: float, stage: Stage,
+            estimate: dict | None = None) -> dict:
+    """The quality verdict of a finished training (:func:`atlasnn.evaluation.judge_training`, its
+    error estimate first), as JSON."""
     returned = float(result.history.loss[result.best_epoch]) if result.best_epoch >= 0 else result.final_loss
     return judge_training(
         result.history.loss, stop_reason=result.stop_reason, tolerance=result.config.tolerance, energy=energy,
         energy0=e0, gamma={k: float(v) for k, v in result.model.scaling.gamma().items()}, returned_loss=returned,
         interval=(stage.t0, stage.T), lr=result.config.lr, epochs_budget=result.config.epochs,
-        key=lr_key(cfg, role),
+        key=lr_key(cfg, role), estimate=estimate, thresholds=cfg.quality,
     ).as_dict()
 
 
@@ -111,13 +113,16 @@ def march_record(training: Task, sol, scheme, metrics_: dict, ckpt: str, stage: 
     )
 
 
-def march_verdict(sol, rec: TrainingRecord, energy: np.ndarray, e0: float, stage: Stage) -> dict:
-    """The quality verdict of a time-marching training: its windows' loss histories one after the
-    other, the worst window's loss as the returned one."""
+def march_verdict(cfg: ExperimentConfig, sol, rec: TrainingRecord, energy: np.ndarray, e0: float,
+                  stage: Stage) -> dict:
+    """The quality verdict of a time-marching training: its error estimate first; its windows' loss
+    histories one after the other, the worst window's loss as the returned one."""
     history = np.concatenate([np.asarray(r.history, np.float64) for r in sol.windows if r.history is not None])
     return judge_training(history, stop_reason=rec.stop_reason, tolerance=None, energy=energy, energy0=e0,
                           gamma=rec.gamma, returned_loss=rec.returned_loss, interval=(stage.t0, stage.T),
-                          lr=rec.lr, epochs_budget=rec.epochs_budget, key="march.train").as_dict()
+                          lr=rec.lr, epochs_budget=rec.epochs_budget, key="march.train", estimate=rec.estimate,
+                          thresholds=cfg.quality, estimate_advice="lower march.rtol (adaptive windows) or shorten "
+                          "march.window, or raise march.train.epochs").as_dict()
 
 
 class TaskRun:
@@ -246,11 +251,15 @@ class TaskRun:
                        extra={"experiment": self.cfg.name, "column": column, "model": self.task.model,
                               "role": "march", "seed": seed, "interval": [stage.t0, stage.T]})
         per, z, energy = measure_solution(sol, self.grids["eval"], self.grids["eval_ref"], self.names, self.e0)
+        est = sol.estimate(z0=self.z0)
+        per["estimate_relative"] = est.relative_max
         rec = march_record(self.task.one(seed), sol, scheme, per, rel, stage)
-        rec.quality = march_verdict(sol, rec, energy, self.e0, stage)
+        rec.estimate = est.summary()
+        rec.quality = march_verdict(self.cfg, sol, rec, energy, self.e0, stage)
         self.out[seed]["records"].append(rec.as_dict())
         self.out[seed]["arrays"][f"pred_{column}_seed{seed}"] = z
         self.out[seed]["arrays"][f"energy_{column}_seed{seed}"] = energy
+        self.out[seed]["arrays"][f"estimate_{column}_seed{seed}"] = est.at(self.grids["eval"])
 
     def finish(self, result, column: str, role: str, stage: Stage, t_key: str, seed: int) -> dict:
         if self.cfg.polish is not None and role != "source":
@@ -258,12 +267,16 @@ class TaskRun:
 
         sol = Solution(result.model, self.system, (stage.t0, stage.T))
         per, z, energy = measure_solution(sol, self.grids[t_key], self.grids[t_key + "_ref"], self.names, self.e0)
+        est = sol.estimate(z0=self.z0)
+        per["estimate_relative"] = est.relative_max
         rec = record(self.task.one(seed), role, column, result, per, self.save(result, column, role, stage, seed), stage)
-        rec.quality = verdict(self.cfg, role, result, energy, self.e0, stage)
+        rec.estimate = est.summary()
+        rec.quality = verdict(self.cfg, role, result, energy, self.e0, stage, rec.estimate)
         self.out[seed]["records"].append(rec.as_dict())
         if role != "source":
             self.out[seed]["arrays"][f"pred_{column}_seed{seed}"] = z
             self.out[seed]["arrays"][f"energy_{column}_seed{seed}"] = energy
+            self.out[seed]["arrays"][f"estimate_{column}_seed{seed}"] = est.at(self.grids[t_key])
         return rec
 
 

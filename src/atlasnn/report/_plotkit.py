@@ -174,7 +174,8 @@ class Series:
     """One model's trajectory next to the reference, on the model's own time grid.
 
     ``t``: (N,) times; ``z``: (N, 2d) prediction, columns (q_1..q_d, p_1..p_d); ``z_ref``: (N, 2d)
-    reference on the same ``t``; ``energy``: optional (N,) Hamiltonian evaluated along ``z``.
+    reference on the same ``t``; ``energy``: optional (N,) Hamiltonian evaluated along ``z``;
+    ``estimate``: optional (N, 2d) a-posteriori error estimate δ ≈ z_ref − z (no reference used).
     Arrays are converted to float64 and shapes are checked on construction.
     """
 
@@ -183,6 +184,7 @@ class Series:
     z: np.ndarray
     z_ref: np.ndarray
     energy: np.ndarray | None = None
+    estimate: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.label = str(self.label)
@@ -203,6 +205,11 @@ class Series:
             if self.energy.shape[0] != n:
                 raise ConfigError(f"Series {self.label!r} energy must have shape ({n},), "
                                   f"got {self.energy.shape}")
+        if self.estimate is not None:
+            self.estimate = _float_array(self.estimate, f"Series {self.label!r} estimate", 2)
+            if self.estimate.shape != self.z.shape:
+                raise ConfigError(f"Series {self.label!r} estimate must have shape {self.z.shape}, "
+                                  f"got {self.estimate.shape}")
 
     @property
     def dof(self) -> int:

@@ -131,7 +131,8 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
     for c in table_cols:
         key = f"pred_{c}_seed{seed0}"
         if key in arrays:
-            series.append(Series(labels[c], t, arrays[key], arrays["z_ref"], arrays[f"energy_{c}_seed{seed0}"]))
+            series.append(Series(labels[c], t, arrays[key], arrays["z_ref"], arrays[f"energy_{c}_seed{seed0}"],
+                                 arrays.get(f"estimate_{c}_seed{seed0}")))
     ref = Series("reference", t, arrays["z_ref"], arrays["z_ref"], arrays["energy_ref"])
     title = figure_title(results, f"{results['experiment']} (seed {seed0})")
     written += plot_overview(fig_dir / "overview", [ref] + series, names, results["energy0"], src_iv,
@@ -219,6 +220,15 @@ def _fit_columns(widths: list[int], fixed: int, limit: int) -> int:
     return k
 
 
+def _relative_cell(cs: dict) -> str:
+    """The worst seed's max error / range, and beside it the worst error estimate (no reference)."""
+    true = (cs["metrics"].get("relative_max") or {}).get("max")
+    est = (cs["metrics"].get("estimate_relative") or {}).get("max")
+    if true is None:
+        return ""
+    return format_number(true) + ("" if est is None else f" (est. {format_number(est)})")
+
+
 def summary_lines(results: dict | str | Path, run_dir: str | Path | None = None) -> list[str]:
     """The end-of-run summary: one line per model with the median L2 (release form) of every
     state component over seeds ([min–max] for the first), the paper's L2 of the first component,
@@ -245,11 +255,16 @@ def summary_lines(results: dict | str | Path, run_dir: str | Path | None = None)
 
     label = {c: results.get("labels", {}).get(c, c) for c in cols}
     cells = {c: _l2_cells(s["columns_summary"][c], states) for c in cols}
+    relative = {c: _relative_cell(s["columns_summary"][c]) for c in cols}
+    if any(relative.values()):  # worst seed's max error / range, with the estimate beside it
+        cells = {c: [relative[c] or "n/a", *cells[c]] for c in cols}
     paper = {c: format_number(paper_rows[c]) if isinstance(paper_rows.get(c), (int, float)) else "–" for c in cols}
     status = {c: verdict_status_text(verdicts[c]) if c in verdicts else "" for c in cols}
     heads = [f"L2({name})" for name in states]
+    if any(relative.values()):
+        heads = ["max err/range", *heads]
     w_label = max([len("model")] + [len(label[c]) for c in cols])
-    widths = [max([len(heads[i])] + [len(cells[c][i]) for c in cols]) for i in range(len(states))]
+    widths = [max([len(heads[i])] + [len(cells[c][i]) for c in cols]) for i in range(len(heads))]
     paper_head = f"paper L2({states[0]})"
     w_paper = max([len(paper_head)] + [len(paper[c]) for c in cols]) if paper_rows else 0
     w_status = max([len("verdict")] + [len(status[c]) for c in cols]) if verdicts else 0
@@ -279,9 +294,10 @@ def summary_lines(results: dict | str | Path, run_dir: str | Path | None = None)
         if detail:
             text = f"    ↳ {detail}"
             lines.append(text if len(text) <= SUMMARY_WIDTH else text[: SUMMARY_WIDTH - 1] + "…")
-    if k < len(states):
-        lines.append(f"  (+{len(states) - k} more components, {', '.join(states[k:k + 3])}"
-                     f"{', ...' if len(states) - k > 3 else ''}: in tables.md)")
+    shown = k - (len(heads) - len(states))  # state columns shown
+    if shown < len(states):
+        lines.append(f"  (+{len(states) - shown} more components, {', '.join(states[shown:shown + 3])}"
+                     f"{', ...' if len(states) - shown > 3 else ''}: in tables.md)")
     if paper_rows:
         note = "paper: one training run per model"
         if quick:

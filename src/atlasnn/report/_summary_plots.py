@@ -137,12 +137,16 @@ def plot_overview(stem: str | Path, series: Sequence[Series], state_names: Seque
     ax_q.set_ylabel(_state_label(names[0]))
 
     err = {id(s): np.linalg.norm(s.z - s.z_ref, axis=1) for s in models}
-    floor = _log_floor(err.values())
+    est = {id(s): np.linalg.norm(s.estimate, axis=1) for s in models if s.estimate is not None}
+    floor = _log_floor([*err.values(), *est.values()])
     for s in models:
         ax_e.plot(s.t, _clip_log(err[id(s)], floor), label=s.label, **model_style(s.label))
+        if id(s) in est:  # the estimate, computed without the reference, beside the true error
+            style = {**model_style(s.label), "linestyle": ":", "linewidth": 2.0, "alpha": 0.8}
+            ax_e.plot(s.t, _clip_log(est[id(s)], floor), label=f"{s.label}: estimate", **style)
     ax_e.set_yscale("log")
-    _log_limits(ax_e, err.values())
-    ax_e.set_ylabel(r"$\|\hat z(t) - z_{\mathrm{ref}}(t)\|$")
+    _log_limits(ax_e, [*err.values(), *est.values()])
+    ax_e.set_ylabel(r"$\|\hat z(t) - z_{\mathrm{ref}}(t)\|$" + ("\n(dotted: estimate)" if est else ""))
 
     with_energy = [s for s in models if s.energy is not None]
     drift = {id(s): np.abs(s.energy - e0) for s in with_energy}

@@ -40,6 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.errors import AtlasError, ConfigError
+from atlasnn.evaluation import Thresholds
 from atlasnn.experiments.config._schema import (
     MAX_STEPS,
     MAX_TIME,
@@ -161,6 +162,7 @@ class ExperimentConfig:
     profile: str = "default"
     seed_batch: int | str = "auto"
     scheduler: str = ""
+    quality: Thresholds = field(default_factory=Thresholds)
     raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -301,6 +303,7 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
         "source": stages.get("source"), "target": stages.get("target"), "evaluation": evaluation, "raw": raw,
         "march": None if v["march"] is None else _march_settings(v["march"], data["march"], eval_stage),
         "polish": None if v["polish"] is None else _polish_config("polish", v["polish"]),
+        "quality": _quality(v["quality"]),
     })
     _check_system_builds(system)
     return cfg
@@ -318,6 +321,13 @@ def apply_profile(data: dict[str, Any], profile: str | None, source: str) -> dic
     merged = _deep_merge({k: v for k, v in data.items() if k != "profiles"}, variants[profile])
     merged["profile"] = profile  # (the profile's follows notes are merged over the file's, key by key)
     return merged
+
+
+def _quality(v: dict[str, Any]) -> Thresholds:
+    if v["estimate_suspect"] > v["estimate_failed"]:
+        _fail("quality.estimate_suspect", v["estimate_suspect"],
+              f"must not exceed quality.estimate_failed = {v['estimate_failed']:g}")
+    return Thresholds(**v)
 
 
 def _polish_config(path: str, v: dict[str, Any]):

@@ -206,6 +206,7 @@ _STATIC_TABLES: dict[str, TableSpec] = {
         Key("polish", Sub("polish"), None, "L-BFGS after Adam on every training whose errors are tabulated "
             "(short runs, targets, the baseline); none by default.", default_text="none"),
         Key("execution", Sub("execution"), {}, "How the trainings are run (not what they compute)."),
+        Key("quality", Sub("quality"), {}, "The thresholds of the quality verdict's error-estimate rule."),
         Key("profile", String(r"[A-Za-z0-9_-]+", "use letters, digits, '-' and '_' only",
                               "letters, digits, '-', '_'"), "default",
             "The name of the settings this file holds as written (the paper's experiments: \"paper\"); "
@@ -316,6 +317,14 @@ _STATIC_TABLES: dict[str, TableSpec] = {
         Key("lr_from_source", Bool(), False, "Train the target at the source's learning rate instead of the "
             "target's own, as the authors' release did in effect (loading the source's Adam state also set "
             "its learning rate)."),
+    )),
+    "quality": TableSpec("The verdict on each training: judged first by its a-posteriori error estimate (the "
+                         "linearised error equation along ẑ, no reference needed), as a fraction of the state's "
+                         "range (the largest max − min of a component).", (
+        Key("estimate_suspect", Number(low=0, low_open=True, high=1), 1e-2, "Suspect from this estimated max "
+            "error / range (a true error above 5 % gives at least 1.7 % here: docs/ESTIMATE.md)."),
+        Key("estimate_failed", Number(low=0, low_open=True, high=10), 5e-2, "Failed from this estimated max "
+            "error / range (give it ≥ estimate_suspect)."),
     )),
     "execution": TableSpec("How the trainings are run; results do not depend on these beyond rounding.", (
         Key("seed_batch", CountOrAuto(1024), "auto", "Seeds of one model trained together as one compiled "
