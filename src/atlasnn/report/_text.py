@@ -118,7 +118,8 @@ def _rows_spec(summary: dict) -> list[dict]:
                 "paper_key": f"{m.short}_{s}" if m.paper else None,
                 "definition": m.definition,
             })
-    for m in (m for m in METRICS.values() if m.table and not m.per_state):
+    present = set(summary.get("scalar_metrics") or ()) | {"energy_drift"}  # rows of measures the run has
+    for m in (m for m in METRICS.values() if m.table and not m.per_state and m.name in present):
         rows.append({"key": m.name, "metric": m.name, "state": None, "label": m.row, "latex": m.latex,
                      "paper_key": None, "definition": m.definition})
     if summary["kind"] == "transfer":
