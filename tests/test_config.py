@@ -41,7 +41,7 @@ def test_long_experiments_compare_the_papers_transfer_with_time_marching(name, p
     assert (long.source, long.target, long.evaluation.eval_points) == (ref.source, ref.target, ref.evaluation.eval_points)
     m = long.march
     assert (m.width, m.depth, m.first_layer_scale) == (48, 2, 4.0)
-    assert m.scheme.window == pytest.approx(4 * math.pi) and m.scheme.train.epochs == 16000
+    assert m.scheme.adaptive and m.scheme.train.epochs == 2000 and m.scheme.polish is not None  # the defaults
     assert m.scheme.train.lam_reg == ref.target.train.lam_reg  # the paper's energy weight
     assert long.evaluation.work_precision
 

@@ -16,11 +16,12 @@ import pytest
 
 from atlasnn.checkpoint import load_checkpoint, load_piecewise, save_checkpoint, save_piecewise
 from atlasnn.errors import CheckpointError, ConfigError
-from atlasnn.training._marching import MarchConfig, end_state, march, n_windows_for
+from atlasnn.training import MarchConfig, march, n_windows_for
+from atlasnn.training._marching import end_state
 from atlasnn.nn import make_model
 from atlasnn.solutions import PiecewiseSolution, window_edges
 from atlasnn.systems import harmonic_exact
-from atlasnn.training import TrainConfig
+from atlasnn.training import DEFAULT_WINDOW, TrainConfig
 
 T_END = 4 * math.pi
 N_WIN = 4
@@ -149,7 +150,8 @@ def test_window_count_and_config_errors():
     assert n_windows_for(0.0, 20 * math.pi, MarchConfig(window=4 * math.pi)) == 5
     assert n_windows_for(0.0, 10.0, MarchConfig(window=3.0)) == 4
     np.testing.assert_allclose(window_edges(1.0, 3.0, 4), [1.0, 1.5, 2.0, 2.5, 3.0])
-    assert n_windows_for(0.0, 24 * math.pi, MarchConfig()) == 6  # the default window, 4π
+    assert n_windows_for(0.0, 24 * math.pi, MarchConfig(window=DEFAULT_WINDOW)) == 6  # 4π
+    assert MarchConfig().adaptive and not MarchConfig(window=1.0).adaptive  # the default: windows by the estimate
     with pytest.raises(ConfigError, match="not both"):
         MarchConfig(n_windows=2, window=1.0)
     with pytest.raises(ConfigError, match="n_windows"):

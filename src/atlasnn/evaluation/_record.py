@@ -30,6 +30,7 @@ class MarchSummary:
     window_losses: list[float]
     window_epochs: list[int]
     windows: list[dict[str, Any]] = field(default_factory=list)
+    edges: list[float] = field(default_factory=list)
 
 
 @dataclass

@@ -65,12 +65,19 @@ def epoch_work(cfg: ExperimentConfig, role: str) -> float:
     return SCHEMES[role].epoch_work(cfg)
 
 
+def _explicit(seed_batch: int | str, n_seeds: int) -> int:
+    if isinstance(seed_batch, bool) or not isinstance(seed_batch, int) or seed_batch < 1:
+        raise ConfigError(f"seed_batch must be an integer >= 1 or \"auto\", got {seed_batch!r}")
+    return min(seed_batch, n_seeds)
+
+
 def batch_size(cfg: ExperimentConfig, role: str, n_seeds: int, jobs: int, seed_batch: int | str) -> int:
     """How many seeds of one column to train together (see the module docstring)."""
+    limit = SCHEMES[role].batch_limit(cfg)
+    if limit is not None:
+        return 1 if seed_batch == "auto" else min(limit, _explicit(seed_batch, n_seeds))
     if seed_batch != "auto":
-        if isinstance(seed_batch, bool) or not isinstance(seed_batch, int) or seed_batch < 1:
-            raise ConfigError(f"seed_batch must be an integer >= 1 or \"auto\", got {seed_batch!r}")
-        return min(seed_batch, n_seeds)
+        return _explicit(seed_batch, n_seeds)
     if epoch_work(cfg, role) > AUTO_BATCH_WORK:
         return 2 if (os.cpu_count() or 1) > jobs and n_seeds > 1 else 1
     columns = len(columns_of(cfg))

@@ -25,7 +25,7 @@ from atlasnn.experiments._signals import check_interrupt
 from atlasnn.experiments._store import one_line, source_state_path, state_path, write_json
 from atlasnn.limits import check_training_memory
 from atlasnn.nn import make_model, model_kind
-from atlasnn.training import TrainState, march_batch, train_batch, transfer_batch
+from atlasnn.training import TrainState, march, march_batch, train_batch, transfer_batch
 
 __all__ = ["Scheme", "SCHEMES", "table_columns", "baseline_column", "column_labels", "column_label"]
 
@@ -71,6 +71,10 @@ class Scheme(abc.ABC):
     def extra_states(self, model: str) -> tuple[str, ...]:
         """Names of states a training keeps besides its column's (a transfer's finished source)."""
         return ()
+
+    def batch_limit(self, cfg) -> int | None:
+        """The most seeds one program can train together (None: no limit)."""
+        return None
 
     def network(self, cfg) -> tuple[int, int]:
         """(width, depth) of its networks."""
@@ -263,6 +267,10 @@ class March(Scheme):
     def points(self, cfg):
         return [("march.train.n_points", cfg.march.scheme.train.n_points)]
 
+    def batch_limit(self, cfg) -> int | None:
+        """Adaptive windows differ per seed: their seeds train one at a time."""
+        return 1 if cfg.march.scheme.adaptive else None
+
     def train(self, run):
         task, cfg, seeds = run.task, run.cfg, list(run.task.seeds)
         m, st = cfg.march, cfg.eval_stage
@@ -274,6 +282,11 @@ class March(Scheme):
             return None if tc is None else tc.replace(seed=s, progress=run.progress)
 
         schemes = [m.scheme.replace(train=seeded(m.scheme.train, s), first=seeded(m.scheme.first, s)) for s in seeds]
+        if m.scheme.adaptive:  # every seed gets windows of its own: one after the other
+            for seed, model, scheme in zip(seeds, models, schemes):
+                sol = march(model, run.system, st.T, scheme, on_chunk=lambda states: check_interrupt())
+                run.finish_march(sol, scheme, st, seed)
+            return
         solutions = march_batch(models, run.system, st.T, schemes, on_chunk=lambda states: check_interrupt())
         for seed, sol, scheme in zip(seeds, solutions, schemes):
             run.finish_march(sol, scheme, st, seed)

@@ -34,7 +34,7 @@ from atlasnn.experiments._tasks import Task
 from atlasnn.experiments.config import ExperimentConfig, Stage
 from atlasnn.nn import make_model
 from atlasnn.solutions import Solution
-from atlasnn.training import polish
+from atlasnn.training import LMConfig, refine
 from atlasnn.experiments._store import (
     checkpoint_seconds,
     state_files,
@@ -94,22 +94,29 @@ def record(training: Task, role: str, column: str, result, metrics_: dict, ckpt:
 
 
 def march_record(training: Task, sol, scheme, metrics_: dict, ckpt: str, stage: Stage) -> TrainingRecord:
-    """The record of a time-marching training: the worst window's loss is its loss."""
+    """The record of a time-marching training: the worst window's loss is its loss; with adaptive
+    windows every attempt (accepted, cut, rejected, forced) is listed in ``windows``."""
     windows = sol.windows
     losses = [float(r.loss) for r in windows]
     reasons = {r.stop_reason for r in windows}
     stop = "diverged" if "diverged" in reasons else ("tolerance" if reasons == {"tolerance"} else "budget")
+    attempts = list(sol.info.get("attempts") or [])
     first = scheme.first or scheme.train
+    budget = (sum(a["epochs"] for a in attempts) if attempts
+              else first.epochs + scheme.train.epochs * (len(windows) - 1))
+    lengths = np.diff(sol.edges)
     return TrainingRecord(
         column=training.column, label=column_label(training.model, training.role), model=training.model,
         seed=training.seed, role="march", interval=(stage.t0, stage.T), metrics=metrics_, gamma=sol.gamma,
-        epochs=int(sum(r.epochs for r in windows)), stop_reason=stop, returned_loss=max(losses), checkpoint=ckpt,
-        tolerance_met=stop == "tolerance", wall_time=float(sum(r.wall_time for r in windows)),
+        epochs=int(sum(a["epochs"] for a in attempts) if attempts else sum(r.epochs for r in windows)),
+        stop_reason=stop, returned_loss=max(losses), checkpoint=ckpt,
+        tolerance_met=stop == "tolerance", wall_time=float(sum(a["wall_time"] for a in attempts) if attempts
+                                                           else sum(r.wall_time for r in windows)),
         compile_time=float(sum(r.compile_time for r in windows)), batch_size=int(sol.info.get("batch_size", 1)),
-        final_loss=losses[-1], best_loss=min(losses), lr=scheme.train.lr,
-        epochs_budget=first.epochs + scheme.train.epochs * (len(windows) - 1),
-        march=MarchSummary(n_windows=len(windows), window=sol.window_length, window_losses=losses,
-                           window_epochs=[int(r.epochs) for r in windows]),
+        final_loss=losses[-1], best_loss=min(losses), lr=scheme.train.lr, epochs_budget=int(budget),
+        march=MarchSummary(n_windows=len(windows), window=float(lengths.max()), window_losses=losses,
+                           window_epochs=[int(r.epochs) for r in windows], windows=attempts,
+                           edges=[float(e) for e in sol.edges]),
     )
 
 
@@ -236,11 +243,13 @@ class TaskRun:
         return rel
 
     def polished(self, result, stage: Stage) -> None:
-        """L-BFGS after Adam ([polish]): the result's model is replaced by the polished one (never
-        worse) and the phase is recorded in ``result.info["polish"]``."""
-        pol = polish(result.model, self.system, stage.T, self.cfg.polish.replace(lam_reg=result.config.lam_reg),
+        """The second phase after Adam ([polish]: Levenberg–Marquardt or L-BFGS): the result's model
+        is replaced by the refined one (never worse) and the phase is recorded in
+        ``result.info["polish"]``."""
+        pol = refine(result.model, self.system, stage.T, self.cfg.polish.replace(lam_reg=result.config.lam_reg),
                      energy0=self.e0)
-        result.info["polish"] = {"steps": pol.steps, "stop_reason": pol.stop_reason,
+        result.info["polish"] = {"method": "lm" if isinstance(self.cfg.polish, LMConfig) else "lbfgs",
+                                 "steps": pol.steps, "stop_reason": pol.stop_reason,
                                  "initial_loss": pol.initial_loss, "final_loss": pol.final_loss}
         result.model = pol.model
 

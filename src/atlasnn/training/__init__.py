@@ -3,17 +3,21 @@ Adam loop (one model or a batch of seeds), transfer, L-BFGS polishing and time-m
 
 from atlasnn.training._collocation import check_interval, jittered, uniform_grid
 from atlasnn.training._loss import causal_physics_loss, energy_and_vector_field, hamilton_residual, physics_loss
+from atlasnn.training._adaptive import first_window, march, march_adaptive
+from atlasnn.training._lm import LMConfig, LMResult, levenberg_marquardt, lm_batch
 from atlasnn.training._marching import (
     DEFAULT_NETWORK,
+    DEFAULT_RTOL,
     DEFAULT_WINDOW,
+    DEFAULT_WINDOW_LM,
     DEFAULT_WINDOW_TRAIN,
     WINDOW_STARTS,
     MarchConfig,
-    march,
     march_batch,
     n_windows_for,
 )
 from atlasnn.training._polish import PRECISIONS, PolishConfig, PolishResult, polish
+from atlasnn.training._refine import RefineConfig, refine
 from atlasnn.training._step import init_opt_state, trainable_filter
 from atlasnn.training._train import (
     BEST_RULES,
@@ -51,6 +55,13 @@ __all__ = [
     "transfer_batch",
     "check_same_architecture",
     "restrict_opt_state",
+    "LMConfig",
+    "LMResult",
+    "levenberg_marquardt",
+    "lm_batch",
+    "DEFAULT_WINDOW_LM",
+    "refine",
+    "RefineConfig",
     "PolishConfig",
     "PolishResult",
     "PRECISIONS",
@@ -58,6 +69,9 @@ __all__ = [
     "MarchConfig",
     "march",
     "march_batch",
+    "march_adaptive",
+    "first_window",
+    "DEFAULT_RTOL",
     "n_windows_for",
     "DEFAULT_WINDOW",
     "DEFAULT_WINDOW_TRAIN",

@@ -43,12 +43,14 @@ import numpy as np
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
 from atlasnn.solutions import PiecewiseSolution, WindowRecord, window_edges
-from atlasnn.training._polish import PolishConfig, PolishResult, polish
+from atlasnn.training._lm import LMConfig, LMResult
+from atlasnn.training._polish import PolishConfig, PolishResult
+from atlasnn.training._refine import refine
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._train import TrainConfig, TrainResult, train_batch
 from atlasnn.training._transfer import restrict_opt_state
 
-__all__ = ["MarchConfig", "march", "march_batch", "n_windows_for", "window_model", "end_state", "window_seed"]
+__all__ = ["MarchConfig", "march_batch", "n_windows_for", "window_model", "end_state", "window_seed"]
 
 WINDOW_STARTS = ("initial", "previous", "features")
 
@@ -59,10 +61,17 @@ _SEED_STRIDE = 7919
 # long-time targets of issue 10 on the nonlinear oscillator over [0, 20π] and Hénon–Heiles over
 # [0, 24π] in every seed tried, without per-system tuning (λ_reg aside, which is the paper's).
 DEFAULT_WINDOW = 4 * math.pi
+#: The adaptive windows' default per-window tolerance: local error ≤ rtol × the state's range
+#: (docs/SUITE.md: what it gives over the suite of hard problems).
+DEFAULT_RTOL = 1e-5
+# Each window: 2 000 Adam epochs, then a Levenberg–Marquardt phase. Measured against the round-2
+# default of 16 000 Adam epochs alone (docs/ESTIMATE.md, "optimisation"): 10–100× lower max error
+# on the oscillator over [0, 20π] and Hénon–Heiles over [0, 24π] at less training time.
 DEFAULT_WINDOW_TRAIN = TrainConfig(
-    epochs=16_000, lr=5e-3, betas=(0.9, 0.999), n_points=100, sigma=0.5, lr_schedule="cosine",
+    epochs=2_000, lr=5e-3, betas=(0.9, 0.999), n_points=100, sigma=0.5, lr_schedule="cosine",
     lr_final_ratio=0.01, causal_eps=10.0, best_rule="lowest", chunk=2000,
 )
+DEFAULT_WINDOW_LM = LMConfig()
 # The network the defaults were measured with: make_model(z0, **DEFAULT_NETWORK, seed=...).
 DEFAULT_NETWORK = {"scaling": "rational_exp", "width": 48, "depth": 2, "activation": "sin",
                    "first_layer_scale": 4.0}
@@ -86,19 +95,36 @@ class MarchConfig:
     to window) or ``"features"`` (the previous window's hidden layers with the output layer set
     to zero: its features are kept, its phase-specific output is not). γ is always the learned
     one (frozen, or thawed and carried on).
-    ``polish``: an L-BFGS phase after Adam in every window (``None``: none); its ``lam_reg`` is
-    the window's; with its default ``freeze_gamma`` (true) every window polishes θ only, so one
-    compiled polishing step serves all windows.
+    ``polish``: the second phase of every window after Adam: Levenberg–Marquardt (an
+    :class:`~atlasnn.training.LMConfig`, the default), L-BFGS (a :class:`PolishConfig`) or none
+    (``None``); its ``lam_reg`` is the window's; with its default ``freeze_gamma`` (true) every
+    window refines θ only, so one compiled program serves all windows.
+    Windows chosen by the error estimate (the default, ``window = "auto"``, see
+    :mod:`atlasnn.training._adaptive`): ``rtol``/``atol`` the local error tolerance of a window
+    (``atol + rtol × the state's range``), ``first_window`` (default: one period of the fastest
+    linear mode at z0), ``min_window`` (default (T − t0)·1e-4), ``max_rejects`` retrainings of one
+    window, ``max_windows`` in all.
     """
 
     n_windows: int | None = None
-    window: float | None = None
+    window: float | str | None = None
     train: TrainConfig = DEFAULT_WINDOW_TRAIN
     first: TrainConfig | None = None
     thaw: bool = False
     carry_adam: bool = True
     start: str = "initial"
-    polish: PolishConfig | None = None
+    polish: PolishConfig | LMConfig | None = DEFAULT_WINDOW_LM
+    rtol: float = DEFAULT_RTOL
+    atol: float = 0.0
+    first_window: float | None = None
+    min_window: float | None = None
+    max_rejects: int = 8
+    max_windows: int = 10_000
+
+    @property
+    def adaptive(self) -> bool:
+        """Whether the windows are chosen by the error estimate (``window = "auto"``, the default)."""
+        return self.n_windows is None and self.window in (None, "auto")
 
     def __post_init__(self) -> None:
         if self.n_windows is not None and self.window is not None:
@@ -110,17 +136,32 @@ class MarchConfig:
             isinstance(self.n_windows, bool) or not isinstance(self.n_windows, (int, np.integer)) or self.n_windows < 1
         ):
             raise ConfigError(f"march.n_windows must be an integer >= 1, got {self.n_windows!r}")
-        if self.window is not None and (
+        if self.window not in (None, "auto") and (
             isinstance(self.window, bool) or not isinstance(self.window, (int, float))
             or not math.isfinite(self.window) or self.window <= 0
         ):
-            raise ConfigError(f"march.window must be a finite number > 0, got {self.window!r}")
+            raise ConfigError(f"march.window must be a finite number > 0 or \"auto\", got {self.window!r}")
+        for name in ("rtol", "atol", "first_window", "min_window"):
+            v = getattr(self, name)
+            if v is None and name in ("first_window", "min_window"):
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0 or (
+                    v == 0 and name != "atol"):
+                raise ConfigError(f"march.{name} must be a finite number > 0{' (>= 0)' if name == 'atol' else ''}, "
+                                  f"got {v!r}")
+        if self.rtol == 0 and self.atol == 0:
+            raise ConfigError("march.rtol and march.atol cannot both be 0")
+        for name in ("max_rejects", "max_windows"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < (0 if name == "max_rejects" else 1):
+                raise ConfigError(f"march.{name} must be an integer >= {0 if name == 'max_rejects' else 1}, got {v!r}")
         for name in ("train", "first"):
             v = getattr(self, name)
             if v is not None and not isinstance(v, TrainConfig):
                 raise ConfigError(f"march.{name} must be a TrainConfig, got {type(v).__name__}")
-        if self.polish is not None and not isinstance(self.polish, PolishConfig):
-            raise ConfigError(f"march.polish must be a PolishConfig or None, got {type(self.polish).__name__}")
+        if self.polish is not None and not isinstance(self.polish, (PolishConfig, LMConfig)):
+            raise ConfigError(f"march.polish must be an LMConfig, a PolishConfig or None, got "
+                              f"{type(self.polish).__name__}")
         if self.start not in WINDOW_STARTS:
             raise ConfigError(f"march.start must be one of {list(WINDOW_STARTS)}, got {self.start!r}")
         for name in ("thaw", "carry_adam"):
@@ -137,7 +178,10 @@ def n_windows_for(t0: float, T: float, config: MarchConfig) -> int:
     that 20π split into windows of 4π gives 5, not 6, despite rounding)."""
     if config.n_windows is not None:
         return int(config.n_windows)
-    window = DEFAULT_WINDOW if config.window is None else float(config.window)
+    if config.adaptive:
+        raise ConfigError("adaptive windows (march.window = \"auto\") have no fixed count; give window or "
+                          "n_windows for fixed windows")
+    window = float(config.window)
     return max(1, math.ceil((float(T) - float(t0)) / window * (1 - 1e-9)))
 
 
@@ -205,8 +249,9 @@ def _train_windows(models: list[TrialSolution], system: HamiltonianSystem, lengt
 
 
 def _polish_window(model: TrialSolution, system: HamiltonianSystem, length: float,
-                   config: PolishConfig, energy0: float) -> PolishResult:
-    return polish(model, system, length, config, energy0=energy0)
+                   config: PolishConfig | LMConfig, energy0: float) -> PolishResult | LMResult:
+    """The second phase of a window: Levenberg–Marquardt (an :class:`LMConfig`) or L-BFGS."""
+    return refine(model, system, length, config, energy0=energy0)
 
 
 def _record(k: int, edges: np.ndarray, z_start, res: TrainResult, pol: PolishResult | None,
@@ -227,31 +272,6 @@ def _record(k: int, edges: np.ndarray, z_start, res: TrainResult, pol: PolishRes
 
 
 # ---------------------------------------------------------------------- march
-def march(
-    model: TrialSolution,
-    system: HamiltonianSystem,
-    T: float,
-    config: MarchConfig = MarchConfig(),
-    *,
-    on_window: Callable[[WindowRecord], None] | None = None,
-    on_chunk: Callable | None = None,
-) -> PiecewiseSolution:
-    """Train a time-marching ATLAS-NN on [model.t0, T] and return the piecewise solution.
-
-    Args:
-        model: the first window's starting trial solution (network, scaling with initial γ, z0);
-            its t0 is the start of the interval.
-        system: the Hamiltonian system.
-        T: the end of the interval.
-        config: windows, per-window training, γ freezing, Adam carrying, polishing.
-        on_window: called with each window's :class:`WindowRecord` when it is done.
-        on_chunk: passed to the trainer (called after every chunk of epochs with the list of
-            current training states); raising KeyboardInterrupt there stops the march.
-    """
-    callback = None if on_window is None else (lambda i, record: on_window(record))
-    return march_batch([model], system, T, [config], on_window=callback, on_chunk=on_chunk)[0]
-
-
 def march_batch(
     models: list[TrialSolution],
     system: HamiltonianSystem,

@@ -51,7 +51,7 @@ from atlasnn.experiments.config._schema import (
 )
 from atlasnn.experiments.config._types import _fail, _number, _one_line, _table
 from atlasnn.systems import BUILTIN_SYSTEMS, builtin_system, expression_system
-from atlasnn.training import DEFAULT_WINDOW_TRAIN, MarchConfig, PolishConfig, TrainConfig, n_windows_for
+from atlasnn.training import DEFAULT_WINDOW_TRAIN, LMConfig, MarchConfig, PolishConfig, TrainConfig, n_windows_for
 
 
 def _deep_merge(base: dict, over: dict) -> dict:
@@ -330,8 +330,18 @@ def _quality(v: dict[str, Any]) -> Thresholds:
     return Thresholds(**v)
 
 
-def _polish_config(path: str, v: dict[str, Any]):
-    return PolishConfig(**{k: v[k] for k in ("steps", "n_points", "memory", "patience", "precision")})
+def _polish_config(path: str, v: dict[str, Any]) -> PolishConfig | LMConfig | None:
+    """The [polish] table (or march.polish) as the second phase's config, or None (method none)."""
+    given = {k: v[k] for k in ("steps", "n_points", "patience") if v.get(k) is not None}
+    if v["method"] == "none":
+        return None
+    if v["method"] == "lm":
+        if v["memory"] != 20:
+            _fail(f"{path}.memory", v["memory"], "is a key of method lbfgs, not lm")
+        return LMConfig(precision=v["precision"], **given)
+    if v["precision"] == "mixed":
+        _fail(f"{path}.precision", "mixed", "is a precision of method lm; lbfgs takes model or float64")
+    return PolishConfig(memory=v["memory"], precision=v["precision"], **given)
 
 
 def _window_train(path: str, given: dict[str, Any], base, length: float):
@@ -351,10 +361,21 @@ def _march_settings(v: dict[str, Any], given: dict[str, Any], stage: Stage) -> M
     """The [march] table as a MarchSettings (the scheme's train configs over the measured defaults)."""
     if v.get("window") is not None and v.get("n_windows") is not None:
         _fail("march.window", given.get("window"), "give window or n_windows, not both")
-    scheme = MarchConfig(n_windows=v.get("n_windows"), window=v.get("window"), thaw=v["thaw"],
+    window = None if v.get("n_windows") is not None and "window" not in given else v.get("window")
+    scheme = MarchConfig(n_windows=v.get("n_windows"), window=window, thaw=v["thaw"],
                          carry_adam=v["carry_adam"], start=v["start"],
-                         polish=None if v["polish"] is None else _polish_config("march.polish", v["polish"]))
-    length = (stage.T - stage.t0) / n_windows_for(stage.t0, stage.T, scheme)
+                         polish=_polish_config("march.polish", v["polish"]), rtol=v["rtol"], atol=v["atol"],
+                         first_window=v["first_window"], min_window=v["min_window"],
+                         max_rejects=v["max_rejects"], max_windows=v["max_windows"])
+    if scheme.adaptive:
+        for key in ("sigma_per_T",):
+            for table in ("train", "first_train"):
+                if key in (given.get(table) or {}):
+                    _fail(f"march.{table}.{key}", given[table][key], "needs fixed windows (window = a length); "
+                          "with window = \"auto\" give sigma (in units of the collocation spacing)")
+        length = stage.T - stage.t0
+    else:
+        length = (stage.T - stage.t0) / n_windows_for(stage.t0, stage.T, scheme)
     train = _window_train("march.train", given.get("train") or {}, DEFAULT_WINDOW_TRAIN, length)
     first = None
     if given.get("first_train"):

@@ -34,6 +34,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from atlasnn.experiments.config._types import (
+    LengthOrAuto,
     Bool,
     Choice,
     CountOrAuto,
@@ -236,15 +237,27 @@ _STATIC_TABLES: dict[str, TableSpec] = {
     )),
     "network": TableSpec("The fully connected network N(t; θ) from the time t to R^(2d).", _network_keys(
         50, 1.0, "higher initial frequencies of the sin network; 1 is PyTorch's init")),
-    "march": TableSpec("Time-marching ATLAS-NN (atlasnn.training._marching): windows [t_k, t_k+1] of equal length, window "
-                       "k exact at its own start z_k = the previous window's end state.", (
+    "march": TableSpec("Time-marching ATLAS-NN (atlasnn.training): windows [t_k, t_k+1], window k exact at its "
+                       "own start z_k = the previous window's end state; by default each window's length is "
+                       "chosen by its error estimate, as an adaptive ODE solver chooses its steps.", (
         Key("models", _MODEL_LIST, ["atlas_exp"],
             "The models marched (their initial γ from [gamma_init]); one column each, e.g. atlas_exp_march."),
-        Key("window", Number(low=0, low_open=True, high=MAX_TIME, pi=True), None, "The longest window: the "
-            "interval is cut into ⌈(T − t0)/window⌉ equal windows; give window or n_windows.",
-            default_text="4*pi (measured on the paper's systems)"),
+        Key("window", LengthOrAuto(MAX_TIME), "auto", "\"auto\": each window's length chosen by its error "
+            "estimate (retrained shorter when its local error exceeds rtol × the state's range, longer "
+            "when there is room); or a number: the longest window, the interval cut into "
+            "⌈(T − t0)/window⌉ equal windows."),
         Key("n_windows", Integer(1, 100_000), None, "The number of equal windows, instead of window.",
-            default_text="from window"),
+            default_text="none (window decides)"),
+        Key("rtol", Number(low=0, high=1), 1e-5, "Adaptive windows: a window's local error estimate must stay "
+            "below atol + rtol × the state's range (measured over the hard-problem suite: docs/SUITE.md)."),
+        Key("atol", Number(low=0), 0.0, "Adaptive windows: the absolute part of the local tolerance."),
+        Key("first_window", Number(low=0, low_open=True, high=MAX_TIME, pi=True), None, "Adaptive windows: "
+            "the first window's length.", default_text="one period of the fastest linear mode at z0"),
+        Key("min_window", Number(low=0, low_open=True, high=MAX_TIME, pi=True), None, "Adaptive windows: "
+            "the shortest window (one that still fails there is kept and marked forced).",
+            default_text="(T − t0)·1e-4"),
+        Key("max_rejects", Integer(0, 1000), 8, "Adaptive windows: retrainings of one window at most."),
+        Key("max_windows", Integer(1, 100_000), 10_000, "Adaptive windows: windows in all at most."),
         Key("start", Choice(("initial", "previous", "features")), "initial", "Where window k ≥ 1 starts its "
             "network: the initial weights (measured best), the previous window's trained ones (the paper's "
             "transfer, window to window), or its hidden layers with a zeroed output layer."),
@@ -252,23 +265,30 @@ _STATIC_TABLES: dict[str, TableSpec] = {
         Key("carry_adam", Bool(), True, "Start each window's Adam from the previous window's moments."),
         Key("network", Sub("march.network"), {}, "The marched models' network (its own: the defaults were measured "
             "for time-marching)."),
-        Key("train", Sub("train", sparse=True), {}, "Each window's training, key by key over the measured defaults "
-            "(16 000 epochs, K = 100, lr 5e-3 cosine to 5e-5, Adam betas (0.9, 0.999), sigma 0.5, causal_eps 10, "
-            "best_rule lowest, lam_reg 1); n_points and epochs are per window; [train] is not inherited."),
+        Key("train", Sub("train", sparse=True), {}, "Each window's Adam training, key by key over the measured "
+            "defaults (2 000 epochs, K = 100, lr 5e-3 cosine to 5e-5, Adam betas (0.9, 0.999), sigma 0.5, "
+            "causal_eps 10, best_rule lowest, lam_reg 1); n_points and epochs are per window; [train] is not inherited."),
         Key("first_train", Sub("train", sparse=True), {}, "The first window's training, key by key over march.train "
             "(e.g. more epochs while γ is learned)."),
-        Key("polish", Sub("polish"), None, "L-BFGS after Adam in every window.", default_text="none"),
+        Key("polish", Sub("polish"), {}, "The second phase of every window after Adam (default: "
+            "Levenberg–Marquardt, method = \"lm\"; method = \"none\" turns it off)."),
     )),
     "march.network": TableSpec("The network of the marched models.", _network_keys(
         48, 4.0, "measured: 3–8 lowers a window's error 2–9×")),
-    "polish": TableSpec("L-BFGS (optax.lbfgs, zoom line search) on fixed collocation times after Adam; the best "
-                        "parameters are kept, so it never makes a model worse.", (
-        Key("steps", Integer(1, MAX_EPOCHS), 1000, "L-BFGS step budget."),
-        Key("n_points", Integer(2, MAX_POINTS), 400, "Fixed collocation times (a uniform grid, ends included)."),
-        Key("memory", Integer(1, 1000), 20, "Curvature pairs L-BFGS keeps."),
-        Key("patience", Integer(1, MAX_EPOCHS), 100, "Stop when the best loss has not dropped by 0.1 % in this many steps."),
-        Key("precision", Choice(("model", "float64")), "model", "Polish in the model's float type, or a float64 "
-            "copy rounded back (slower; float32 line searches stall near losses of 1e-7)."),
+    "polish": TableSpec("A second phase after Adam on fixed collocation times: Levenberg–Marquardt (damped "
+                        "Gauss–Newton, Jacobian by autodiff) or L-BFGS (optax.lbfgs, zoom line search); either "
+                        "keeps the best parameters, so it never makes a model worse.", (
+        Key("method", Choice(("lm", "lbfgs", "none")), "lm", "lm (measured the fastest way to a low loss: "
+            "docs/ESTIMATE.md), lbfgs, or none."),
+        Key("steps", Integer(1, MAX_EPOCHS), None, "Step budget (LM trials, or L-BFGS steps).",
+            default_text="150 (lm), 1000 (lbfgs)"),
+        Key("n_points", Integer(2, MAX_POINTS), None, "Fixed collocation times (lm: Chebyshev–Lobatto; lbfgs: "
+            "uniform).", default_text="100 (lm), 400 (lbfgs)"),
+        Key("memory", Integer(1, 1000), 20, "lbfgs: curvature pairs kept."),
+        Key("patience", Integer(1, MAX_EPOCHS), None, "Stop when the loss has not dropped by 0.1 % in this many "
+            "steps.", default_text="20 (lm), 100 (lbfgs)"),
+        Key("precision", Choice(("model", "float64", "mixed")), "model", "The phase's float type: the model's, a "
+            "float64 copy rounded back, or (lm) float64 residuals with a float32 Jacobian."),
     )),
     "train": TableSpec("Adam on the physics loss L = residual of Hamilton's equations + λ_reg·energy "
                        "penalty, at K jittered collocation times.", (

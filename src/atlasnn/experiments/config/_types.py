@@ -386,6 +386,22 @@ class CountOrAuto(ValueType):
         return f'[1, {self.high}] or "auto"'
 
 
+@dataclass(frozen=True)
+class LengthOrAuto(ValueType):
+    """A time length > 0 (a number or a multiple of pi, at most ``high``), or "auto"."""
+
+    high: float
+    label = "number, multiple of pi, or \"auto\""
+
+    def parse(self, path, v):
+        if v == "auto":
+            return v
+        return _number(path, v, low=0, low_open=True, high=self.high, allow_pi=True)
+
+    def limits(self):
+        return f'(0, {self.high:g}] or "auto"'
+
+
 # ------------------------------------------------------------------------ keys and tables
 @dataclass(frozen=True)
 class Key:

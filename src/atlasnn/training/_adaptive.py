@@ -1,0 +1,204 @@
+"""Error-controlled time-marching: windows chosen by the error estimate, as an adaptive ODE solver
+chooses its steps.
+
+Each window is trained as in fixed-window marching (:mod:`._marching`), then judged by its local
+error estimate: the linearised error equation integrated over the window alone, δ(0) = 0
+(:mod:`atlasnn.solutions`), no reference needed. With ``tol = atol + rtol · scale`` (scale: the
+range of the solution so far, at least max |z0|):
+
+- max |δ| ≤ tol on the whole window: accepted; the next window is ``w · min(2, 0.9 (tol/err)^{1/3})``
+  long (never shorter than the accepted one);
+- otherwise the window is cut where |δ| first exceeds 0.9·tol: the prefix [0, s*] is accepted when
+  s* ≥ w/4 (its error is within the tolerance, its network is the trained one: no retraining), and
+  the next window is s* long;
+- else the window is rejected and retrained from scratch, shorter: ``w · max(1/4, 0.9 (tol/err)^{1/3})``.
+
+A window is never shorter than ``min_window`` (default (T − t0)·1e-4): one that still fails there
+is accepted and marked ``forced``; at most ``max_rejects`` retrainings per window. Every attempt —
+accepted, cut, rejected, forced — is recorded (``info["attempts"]``), and the solution's own
+estimate over the whole interval (errors carried across the edges) is what reports its accuracy.
+
+Unlike fixed windows, the seeds of a batch get different windows: :func:`march_adaptive` marches
+one model; a batch of seeds is marched one after the other.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from atlasnn.errors import ConfigError
+from atlasnn.nn import TrialSolution
+from atlasnn.solutions import PiecewiseSolution, WindowRecord, estimate_error, state_range
+from atlasnn.systems import HamiltonianSystem
+from atlasnn.training._marching import (
+    MarchConfig,
+    _polish_window,
+    _record,
+    _train_windows,
+    end_state,
+    march_batch,
+    local_model,
+    next_window_model,
+    window_config,
+    window_polish,
+)
+from atlasnn.training._transfer import restrict_opt_state
+
+__all__ = ["march", "march_adaptive", "first_window", "SAFETY", "GROWTH", "SHRINK", "EXPONENT", "CUT_FRACTION"]
+
+#: the controller's constants (see the module docstring)
+SAFETY, GROWTH, SHRINK, EXPONENT, CUT_FRACTION = 0.9, 2.0, 0.25, 1.0 / 3.0, 0.25
+#: window attempts are seeded apart from each other (a prime, as the windows are)
+_ATTEMPT_STRIDE = 104_729
+
+
+def first_window(system: HamiltonianSystem, z0: Any, span: float) -> float:
+    """A first window: one period 2π/ω of the fastest linear mode at z0 (ω = max |eig D(J∇H)(z0)|),
+    at most the whole interval."""
+    with jax.enable_x64(True):
+        a = np.asarray(system.jacobian(jnp.asarray(np.asarray(z0, np.float64).reshape(-1))), dtype=np.float64)
+    omega = float(np.max(np.abs(np.linalg.eigvals(a)))) if np.all(np.isfinite(a)) else 0.0
+    return float(min(span, 2 * math.pi / omega)) if omega > 0 else float(span)
+
+
+def _local_error(system: HamiltonianSystem, model: TrialSolution, length: float) -> tuple[np.ndarray, np.ndarray, Any]:
+    """(node times, max_i |δ_i| at the nodes, the estimate) of one window on its own, δ(0) = 0."""
+    est = estimate_error(system, [(model, 0.0, length, 0.0)])
+    return est.t, np.abs(est.delta).max(axis=1), est
+
+
+def _next_length(w: float, err: float, tol: float) -> float:
+    factor = SAFETY * (tol / err) ** EXPONENT if err > 0 else GROWTH
+    return w * min(GROWTH, factor)
+
+
+def march_adaptive(
+    model: TrialSolution,
+    system: HamiltonianSystem,
+    T: float,
+    config: MarchConfig,
+    *,
+    on_window: Callable[[WindowRecord], None] | None = None,
+    on_chunk: Callable | None = None,
+    log: Callable[[str], None] | None = None,
+) -> PiecewiseSolution:
+    """March ``model`` over [model.t0, T] with windows chosen by the error estimate (module docstring).
+
+    ``config``: its ``rtol``, ``atol``, ``first_window``, ``min_window``, ``max_rejects``,
+    ``max_windows`` drive the windows; ``train``/``first``/``polish``/``start``/``thaw``/
+    ``carry_adam`` the training of each, as for fixed windows.
+    """
+    t0, T = float(model.t0), float(T)
+    if not T > t0:
+        raise ConfigError(f"march interval must satisfy t0 < T, got t0={t0}, T={T}")
+    if model.state_dim != system.state_dim:
+        raise ConfigError(f"model state dimension {model.state_dim} does not match system {system.name!r} "
+                          f"(2d = {system.state_dim})")
+    span = T - t0
+    z0 = np.asarray(model.z0, dtype=np.float64)
+    energy0 = float(system.energy64(z0))
+    w = float(config.first_window) if config.first_window else first_window(system, z0, span)
+    w_min = float(config.min_window) if config.min_window else span * 1e-4
+    initial = current = local_model(model)
+    opt_state, edges, trained, records, attempts = None, [t0], [], [], []
+    path = [z0[None, :]]  # the solution so far, for the scale of the tolerance
+    t, k, rejects = t0, 0, 0
+    while t < T - 1e-12 * span:
+        if len(trained) >= config.max_windows:
+            raise ConfigError(f"march needs more than march.max_windows = {config.max_windows} windows at "
+                              f"rtol = {config.rtol:g}; raise rtol or max_windows")
+        w = max(min(w, T - t), min(w_min, T - t))
+        if T - t - w < 1e-9 * span:  # do not leave a sliver at the end
+            w = T - t
+        cfg = window_config(config, k)
+        cfg = cfg.replace(seed=(cfg.seed + _ATTEMPT_STRIDE * rejects) % (2**31 - 1))
+        start_opt = restrict_opt_state(opt_state, current, cfg.freeze_gamma) if (k > 0 and config.carry_adam) else None
+        clock = time.perf_counter()
+        res = _train_windows([current], system, w, [cfg], [start_opt], [energy0],
+                             f"window {k + 1} [{t:.4g}, {t + w:.4g}]", on_chunk)[0]
+        if res.stop_reason == "interrupted":
+            raise KeyboardInterrupt
+        net, pol = res.model, None
+        pcfg = window_polish(config, cfg)
+        if pcfg is not None:
+            pol = _polish_window(net, system, w, pcfg, energy0)
+            net = pol.model
+        wall = time.perf_counter() - clock - res.compile_time - (0.0 if pol is None else pol.compile_time)
+        nodes, err, est = _local_error(system, net, w)
+        scale = max(state_range(np.concatenate([*path, est.z])), float(np.abs(z0).max()), 1e-300)
+        tol = config.atol + config.rtol * scale
+        worst = float(err.max()) if np.all(np.isfinite(err)) else math.inf
+        outcome, length = "accepted", w
+        if not worst <= tol:
+            over = np.nonzero(~(err <= SAFETY * tol))[0]
+            cut = float(nodes[max(int(over[0]) - 1, 0)])
+            if cut >= CUT_FRACTION * w and cut >= min(w_min, T - t) and math.isfinite(worst):
+                outcome, length = "cut", cut
+            elif w <= w_min * (1 + 1e-9) or rejects >= config.max_rejects:
+                outcome = "forced"
+            else:
+                outcome = "rejected"
+        attempts.append({"window": k, "start": t, "length": w, "accepted_length": length if outcome != "rejected"
+                         else 0.0, "outcome": outcome, "local_error": worst, "tolerance": tol,
+                         "epochs": int(res.epochs_run), "wall_time": wall})
+        if log is not None:
+            log(f"window {k + 1} [{t:.4g}, {t + w:.4g}]: local error {worst:.2e} (tol {tol:.2e}): {outcome}"
+                + (f" at {t + length:.4g}" if outcome == "cut" else ""))
+        if outcome == "rejected":
+            rejects += 1
+            w = max(w * max(SHRINK, SAFETY * (tol / worst) ** EXPONENT if math.isfinite(worst) else SHRINK), w_min)
+            continue
+        edges.append(t + length)
+        record = _record(k, np.asarray(edges), current.z0, res, pol, net, wall)
+        trained.append(net)
+        records.append(record)
+        keep = nodes <= length + 1e-12
+        path.append(est.z[keep])
+        if on_window is not None:
+            on_window(record)
+        opt_state = res.opt_state
+        current = next_window_model(config.start, initial, net, end_state(net, length))
+        t, k, rejects = t + length, k + 1, 0
+        w = length if outcome == "cut" else max(length, _next_length(length, worst, tol))
+    edges_arr = np.asarray(edges, dtype=np.float64)
+    edges_arr[-1] = T
+    info = {"scheme": "time-marching", "windows": "auto", "n_windows": len(trained), "rtol": config.rtol,
+            "atol": config.atol, "thaw": config.thaw, "carry_adam": config.carry_adam, "energy0": energy0,
+            "batch_size": 1, "attempts": attempts,
+            "rejected": sum(a["outcome"] == "rejected" for a in attempts)}
+    return PiecewiseSolution(trained, system, edges_arr, records, info)
+
+
+def march(
+    model: TrialSolution,
+    system: HamiltonianSystem,
+    T: float,
+    config: MarchConfig = MarchConfig(),
+    *,
+    on_window: Callable[[WindowRecord], None] | None = None,
+    on_chunk: Callable | None = None,
+) -> PiecewiseSolution:
+    """Train a time-marching ATLAS-NN on [model.t0, T] and return the piecewise solution: windows
+    chosen by the error estimate (:func:`march_adaptive`; ``window = "auto"``, the default), or
+    fixed ones (``window`` or ``n_windows``: :func:`~atlasnn.training.march_batch`).
+
+    Args:
+        model: the first window's starting trial solution (network, scaling with initial γ, z0);
+            its t0 is the start of the interval.
+        system: the Hamiltonian system.
+        T: the end of the interval.
+        config: windows, per-window training, γ freezing, Adam carrying, polishing.
+        on_window: called with each window's :class:`WindowRecord` when it is done.
+        on_chunk: passed to the trainer (called after every chunk of epochs with the list of
+            current training states); raising KeyboardInterrupt there stops the march.
+    """
+    if config.adaptive:
+        return march_adaptive(model, system, T, config, on_window=on_window, on_chunk=on_chunk)
+    callback = None if on_window is None else (lambda i, record: on_window(record))
+    return march_batch([model], system, T, [config], on_window=callback, on_chunk=on_chunk)[0]
