@@ -228,6 +228,24 @@ def cmd_sweep(args) -> int:
     return 0
 
 
+def cmd_suite(args) -> int:
+    from atlasnn.experiments import run_suite
+
+    seeds = _seeds(args)
+    out = run_suite(args.name, args.out, seeds=seeds, jobs=_jobs(args), quick=args.quick, only=args.only or None,
+                    progress=not args.no_progress)
+    print((out / "suite.md").read_text(encoding="utf-8"))
+    return 0
+
+
+def _builtin_names() -> list[str]:
+    """The built-in experiments, from the configs shipped with the package (no heavy import)."""
+    from importlib import resources
+
+    folder = resources.files("atlasnn").joinpath("experiments", "configs")
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
 def cmd_report(args) -> int:
     from atlasnn.report import load_results, summary_lines, write_report
 
@@ -362,8 +380,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="continue an interrupted run in DIR (its config, seeds and --quick are read from DIR)")
         s.add_argument("--no-progress", action="store_true", help="no progress bars")
 
-    s = sub.add_parser("reproduce", help="reproduce one of the paper's experiments")
-    s.add_argument("name", nargs="?", help="oscillator-short, oscillator-transfer, henon-heiles-short or henon-heiles-transfer")
+    s = sub.add_parser("reproduce", help="run one of the built-in experiments (the paper's, the long-time ones, "
+                                         "the hard-problem suite's)")
+    s.add_argument("name", nargs="?", help="one of: " + ", ".join(_builtin_names()))
     add_run_options(s)
     s.set_defaults(func=cmd_reproduce)
 
@@ -389,6 +408,17 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--resume", default=None, metavar="DIR", help="continue the sweep in DIR")
     s.add_argument("--no-progress", action="store_true", help="no progress bars")
     s.set_defaults(func=cmd_sweep)
+
+    s = sub.add_parser("suite", help="run every built-in experiment of a suite (default: hard, the hard "
+                                     "Hamiltonian problems) in each of its profiles, with one summary")
+    s.add_argument("name", nargs="?", default="hard", help="the suite (default hard)")
+    s.add_argument("--seeds", type=int, default=None, metavar="K", help="seeds 0..K-1 (default: each config's)")
+    s.add_argument("--jobs", type=int, default=1, metavar="J", help="independent trainings in J processes")
+    s.add_argument("--only", action="append", default=[], metavar="EXPERIMENT", help="run only these members")
+    s.add_argument("--quick", action="store_true", help="the configs' quick variants")
+    s.add_argument("--out", default=None, metavar="DIR", help="suite directory (default runs/suite-NAME[-quick])")
+    s.add_argument("--no-progress", action="store_true", help="no progress bars")
+    s.set_defaults(func=cmd_suite)
 
     s = sub.add_parser("report", help="re-render tables and figures of a finished run")
     s.add_argument("dir", help="a run directory written by reproduce or run")

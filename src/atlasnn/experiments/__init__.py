@@ -9,6 +9,7 @@ from atlasnn.experiments._runner import RunInterrupted, divergence_advice, resum
 from atlasnn.experiments._schemes import SCHEMES, Scheme, baseline_column, column_label, column_labels, table_columns
 from atlasnn.experiments._signals import NoGuard, SignalGuard, check_interrupt
 from atlasnn.experiments._store import load_run_config
+from atlasnn.experiments._suite import SUITE_PROFILES, run_suite, suite_members
 from atlasnn.experiments._sweep import SweepInterrupted, resume_sweep, run_sweep
 from atlasnn.experiments._tasks import Task
 
@@ -19,6 +20,9 @@ __all__ = [
     "divergence_advice",
     "load_run_config",
     "run_sweep",
+    "run_suite",
+    "suite_members",
+    "SUITE_PROFILES",
     "resume_sweep",
     "SweepInterrupted",
     "Executor",

@@ -18,6 +18,7 @@ from atlasnn.report._plots import (
 )
 from atlasnn.report._render import SUMMARY_WIDTH, summary_lines, write_figures, write_report
 from atlasnn.report._stats import SCALAR_METRICS, STATE_METRICS, column_label, load_paper, load_results, summarize
+from atlasnn.report._suite import suite_markdown, suite_summary
 from atlasnn.report._summary_plots import plot_loss_vs_accuracy, plot_overview
 from atlasnn.report._sweep_plot import plot_sweep
 from atlasnn.report._tables import CSV_FIELDS, render_tables, write_tables
@@ -63,4 +64,6 @@ __all__ = [
     "plot_loss_vs_accuracy",
     "plot_sweep",
     "plot_work_precision",
+    "suite_summary",
+    "suite_markdown",
 ]

@@ -154,6 +154,7 @@ class ExperimentConfig:
     evaluation: EvaluationConfig = EvaluationConfig()
     seeds: tuple[int, ...] = (0,)
     description: str = ""
+    suite: str = ""
     follows: dict[str, str] = field(default_factory=dict)
     paper_experiment: str = ""
     first_layer_scale: float = 1.0
@@ -287,6 +288,8 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     system = _system_config(v["system"], data["system"])
     base_train = _train_settings("train", v["train"], data.get("train", {}))
     _check_stages_present(kind, data)
+    if not v["models"] and (kind != "short" or v["march"] is None):
+        _fail("models", [], "give at least one model (an empty list needs a short experiment with a [march] table)")
     stages = {p: _stage(p, v[p], data[p], base_train) for p in ("interval", "source", "target") if p in data}
     if kind == "transfer":
         _check_same_start(stages["source"], stages["target"])

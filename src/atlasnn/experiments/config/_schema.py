@@ -85,6 +85,8 @@ def _model_spellings() -> dict[str, str]:
 
 _MODEL_LIST = NameList(lambda: f"expected a non-empty list drawn from {sorted(MODELS)}", _model_names,
                        _model_spellings, unique=True)
+_MODELS_OR_NONE = NameList(lambda: f"expected a list drawn from {sorted(MODELS)}", _model_names,
+                           _model_spellings, nonempty=False, unique=True)
 
 
 
@@ -173,6 +175,8 @@ _STATIC_TABLES: dict[str, TableSpec] = {
             default_text="the file's name without .toml"),
         Key("description", String(), "", "One line saying what the experiment is, shown by `atlasnn experiments` "
             "and in the results."),
+        Key("suite", String(r"[A-Za-z0-9_-]*", "use letters, digits, '-' and '_' only", "letters, digits, '-', '_'"),
+            "", "The suite a built-in experiment belongs to: `atlasnn suite NAME` runs every one of them."),
         Key("paper_experiment", String(), "", "The paper experiment whose printed numbers the tables show beside this "
             "run's (columns of the same name); empty: the experiment's own name, if the paper has it."),
         Key("kind", Choice(("short", "transfer")), None,
@@ -183,10 +187,11 @@ _STATIC_TABLES: dict[str, TableSpec] = {
             missing="expected a table", default_text="required"),
         Key("network", Sub("network"), {}, "The network N(t; θ) of the trial solution ẑ(t) = z0 + f(t − t0; γ)·N(t; θ)."),
         Key("train", Sub("train"), {}, "Training settings of every interval (a stage's own train table overrides them key by key)."),
-        Key("models", _MODEL_LIST, ["hnn", "atlas_tanh", "atlas_exp"],
+        Key("models", _MODELS_OR_NONE, ["hnn", "atlas_tanh", "atlas_exp"],
             "The models to train, e.g. hnn (HNN, f = 1 − e^(−t)), atlas_tanh (ATLAS-NN (tanh), f = tanh(m t)) and "
             "atlas_exp (ATLAS-NN (exp), f = (1 − e^(−αt))/(1 + β e^(−αt))); their scalings' names "
-            "(exp_decay, tanh, rational_exp) are accepted for them. The list is atlasnn.nn.MODELS."),
+            "(exp_decay, tanh, rational_exp) are accepted for them. The list is atlasnn.nn.MODELS. An empty "
+            "list (a short experiment with [march] only) trains the marched models alone."),
         Key("gamma_init", Sub("gamma_init", sparse=True), {},
             "Initial values of each model's time-scaling parameters γ (learned on the first interval)."),
         Key("interval", Sub("stage"), None, "The interval of a short run, [t0, T], and its training settings.",
