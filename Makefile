@@ -3,7 +3,7 @@ PY ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: quick test reproduce-all reproduce-release reproduction-doc bench clean-venv
+.PHONY: quick test reproduce-all reproduce-release reproduction-doc suite suite-doc bench clean-venv
 
 $(BIN)/atlasnn: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -33,6 +33,15 @@ reproduce-release: $(BIN)/atlasnn
 
 reproduction-doc: $(BIN)/atlasnn
 	$(BIN)/python scripts/reproduction_doc.py $(foreach e,$(PAPER),runs/paper/$(e) runs/release/$(e)) runs/paper/oscillator-long runs/paper/henon-heiles-long
+
+# The hard-problem suite (docs/SUITE.md): every problem, direct training, adaptive and fixed-window
+# time-marching, 5 seeds; then its tables into docs/.
+suite: $(BIN)/atlasnn
+	$(BIN)/python scripts/timed.py runs/suite-hard.timing.json -- \
+	  "$(BIN)/atlasnn suite hard --seeds $(SEEDS) --jobs $(JOBS) --out runs/suite-hard --no-progress"
+
+suite-doc: $(BIN)/atlasnn
+	$(BIN)/python scripts/suite_doc.py runs/suite-hard
 
 bench: $(BIN)/atlasnn
 	$(BIN)/pip install -q 'torch==2.13.0'

@@ -218,7 +218,7 @@ def _run_python(args: list[str], workspace: Path, what: str) -> None:
 
 def _check_atlasnn_command(words: list[str]) -> None:
     """A command that is not run: its options must parse and its config must load."""
-    from atlasnn.cli._main import build_parser
+    from atlasnn.cli._parser import build_parser
     from atlasnn.experiments.config import builtin_config_path, load_config
 
     err = io.StringIO()

@@ -99,7 +99,7 @@ def test_out_in_an_unwritable_directory_as_nobody():
         probe = subprocess.run(as_nobody + ["import atlasnn.cli._main"], capture_output=True, text=True, cwd=base)
         if probe.returncode != 0:
             pytest.skip(f"nobody cannot import atlasnn here: {probe.stderr.strip()[-200:]}")
-        code = "import sys; from atlasnn.cli._main import main; sys.exit(main(sys.argv[1:]))"
+        code = "import sys; from atlasnn.cli import main; sys.exit(main(sys.argv[1:]))"
         done = subprocess.run(as_nobody + [code, "run", config, "--out", os.path.join(locked, "run"), "--no-progress"],
                               capture_output=True, text=True, cwd=base, timeout=120)
         assert done.returncode == 2, done.stderr

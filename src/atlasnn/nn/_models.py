@@ -9,6 +9,7 @@ figures' colours and the family-of-scalings figure. Adding a time scaling is one
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field
 from typing import Mapping
@@ -54,8 +55,11 @@ class ModelKind:
         unknown = set(self.scaling.rate_names) - set(self.scaling.gamma_names)
         if unknown:
             raise ConfigError(f"scaling {self.scaling.name!r}: rate_names {sorted(unknown)} are not gamma_names")
-        for gamma in self.examples:
-            build_scaling(self.scaling, dict(gamma))  # checks names and values
+        for gamma in self.examples:  # checked without building arrays (importing atlasnn allocates nothing)
+            bad = set(gamma) - set(self.scaling.gamma_names)
+            if bad or not all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in gamma.values()):
+                raise ConfigError(f"model {self.name!r}: example γ {dict(gamma)} must give positive values of "
+                                  f"{list(self.scaling.gamma_names)}")
         object.__setattr__(self, "aliases", tuple(dict.fromkeys((self.scaling.name, *self.aliases))))
 
     @property

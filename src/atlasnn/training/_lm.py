@@ -53,7 +53,7 @@ from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._loss import energy_and_vector_field
 from atlasnn.training._step import trainable_filter
 
-__all__ = ["LMConfig", "LMResult", "levenberg_marquardt", "lm_batch", "lm_nodes"]
+__all__ = ["LMConfig", "LMResult", "levenberg_marquardt", "lm_batch", "lm_nodes", "lm_points"]
 
 NODES = ("chebyshev", "uniform")
 LM_PRECISIONS = ("model", "float64", "mixed")
@@ -63,7 +63,8 @@ _STOP = {1: "tolerance", 2: "no_improvement", 3: "stalled", 4: "budget"}
 class LMConfig:
     """Settings of a Levenberg–Marquardt phase.
 
-    ``steps``: the budget of trials (accepted or rejected); ``n_points`` K and ``nodes``
+    ``steps``: the budget of trials (accepted or rejected); ``n_points`` K (default: by
+    :func:`lm_points`, from the window's length and the state's dimension) and ``nodes``
     (``"chebyshev"``: Chebyshev–Lobatto times, clustered at the ends; ``"uniform"``); ``lam_reg``
     as in training; ``freeze_gamma``: γ of the scaling fixed (default) or optimised too;
     ``mu_init`` τ; ``geodesic``/``accel_ratio``: the geodesic acceleration (module docstring);
@@ -73,7 +74,7 @@ class LMConfig:
     """
 
     steps: int = 100
-    n_points: int = 100
+    n_points: int | None = None
     nodes: str = "chebyshev"
     lam_reg: float = 1.0
     freeze_gamma: bool = True
@@ -92,6 +93,8 @@ class LMConfig:
                 raise ConfigError(f"lm.{name} must be one of {list(options)}, got {getattr(self, name)!r}")
         for name, low in (("steps", 1), ("n_points", 2), ("patience", 1)):
             v = getattr(self, name)
+            if v is None and name == "n_points":
+                continue
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
                 raise ConfigError(f"lm.{name} must be an integer >= {low}, got {v!r}")
         for name in ("lam_reg", "mu_init", "loss_tol", "min_rel_improvement", "diag_floor", "accel_ratio"):
@@ -125,10 +128,25 @@ class LMState(NamedTuple):
     history: jax.Array  # loss after each trial (NaN where none)
 
 
-def lm_nodes(config: LMConfig, t0: float, T: float) -> np.ndarray:
+#: the K a phase picks (see :func:`lm_points`): few distinct shapes, so few compiled programs
+_POINT_BUCKETS = (32, 48, 64, 100)
+
+
+def lm_points(length: float, dim: int) -> int:
+    """The default K: about 16 times per unit of time (at least 32, at most 100), and at most about
+    600 residuals K(2d + 1), rounded up to one of 32, 48, 64, 100. The Gram matrix costs
+    O(K²(2d + 1)² n) per accepted trial: measured on the 12-dimensional figure-eight, one window's
+    phase took 96 s at K = 100 and 10 s at K = 32 for the same error (4e-6 of the range); K = 100
+    is what the 4π windows of the one- and two-dimensional problems need (K = 50 failed there)."""
+    want = min(max(32, math.ceil(16 * float(length))), max(32, math.ceil(600 / (2 * int(dim) + 1))), 100)
+    return next(b for b in _POINT_BUCKETS if b >= want)
+
+
+def lm_nodes(config: LMConfig, t0: float, T: float, dim: int = 1) -> np.ndarray:
     """The K fixed collocation times on [t0, T] (float64)."""
-    k = np.arange(config.n_points, dtype=np.float64)
-    u = k / (config.n_points - 1) if config.nodes == "uniform" else (1 - np.cos(np.pi * k / (config.n_points - 1))) / 2
+    n = config.n_points or lm_points(T - t0, dim)
+    k = np.arange(n, dtype=np.float64)
+    u = k / (n - 1) if config.nodes == "uniform" else (1 - np.cos(np.pi * k / (n - 1))) / 2
     return t0 + (T - t0) * u
 
 
@@ -384,7 +402,11 @@ def lm_batch(models: Sequence[TrialSolution], system: HamiltonianSystem, T: floa
             x, unravel = ravel_pytree(params)
             parts.append((x, rest, unravel, ravel_pytree(_cast(params, jac_dtype))[1]))
         unravel, unravel_jac = parts[0][2], parts[0][3]
-        times = [jnp.asarray(lm_nodes(config, float(m.t0), float(t)), dtype) for m, t in zip(models, Ts)]
+        dim = system.dim
+        points = {config.n_points or lm_points(float(t) - float(m.t0), dim) for m, t in zip(models, Ts)}
+        if len(points) > 1:  # one program: every member of a batch on the largest K
+            config = config.replace(n_points=max(points))
+        times = [jnp.asarray(lm_nodes(config, float(m.t0), float(t), dim), dtype) for m, t in zip(models, Ts)]
         if n > 1:
             x = jnp.stack([p[0] for p in parts])
             rest = jax.tree_util.tree_map(lambda *v: jnp.stack(v), *[p[1] for p in parts])

@@ -1,0 +1,101 @@
+"""Commit a suite run into docs/: the runs' records under docs/runs/suite/, the summary's tables
+into docs/SUITE.md (between its ``<!-- generated:NAME -->`` markers), and each problem's overview
+figure under docs/figures/suite/.
+
+    python scripts/suite_doc.py runs/suite-hard        # after `atlasnn suite hard --seeds 5 --jobs 2`
+
+Sections written: ``suite`` (a table per problem and scheme, from suite.json), ``targets`` (the
+issue's targets counted: worst seed ≤ 1e-3 and median ≤ 1e-4 of the range for adaptive
+time-marching; the verdict's false ok / false alarms; the estimate's effectivity where the true
+error exceeds 1e-5 of the range) and ``timing`` (the suite's wall time, when timed.py recorded it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import shutil
+from pathlib import Path
+
+from atlasnn.report import suite_markdown
+
+KEEP = ("results.json", "summary.json", "tables.csv", "meta.json", "config.toml")
+
+
+def replace_generated(text: str, name: str, body: str) -> str:
+    start, end = f"<!-- generated:{name} -->", f"<!-- /generated:{name} -->"
+    pattern = re.compile(re.escape(start) + r".*?" + re.escape(end), re.S)
+    if not pattern.search(text):
+        raise SystemExit(f"docs/SUITE.md has no {start} ... {end} markers")
+    return pattern.sub(lambda _: f"{start}\n{body.strip()}\n{end}", text)
+
+
+def targets(summary: dict) -> str:
+    rows = ["| problem | adaptive march: worst seed ≤ 1e-3 | median ≤ 1e-4 | effectivity in [1/3, 3] (counted) "
+            "| verdicts: false ok / false alarm (all schemes) |", "|---|---|---|---|---|"]
+    all_eff, counted = [], 0
+    for p in summary["problems"]:
+        adaptive = [r for r in p["rows"] if r["scheme"] == "time-marching, adaptive windows"]
+        eff = [(e, t) for r in p["rows"] for e, t in zip(r["effectivity"], r["relative_max"])
+               if e is not None and t is not None and t > 1e-5]
+        inside = sum(1 / 3 <= e <= 3 for e, _ in eff)
+        all_eff += [e for e, _ in eff]
+        counted += len(eff)
+        false_ok = sum(r["false_ok"] for r in p["rows"])
+        false_alarm = sum(r["false_alarm"] for r in p["rows"])
+        if adaptive:
+            r = adaptive[0]
+            worst = "yes" if r["worst"] is not None and r["worst"] <= 1e-3 else f"no ({r['worst']:.2g})"
+            median = "yes" if r["median"] is not None and r["median"] <= 1e-4 else f"no ({r['median']:.2g})"
+        else:
+            worst = median = "not run"
+        rows.append(f"| {p['experiment']} | {worst} | {median} | {inside} of {len(eff)} | {false_ok} / {false_alarm} |")
+    if all_eff:
+        rows.append("")
+        rows.append(f"Effectivity over the {counted} trainings whose true error exceeds 1e-5 of the range: "
+                    f"{min(all_eff):.3g} – {max(all_eff):.3g}.")
+    return "\n".join(rows)
+
+
+def timing(suite_dir: Path, docs: Path) -> str:
+    record = suite_dir.parent / f"{suite_dir.name}.timing.json"
+    if not record.is_file():
+        return "(no timing record beside the suite directory)"
+    data = json.loads(record.read_text())
+    shutil.copyfile(record, docs / "runs" / "suite" / "timing.json")
+    lines = [f"`{c['command']}`: {c['seconds'] / 60:.1f} min (exit {c['status']})" for c in data["commands"]]
+    return "\n\n".join(lines) + f"\n\n({data.get('cpu_count')} cores; [runs/suite/timing.json](runs/suite/timing.json))"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("suite", type=Path, help="the suite directory (holds suite.json)")
+    ap.add_argument("--docs", type=Path, default=Path("docs"))
+    args = ap.parse_args()
+    summary = json.loads((args.suite / "suite.json").read_text())
+    dest = args.docs / "runs" / "suite"
+    for run in sorted(p.parent for p in args.suite.glob("*/*/results.json")):
+        out = dest / run.parent.name / run.name
+        out.mkdir(parents=True, exist_ok=True)
+        for name in KEEP:
+            if (run / name).is_file():
+                shutil.copyfile(run / name, out / name)
+        fig = run / "figures" / "overview.png"
+        if fig.is_file():
+            figs = args.docs / "figures" / "suite" / run.parent.name
+            figs.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(fig, figs / f"overview-{run.name}.png")
+    shutil.copyfile(args.suite / "suite.json", dest / "suite.json")
+    page = args.docs / "SUITE.md"
+    text = page.read_text(encoding="utf-8")
+    text = replace_generated(text, "suite", suite_markdown(summary))
+    text = replace_generated(text, "targets", targets(summary))
+    text = replace_generated(text, "timing", timing(args.suite, args.docs))
+    page.write_text(text, encoding="utf-8")
+    print(f"wrote {page} and {dest}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,326 @@
+"""The commands of ``atlasnn``: one function per subcommand (``cmd_NAME``) and their shared helpers.
+
+Imports of the heavy parts (JAX, the trainer, Matplotlib) happen inside the commands, so that
+``atlasnn --help`` and argument errors stay quick.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import sys
+import time
+from pathlib import Path
+
+from atlasnn.errors import AtlasError
+
+def _seeds(args) -> tuple[int, ...] | None:
+    if args.seeds is None:
+        return None
+    if args.seeds < 1:
+        raise AtlasError(f"--seeds must be >= 1, got {args.seeds}")
+    return tuple(range(args.seeds))
+
+
+def _jobs(args) -> int:
+    if args.jobs < 1:
+        raise AtlasError(f"--jobs must be >= 1, got {args.jobs}")
+    return args.jobs
+
+
+def _print_summary(results, out: Path, start: float) -> int:
+    from atlasnn.report import summary_lines
+
+    for line in summary_lines(results, run_dir=out):
+        print(line)
+    print(f"done in {time.perf_counter() - start:.1f} s; see {out}/tables.md and {out}/figures/")
+    return 0
+
+
+def _seed_batch(args) -> int | str | None:
+    if args.seed_batch is None:
+        return None
+    text = str(args.seed_batch).strip().lower()
+    if text == "auto":
+        return "auto"
+    if not text.isdigit() or int(text) < 1:
+        raise AtlasError(f"--seed-batch must be a whole number >= 1 or auto, got {args.seed_batch!r}")
+    return int(text)
+
+
+def _default_out(cfg, args) -> str:
+    """runs/NAME[-PROFILE][-quick]; the profile is named when one was chosen."""
+    profile = f"-{cfg.profile}" if args.profile is not None else ""
+    return f"runs/{cfg.name}{profile}{'-quick' if args.quick else ''}"
+
+
+def _run_config(cfg, args, config_text: str, default_out: str, config_source: str | None = None) -> int:
+    from atlasnn.experiments import run_experiment
+
+    seeds, jobs, seed_batch = _seeds(args), _jobs(args), _seed_batch(args)
+    out = Path(args.out or default_out)
+    args.run_dir = out
+    start = time.perf_counter()
+    results = run_experiment(
+        cfg, out, seeds=seeds, jobs=jobs, progress=not args.no_progress,
+        overwrite=args.overwrite, config_text=config_text, quick=args.quick, config_source=config_source,
+        seed_batch=seed_batch, scheduler=args.scheduler,
+    )
+    return _print_summary(results, out, start)
+
+
+def _resume(args, check) -> int:
+    """``--resume DIR``: the config, seeds and quick flag come from DIR; options given again must
+    agree with them. ``check(cfg, meta, out)`` compares the command's NAME or CONFIG."""
+    from atlasnn.experiments import load_run_config, run_experiment
+
+    out = Path(args.resume)
+    args.run_dir = out
+    jobs = _jobs(args)
+    if args.overwrite:
+        raise AtlasError("--resume and --overwrite cannot be combined: --resume continues the run in DIR, "
+                         "--overwrite starts it again")
+    if args.out is not None and Path(args.out).resolve() != out.resolve():
+        raise AtlasError(f"--out {args.out} differs from --resume {args.resume}; the run continues in its own directory")
+    cfg, meta = load_run_config(out)
+    seeds = tuple(meta["seeds"])
+    if args.seeds is not None and tuple(range(args.seeds)) != seeds:
+        raise AtlasError(f"--seeds {args.seeds} differs from the run's seeds {list(seeds)} (recorded in {out}/meta.json)")
+    if args.quick and not meta.get("quick"):
+        raise AtlasError(f"--quick given, but the run in {out} was started without --quick")
+    if args.profile is not None and args.profile != meta.get("profile", cfg.profile):
+        raise AtlasError(f"--profile {args.profile} differs from the run's profile {meta.get('profile', cfg.profile)!r} "
+                         f"(recorded in {out}/meta.json)")
+    check(cfg, meta, out)
+    start = time.perf_counter()
+    results = run_experiment(
+        cfg, out, seeds=seeds, jobs=jobs, progress=not args.no_progress, quick=bool(meta.get("quick")),
+        resume=True, scheduler=args.scheduler,
+    )
+    return _print_summary(results, out, start)
+
+
+def cmd_systems(args) -> int:
+    from atlasnn.systems import BUILTIN_SYSTEMS
+
+    for name, entry in BUILTIN_SYSTEMS.items():
+        print(f"{name:22s} {entry.dims}  {entry.formula}   (default z0: {entry.default_z0})")
+    print("Your own system: HamiltonianSystem(H, d) in Python, or system.hamiltonian = \"...\" in a config.")
+    return 0
+
+
+def cmd_experiments(args) -> int:
+    from atlasnn.experiments.config import builtin_config_path, builtin_experiments, load_config
+
+    for name in builtin_experiments():
+        cfg = load_config(builtin_config_path(name))
+        print(f"{name:24s} {cfg.description}")
+    return 0
+
+
+def cmd_reproduce(args) -> int:
+    from atlasnn.experiments.config import builtin_config_path, load_config
+
+    if args.resume is not None:
+        def check(cfg, meta, out):
+            if args.name is not None and args.name != meta.get("experiment"):
+                raise AtlasError(f"--resume {out} holds experiment {meta.get('experiment')!r}, not {args.name!r}")
+
+        return _resume(args, check)
+    if args.name is None:
+        raise AtlasError("reproduce needs the NAME of an experiment (see `atlasnn experiments`), or --resume DIR")
+    path = builtin_config_path(args.name)
+    cfg = load_config(path, quick=args.quick, profile=args.profile)
+    return _run_config(cfg, args, path.read_text(encoding="utf-8"), _default_out(cfg, args), f"{args.name}.toml")
+
+
+def cmd_run(args) -> int:
+    from atlasnn.experiments.config import load_config
+
+    if args.resume is not None:
+        def check(cfg, meta, out):
+            if args.config is None:
+                return
+            given, kept = Path(args.config), Path(out) / "config.toml"
+            try:
+                same = given.read_bytes() == kept.read_bytes()
+            except OSError:
+                same = False
+            if not same:
+                raise AtlasError(f"{args.config} is not the config the run in {out} was started with "
+                                 f"({kept}); omit CONFIG to resume with the run's own copy")
+
+        return _resume(args, check)
+    if args.config is None:
+        raise AtlasError("run needs a CONFIG.toml, or --resume DIR")
+    cfg = load_config(args.config, quick=args.quick, profile=args.profile)
+    return _run_config(cfg, args, Path(args.config).read_text(encoding="utf-8"), _default_out(cfg, args),
+                       str(args.config))
+
+
+def _sweep_config(name: str) -> Path:
+    """A sweep's CONFIG: a TOML file, or the name of a built-in experiment."""
+    from atlasnn.experiments.config import builtin_config_path, builtin_experiments
+
+    path = Path(name)
+    if path.is_file() or name not in builtin_experiments():
+        return path
+    return builtin_config_path(name)
+
+
+def cmd_sweep(args) -> int:
+    from atlasnn.experiments import SweepInterrupted, resume_sweep, run_sweep
+
+    seeds, jobs = _seeds(args), _jobs(args)
+    seed_batch = None if args.seed_batch is None else _seed_batch(args)
+    common = dict(jobs=jobs, scheduler=args.scheduler, progress=not args.no_progress)
+    start = time.perf_counter()
+    try:
+        if args.resume is not None:
+            if args.overwrite:
+                raise AtlasError("--resume and --overwrite cannot be combined")
+            if args.out is not None and Path(args.out).resolve() != Path(args.resume).resolve():
+                raise AtlasError(f"--out {args.out} differs from --resume {args.resume}")
+            out, _ = resume_sweep(args.resume, config=None if args.config is None else _sweep_config(args.config),
+                                  sets=args.sets, seeds=seeds, quick=args.quick, metric=args.metric,
+                                  seed_batch=seed_batch, **common)
+        else:
+            if args.config is None:
+                raise AtlasError("sweep needs a CONFIG.toml (or a built-in experiment name), or --resume DIR")
+            out, _ = run_sweep(_sweep_config(args.config), args.sets, seeds=seeds, out=args.out, quick=args.quick,
+                               metric=args.metric or "l2_discrete", overwrite=args.overwrite,
+                               seed_batch=seed_batch or "auto", profile=args.profile, **common)
+    except SweepInterrupted as exc:
+        parts = ["atlasnn", "sweep", "--resume", str(exc.sweep_dir)]
+        if args.jobs != 1:
+            parts += ["--jobs", str(args.jobs)]
+        if args.scheduler:
+            parts += ["--scheduler", args.scheduler]
+        print(f"atlasnn: interrupted: {exc.complete} of {exc.total} sweep points complete; resume with: "
+              f"{' '.join(shlex.quote(p) for p in parts)}", file=sys.stderr)
+        return 130
+    print((out / "summary.md").read_text(encoding="utf-8").rstrip())
+    print(f"sweep done in {time.perf_counter() - start:.1f} s; see {out}/summary.md, summary.csv and sweep.png")
+    return 0
+
+
+def cmd_suite(args) -> int:
+    from atlasnn.experiments import run_suite
+
+    seeds = _seeds(args)
+    out = run_suite(args.name, args.out, seeds=seeds, jobs=_jobs(args), quick=args.quick, only=args.only or None,
+                    progress=not args.no_progress)
+    print((out / "suite.md").read_text(encoding="utf-8"))
+    return 0
+
+
+def _builtin_names() -> list[str]:
+    """The built-in experiments, from the configs shipped with the package (no heavy import)."""
+    from importlib import resources
+
+    folder = resources.files("atlasnn").joinpath("experiments", "configs")
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def cmd_report(args) -> int:
+    from atlasnn.report import load_results, summary_lines, write_report
+
+    paths = write_report(Path(args.dir))
+    for line in summary_lines(load_results(Path(args.dir)), run_dir=Path(args.dir)):
+        print(line)
+    print(f"wrote {len(paths)} files in {args.dir}")
+    return 0
+
+
+def _integrate_problem(args):
+    """(system, z0, t0, T, steps) from --system/--T/--steps, or from a config file (its system,
+    z0 and evaluation interval; --T and --steps still override)."""
+    from atlasnn.experiments.config import load_config, parse_end_time
+    from atlasnn.systems import builtin_system
+
+    config = args.config_pos or args.config
+    if args.config_pos and args.config and args.config_pos != args.config:
+        raise AtlasError(f"two configs given ({args.config_pos} and --config {args.config}); give one")
+    if config is None:
+        system = builtin_system(args.system or "nonlinear_oscillator")
+        T = parse_end_time("--T", args.T or "4*pi")
+        return system, system.initial_state(), 0.0, T, args.steps or 199
+    if args.system is not None:
+        raise AtlasError(f"--system {args.system} and a config ({config}) both name a system; give one")
+    cfg = load_config(config)
+    stage = cfg.eval_stage
+    system = cfg.system.build()
+    z0 = system.initial_state(cfg.system.z0)
+    T = stage.T if args.T is None else parse_end_time("--T", args.T)
+    if T <= stage.t0:
+        raise AtlasError(f"--T {args.T}: must be greater than the config's t0 = {stage.t0:g}")
+    steps = args.steps or cfg.evaluation.se_steps or stage.train.n_points - 1
+    return system, z0, stage.t0, T, steps
+
+
+def cmd_integrate(args) -> int:
+    import numpy as np
+
+    from atlasnn.evaluation import INTEGRATORS, REFERENCE_DESCRIPTION, energy_drift, error_table, integrate, reference_solution
+
+    if args.steps is not None and args.steps < 1:
+        raise AtlasError(f"--steps must be >= 1, got {args.steps}")
+    system, z0, t0, T, steps = _integrate_problem(args)
+    print(f"{system.name}: z0 = {z0.tolist()}, [{t0:g}, {T:.4f}], {steps} steps; reference: {REFERENCE_DESCRIPTION}")
+    E0 = float(system.energy64(z0))
+    if not system.separable:
+        print(f"skipping {', '.join(INTEGRATORS)}: they need a separable H = T(p) + V(q) and "
+              f"{system.name!r} is not declared separable")
+        t = np.linspace(t0, T, steps + 1)
+        ref = reference_solution(system, z0, t)
+        drift = energy_drift(system.energy64(ref), E0)
+        state = ", ".join(f"{n} = {v:.6g}" for n, v in zip(system.state_names, ref[-1]))
+        print(f"reference: energy drift {drift:.3e} on {steps + 1} points; at t = {T:.4f}: {state}")
+        return 0
+    print(f"{'method':18s}" + "".join(f"{'L2(' + n + ')':>12s}" for n in system.state_names) + f"{'max|err|':>12s}{'energy drift':>14s}")
+    unstable, refs = [], {}
+    for method in INTEGRATORS:
+        with np.errstate(all="ignore"):
+            t, z = integrate(method, system, z0, t0, T, steps)
+            key = t.tobytes()  # every method has the same grid: solve the reference once
+            ref = refs[key] = refs[key] if key in refs else reference_solution(system, z0, t)
+            tab = error_table(t, z, ref, system.state_names)
+            drift = energy_drift(system.energy64(z), E0)
+        if not np.all(np.isfinite(z)):
+            unstable.append(method)
+        cells = "".join(f"{tab['components'][n]['l2_discrete']:12.3e}" for n in system.state_names)
+        print(f"{method:18s}{cells}{tab['whole']['max_abs']:12.3e}{drift:14.3e}")
+    print("L2 = sqrt(sum_i err_i^2) on each method's own grid (the release's tabulated form)")
+    if unstable:
+        print(f"nan: {', '.join(unstable)} blew up (step {(T - t0) / steps:.3g} is too large for it); raise --steps")
+    return 0
+
+
+def cmd_init(args) -> int:
+    from atlasnn.experiments.config import write_template
+
+    z0 = None
+    if args.z0 is not None:
+        try:
+            z0 = [float(x) for x in args.z0]
+        except ValueError:
+            raise AtlasError(f"--z0 {' '.join(args.z0)}: expected numbers") from None
+    split = lambda names: [n for part in names or () for n in part.split(",") if n]  # noqa: E731  "q1,q2" or q1 q2
+    write_template(args.path, force=args.force, transfer=args.transfer, system=args.system,
+                   hamiltonian=args.hamiltonian, coordinates=split(args.coordinates), momenta=split(args.momenta), z0=z0)
+    kind = "transfer (source -> target)" if args.transfer else "single interval"
+    print(f"wrote {args.path} ({kind}); every key is commented there, all of them: `atlasnn config`")
+    print(f"  smoke test (a few hundred epochs): atlasnn run {shlex.quote(args.path)} --quick")
+    print(f"  the full budget:                   atlasnn run {shlex.quote(args.path)}")
+    return 0
+
+
+def cmd_config(args) -> int:
+    from atlasnn.experiments.config import reference_markdown, reference_text
+
+    try:
+        sys.stdout.write(reference_markdown() if args.markdown else reference_text())
+        sys.stdout.flush()
+    except BrokenPipeError:  # `atlasnn config | head`: the reader left; not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return 0

@@ -1,0 +1,124 @@
+"""The argument parser of ``atlasnn``: every subcommand, its options and its help."""
+
+from __future__ import annotations
+
+import argparse
+
+from atlasnn.cli._commands import (
+    _builtin_names,
+    cmd_config,
+    cmd_experiments,
+    cmd_init,
+    cmd_integrate,
+    cmd_report,
+    cmd_reproduce,
+    cmd_run,
+    cmd_suite,
+    cmd_sweep,
+    cmd_systems,
+)
+from atlasnn.version import __version__
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="atlasnn", description="ATLAS-NN: learnable time-scaled Hamiltonian neural networks")
+    p.add_argument("--version", action="version", version=f"atlasnn {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+
+    s = sub.add_parser("systems", help="list the built-in Hamiltonian systems")
+    s.set_defaults(func=cmd_systems)
+    s = sub.add_parser("experiments", help="list the paper's experiments")
+    s.set_defaults(func=cmd_experiments)
+
+    def add_run_options(s):
+        s.add_argument("--quick", action="store_true", help="the config's quick variant (far fewer epochs)")
+        s.add_argument("--seeds", type=int, default=None, metavar="K", help="repeat every training with seeds 0..K-1")
+        s.add_argument("--jobs", type=int, default=1, metavar="J", help="independent trainings in J processes")
+        s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="run the trainings on the Dask cluster of this scheduler (e.g. tcp://host:8786; "
+                            "default $ATLASNN_SCHEDULER; needs atlasnn[dask] and a file system shared with "
+                            "the workers; see docs/SCALE.md)")
+        s.add_argument("--seed-batch", default=None, metavar="N",
+                       help="seeds of one model trained together as one compiled program: a number, or auto "
+                            "(batch where it measures faster; default: the config's execution.seed_batch, auto)")
+        s.add_argument("--profile", default=None, metavar="NAME",
+                       help="a named variant of the config, e.g. release (the authors' release's settings; "
+                            "default: the file as written, the paper's for the built-in experiments)")
+        s.add_argument("--out", default=None, metavar="DIR", help="run directory (default runs/NAME[-quick])")
+        s.add_argument("--overwrite", action="store_true", help="reuse a non-empty run directory")
+        s.add_argument("--resume", default=None, metavar="DIR",
+                       help="continue an interrupted run in DIR (its config, seeds and --quick are read from DIR)")
+        s.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+    s = sub.add_parser("reproduce", help="run one of the built-in experiments (the paper's, the long-time ones, "
+                                         "the hard-problem suite's)")
+    s.add_argument("name", nargs="?", help="one of: " + ", ".join(_builtin_names()))
+    add_run_options(s)
+    s.set_defaults(func=cmd_reproduce)
+
+    s = sub.add_parser("run", help="run an experiment from your own TOML config")
+    s.add_argument("config", nargs="?", help="path to a TOML experiment file")
+    add_run_options(s)
+    s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("sweep", help="run a config at every point of a grid of settings, with one summary")
+    s.add_argument("config", nargs="?", help="a TOML experiment file or a built-in experiment name")
+    s.add_argument("--set", action="append", default=[], dest="sets", metavar="KEY=V1[,V2...]",
+                   help="a swept setting: a dotted config key and its values, read as TOML (repeatable)")
+    s.add_argument("--seeds", type=int, default=None, metavar="K", help="every point with seeds 0..K-1")
+    s.add_argument("--jobs", type=int, default=1, metavar="J", help="independent trainings in J processes")
+    s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the trainings on this Dask scheduler's cluster (default $ATLASNN_SCHEDULER)")
+    s.add_argument("--seed-batch", default=None, metavar="N", help="seeds per compiled program: a number or auto")
+    s.add_argument("--quick", action="store_true", help="the config's quick variant")
+    s.add_argument("--profile", default=None, metavar="NAME", help="a named variant of the config (e.g. release)")
+    s.add_argument("--metric", default=None, help="the summary's metric (default l2_discrete)")
+    s.add_argument("--out", default=None, metavar="DIR", help="sweep directory (default runs/sweep-NAME[-quick])")
+    s.add_argument("--overwrite", action="store_true", help="reuse a non-empty sweep directory")
+    s.add_argument("--resume", default=None, metavar="DIR", help="continue the sweep in DIR")
+    s.add_argument("--no-progress", action="store_true", help="no progress bars")
+    s.set_defaults(func=cmd_sweep)
+
+    s = sub.add_parser("suite", help="run every built-in experiment of a suite (default: hard, the hard "
+                                     "Hamiltonian problems) in each of its profiles, with one summary")
+    s.add_argument("name", nargs="?", default="hard", help="the suite (default hard)")
+    s.add_argument("--seeds", type=int, default=None, metavar="K", help="seeds 0..K-1 (default: each config's)")
+    s.add_argument("--jobs", type=int, default=1, metavar="J", help="independent trainings in J processes")
+    s.add_argument("--only", action="append", default=[], metavar="EXPERIMENT", help="run only these members")
+    s.add_argument("--quick", action="store_true", help="the configs' quick variants")
+    s.add_argument("--out", default=None, metavar="DIR", help="suite directory (default runs/suite-NAME[-quick])")
+    s.add_argument("--no-progress", action="store_true", help="no progress bars")
+    s.set_defaults(func=cmd_suite)
+
+    s = sub.add_parser("report", help="re-render tables and figures of a finished run")
+    s.add_argument("dir", help="a run directory written by reproduce or run")
+    s.set_defaults(func=cmd_report)
+
+    s = sub.add_parser("integrate", help="reference solution vs symplectic integrators (a built-in system or "
+                                         "the system of a config)")
+    s.add_argument("config_pos", nargs="?", metavar="CONFIG", help="a TOML experiment file: its system, z0 and "
+                   "interval (the target's for a transfer experiment)")
+    s.add_argument("--config", default=None, metavar="FILE", help="the same as CONFIG")
+    s.add_argument("--system", default=None, help="a built-in system (default nonlinear_oscillator)")
+    s.add_argument("--T", default=None, help="end time: a number (6.0, 100) or a multiple of pi (20*pi); "
+                   "default 4*pi, or the config's T")
+    s.add_argument("--steps", type=int, default=None, help="integrator steps (default 199, or the config's K - 1)")
+    s.set_defaults(func=cmd_integrate)
+
+    s = sub.add_parser("init", help="write a commented experiment template for your own system")
+    s.add_argument("path", metavar="NAME.toml", help="the file to write (refused if it exists, unless --force)")
+    s.add_argument("--transfer", action="store_true", help="a transfer experiment (source -> target), "
+                   "not a single interval")
+    s.add_argument("--system", default=None, metavar="BUILTIN", help="a built-in system (see `atlasnn systems`)")
+    s.add_argument("--hamiltonian", default=None, metavar="EXPR",
+                   help="your own H, e.g. \"p**2/2 - cos(q)\" (the default: that pendulum)")
+    s.add_argument("--coordinates", nargs="+", default=None, metavar="NAME", help="names of q (with --hamiltonian)")
+    s.add_argument("--momenta", nargs="+", default=None, metavar="NAME", help="names of p (with --hamiltonian)")
+    s.add_argument("--z0", nargs="+", default=None, metavar="X", help="initial state (q..., p...); "
+                   "default: the built-in's, or q = 1, p = 0")
+    s.add_argument("--force", action="store_true", help="overwrite an existing file")
+    s.set_defaults(func=cmd_init)
+
+    s = sub.add_parser("config", help="every key of an experiment file: type, default, limits, meaning")
+    s.add_argument("--markdown", action="store_true", help="as Markdown (docs/CONFIG.md is this output)")
+    s.set_defaults(func=cmd_config)
+    return p
