@@ -98,3 +98,17 @@ def machine_info() -> dict:
         info["lscpu"] = None
     info["versions"] = {d: _version(d) for d in ("atlasnn", "jax", "jaxlib", "equinox", "optax", "numpy", "torch")}
     return info
+
+
+def replace_generated(page, name: str, body: str) -> None:
+    """Write ``body`` between the ``<!-- generated:NAME -->`` markers of a docs page."""
+    import re
+    from pathlib import Path
+
+    page = Path(page)
+    text = page.read_text(encoding="utf-8")
+    start, end = f"<!-- generated:{name} -->", f"<!-- /generated:{name} -->"
+    pattern = re.compile(re.escape(start) + r".*?" + re.escape(end), re.S)
+    if not pattern.search(text):
+        raise SystemExit(f"{page} has no {start} ... {end} markers")
+    page.write_text(pattern.sub(lambda _: f"{start}\n{body.strip()}\n{end}", text), encoding="utf-8")

@@ -23,7 +23,6 @@ from hypothesis import strategies as st
 
 from atlasnn.cli import main
 from atlasnn.errors import AtlasError
-from atlasnn.experiments import _runner as runner
 from atlasnn.experiments import _task as training
 from atlasnn.experiments.config import parse_config
 from atlasnn.nn import make_model

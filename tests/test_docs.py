@@ -164,8 +164,11 @@ def _capped(cfg):
         def cap(tc):
             return None if tc is None else tc.replace(epochs=min(tc.epochs, EPOCH_CAP), chunk=min(tc.chunk, EPOCH_CAP))
 
-        changes["march"] = dataclasses.replace(cfg.march, scheme=scheme.replace(train=cap(scheme.train),
-                                                                                first=cap(scheme.first)))
+        polish = scheme.polish if scheme.polish is None else scheme.polish.replace(steps=min(scheme.polish.steps, 10))
+        # adaptive windows: a loose tolerance and no retraining, so that a capped window is not redone
+        changes["march"] = dataclasses.replace(cfg.march, scheme=scheme.replace(
+            train=cap(scheme.train), first=cap(scheme.first), polish=polish, rtol=max(scheme.rtol, 1e-2),
+            max_rejects=0))
     # the classical methods' timings are measurements, not what a docs block checks
     changes["evaluation"] = dataclasses.replace(cfg.evaluation, work_precision=False)
     return dataclasses.replace(cfg, **changes)

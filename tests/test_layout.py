@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1] / "src" / "atlasnn"
 
 #: lowest first; a package may import packages of earlier layers only
 LAYERS = [
-    {"atlasnn.version", "atlasnn.errors", "atlasnn.precision"},
+    {"atlasnn.version", "atlasnn.errors", "atlasnn.precision", "atlasnn.compile_cache"},
     {"atlasnn.fileio", "atlasnn.limits"},
     {"atlasnn.systems", "atlasnn.nn"},
     {"atlasnn.solutions"},

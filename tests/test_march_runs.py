@@ -3,14 +3,12 @@ checkpoints, verdicts, work–precision, report, and an interrupt during a march
 
 from __future__ import annotations
 
-import json
 import tomllib
 
 import numpy as np
 import pytest
 
 from atlasnn.checkpoint import load_piecewise
-from atlasnn.experiments import _task as training
 from atlasnn.experiments.config import parse_config
 from atlasnn.experiments import RunInterrupted, resume_experiment, run_experiment
 from atlasnn.report import write_report

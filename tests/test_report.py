@@ -5,9 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import json
-import math
 
-import numpy as np
 import pytest
 
 from atlasnn.errors import ConfigError

@@ -15,9 +15,12 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from atlasnn.compile_cache import enable_compile_cache
 from atlasnn.errors import AtlasError
 from atlasnn.precision import enable_x64, x64_enabled
 from atlasnn.version import __version__
+
+enable_compile_cache()  # before anything compiles (atlasnn.compile_cache; ATLASNN_CACHE_DIR=off)
 
 # name -> the subpackage that defines it
 _FACE = {

@@ -1,0 +1,51 @@
+"""The persistent compilation cache: where it lives, how it is turned off, that it is written."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from atlasnn.compile_cache import CACHE_ENV, cache_dir
+
+
+@pytest.mark.parametrize("value", ["off", "0", "none", "", "OFF"])
+def test_off_values_turn_the_cache_off(monkeypatch, value):
+    monkeypatch.setenv(CACHE_ENV, value)
+    assert cache_dir() is None
+
+
+def test_given_directory_and_default(monkeypatch, tmp_path):
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "c"))
+    assert cache_dir() == tmp_path / "c"
+    monkeypatch.delenv(CACHE_ENV)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert cache_dir() == tmp_path / "atlasnn" / "jax"
+
+
+_PROGRAM = """
+import atlasnn, jax, jax.numpy as jnp
+print(jax.config.jax_compilation_cache_dir)
+jax.jit(lambda x: jnp.cos(x) * 3.0 - x)(jnp.arange(5.0)).block_until_ready()
+"""
+
+
+def _run(env_value):
+    env = dict(os.environ, **{CACHE_ENV: env_value})
+    return subprocess.run([sys.executable, "-c", _PROGRAM], env=env, capture_output=True, text=True, check=True)
+
+
+def test_a_compiled_program_is_written_to_the_cache(tmp_path):
+    folder = tmp_path / "jax-cache"
+    out = _run(str(folder))
+    assert out.stdout.strip() == str(folder)
+    assert any(folder.iterdir()), "no cache entry written"
+
+
+def test_an_unwritable_directory_is_skipped(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    out = _run(str(blocker / "cache"))  # cannot be created: the run goes on without a cache
+    assert out.stdout.strip() in ("", "None")
