@@ -102,13 +102,14 @@ def machine_info() -> dict:
 
 def replace_generated(page, name: str, body: str) -> None:
     """Write ``body`` between the ``<!-- generated:NAME -->`` markers of a docs page."""
-    import re
     from pathlib import Path
 
+    from atlasnn.errors import AtlasError
+    from atlasnn.report import replace_generated as replace
+
     page = Path(page)
-    text = page.read_text(encoding="utf-8")
-    start, end = f"<!-- generated:{name} -->", f"<!-- /generated:{name} -->"
-    pattern = re.compile(re.escape(start) + r".*?" + re.escape(end), re.S)
-    if not pattern.search(text):
-        raise SystemExit(f"{page} has no {start} ... {end} markers")
-    page.write_text(pattern.sub(lambda _: f"{start}\n{body.strip()}\n{end}", text), encoding="utf-8")
+    try:
+        text = replace(page.read_text(encoding="utf-8"), name, body, str(page))
+    except AtlasError as exc:
+        raise SystemExit(str(exc)) from None
+    page.write_text(text, encoding="utf-8")

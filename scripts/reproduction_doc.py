@@ -27,16 +27,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import shutil
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from atlasnn.report import claims_markdown, experiment_claims  # noqa: E402
-from atlasnn.report import load_paper  # noqa: E402
-from atlasnn.report import format_number  # noqa: E402
+from atlasnn.errors import AtlasError  # noqa: E402
+from atlasnn.report import claims_markdown, experiment_claims, format_number, load_paper  # noqa: E402
+from atlasnn.report import replace_generated as replace_marked  # noqa: E402
 
 # the overview already shows trajectories, errors and energy; the run directory keeps the full set
 FIGURES = ["overview", "loss", "target_loss_comparison", "loss_source", "gamma", "seed_spread_l2_x", "work_precision"]
@@ -133,8 +132,7 @@ def long_time(runs: dict[str, dict[str, dict]]) -> str:
     """Per long-time experiment (one with a work–precision record): each network column's L2 of
     the first state and max error over seeds (median and worst), worst energy drift, training
     seconds per seed, and the cheapest classical setting as accurate as its *worst* seed."""
-    from atlasnn.evaluation import SYMPLECTIC, WorkPoint
-    from atlasnn.evaluation import workprecision
+    from atlasnn.evaluation import SYMPLECTIC, WorkPoint, workprecision
 
     out = []
     for name, by_profile in runs.items():
@@ -189,11 +187,10 @@ def timing(run_dirs: list[Path], docs: Path) -> str:
 
 
 def replace_generated(text: str, name: str, body: str) -> str:
-    start, end = f"<!-- generated:{name} -->", f"<!-- /generated:{name} -->"
-    pattern = re.compile(re.escape(start) + r".*?" + re.escape(end), re.S)
-    if not pattern.search(text):
-        raise SystemExit(f"docs/REPRODUCTION.md has no {start} ... {end} markers")
-    return pattern.sub(lambda _: f"{start}\n{body.strip()}\n{end}", text)
+    try:
+        return replace_marked(text, name, body, "docs/REPRODUCTION.md")
+    except AtlasError as exc:
+        raise SystemExit(str(exc)) from None
 
 
 def main() -> None:

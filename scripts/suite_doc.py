@@ -14,21 +14,21 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import shutil
 from pathlib import Path
 
+from atlasnn.errors import AtlasError
+from atlasnn.report import replace_generated as replace_marked
 from atlasnn.report import suite_markdown
 
 KEEP = ("results.json", "summary.json", "tables.csv", "meta.json", "config.toml")
 
 
 def replace_generated(text: str, name: str, body: str) -> str:
-    start, end = f"<!-- generated:{name} -->", f"<!-- /generated:{name} -->"
-    pattern = re.compile(re.escape(start) + r".*?" + re.escape(end), re.S)
-    if not pattern.search(text):
-        raise SystemExit(f"docs/SUITE.md has no {start} ... {end} markers")
-    return pattern.sub(lambda _: f"{start}\n{body.strip()}\n{end}", text)
+    try:
+        return replace_marked(text, name, body, "docs/SUITE.md")
+    except AtlasError as exc:
+        raise SystemExit(str(exc)) from None
 
 
 def targets(summary: dict) -> str:

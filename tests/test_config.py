@@ -25,8 +25,13 @@ def raw(name):
 LONG = ["henon-heiles-long", "oscillator-long"]
 
 
-def test_the_four_paper_experiments_and_the_two_long_ones_ship():
-    assert builtin_experiments() == sorted(PAPER + LONG)
+SUITE = ["figure-eight", "fpu-stiff", "henon-heiles-chaotic", "kepler-e06", "kepler-e09", "pendulum-separatrix",
+         "toda-3"]
+
+
+def test_the_four_paper_experiments_the_two_long_ones_and_the_hard_suite_ship():
+    assert builtin_experiments() == sorted(PAPER + LONG + SUITE)
+    assert [n for n in builtin_experiments() if load_config(builtin_config_path(n)).suite == "hard"] == SUITE
 
 
 @pytest.mark.parametrize("name, paper", [("oscillator-long", "oscillator-transfer"),

@@ -306,7 +306,7 @@ def test_cli_refuses_bad_config_before_writing(case, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("flags, expected", [
-    (["--seeds", "0"], "--seeds must be >= 1, got 0"),
+    (["--seeds", "0"], "--seeds must be between 1 and 10000, got 0"),
     (["--jobs", "0"], "--jobs must be >= 1, got 0"),
     (["--resume", "nowhere", "--overwrite"], "--resume and --overwrite cannot be combined"),
 ])

@@ -131,3 +131,30 @@ def test_bad_options_are_refused_in_one_line_and_nothing_is_written(tmp_path, ca
     rc, path, out = init(tmp_path, capsys, "x.toml", *args)
     assert rc == 2 and out.err.count("\n") == 1 and message in out.err, out.err
     assert not path.exists()
+
+
+def test_params_set_a_builtins_parameters(tmp_path, capsys):
+    rc, path, _ = init(tmp_path, capsys, "osc.toml", "--system", "nonlinear_oscillator", "--params", "lam=0.5")
+    assert rc == 0
+    assert load_config(path).system.params == {"lam": 0.5}
+
+
+def test_params_go_into_an_own_hamiltonian(tmp_path, capsys):
+    rc, path, _ = init(tmp_path, capsys, "spring.toml", "--hamiltonian", "p**2/2 + k*q**2/2",
+                       "--coordinates", "q", "--momenta", "p", "--params", "k=4")
+    assert rc == 0
+    cfg = load_config(path)
+    assert cfg.system.params == {"k": 4.0}
+    assert cfg.system.build().energy64([1.0, 0.0]) == pytest.approx(2.0)
+
+
+@pytest.mark.parametrize("given, message", [
+    (["k=0.5"], "--params k: not a parameter of nonlinear_oscillator (its parameters: ['lam'])"),
+    (["lam"], "--params lam: expected NAME=VALUE, e.g. lam=0.5"),
+    (["lam=abc"], "--params lam=abc: 'abc' is not a number"),
+    (["lam=inf"], "--params lam=inf: the value must be finite"),
+])
+def test_bad_params_are_one_line_and_write_nothing(tmp_path, capsys, given, message):
+    rc, path, out = init(tmp_path, capsys, "osc.toml", "--system", "nonlinear_oscillator", "--params", *given)
+    assert rc == 2 and out.err.strip() == f"atlasnn: error: {message}"
+    assert not path.exists()

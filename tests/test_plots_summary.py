@@ -91,6 +91,27 @@ def test_overview_has_trajectory_error_and_energy_panels(tmp_path, captured, d):
     assert {"reference", "HNN", "ATLAS-NN (exp)", "SE", "source interval"} <= set(legend)
 
 
+def test_overview_marks_the_window_edges_of_a_marched_series(tmp_path, captured):
+    series = _series(1)
+    t = series[1].t
+    edges = np.array([0.0, 3.0, 7.5, 12.0, float(t[-1])])
+    series[2] = Series("ATLAS-NN (exp) marched", t, series[2].z, series[2].z_ref, series[2].energy, edges=edges)
+    plot_overview(tmp_path / "overview", series, ["x", "p"], float(series[0].energy[0]))
+    err_ax = [ax for ax in captured["fig"].get_axes() if ax.get_yscale() == "log"][0]
+    ticks = [line for line in err_ax.get_lines() if line.get_label() == "window edges"]
+    assert len(ticks) == 1
+    assert list(ticks[0].get_xdata()) == [3.0, 7.5, 12.0]  # the inner edges only
+    legend = [t.get_text() for t in captured["fig"].legends[0].get_texts()]
+    assert "window edges" in legend
+
+
+def test_series_edges_must_be_one_dimensional():
+    t = np.linspace(0, 1, 5)
+    z = np.zeros((5, 2))
+    with pytest.raises(ConfigError, match="edges must be 1-D"):
+        Series("m", t, z, z, edges=np.zeros((2, 2)))
+
+
 def test_overview_needs_a_model(tmp_path):
     with pytest.raises(ConfigError, match="at least one model"):
         plot_overview(tmp_path / "o", _series(1)[:1], ["x", "p"], 0.5)

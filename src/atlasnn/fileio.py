@@ -23,6 +23,10 @@ one-line message.
 :func:`write_json` and :func:`write_npz` are the run directory's writers (``indent=1``, NumPy
 scalars and arrays converted, NaN and infinities written as the non-standard ``NaN`` and
 ``Infinity`` that Python's ``json`` reads back).
+
+:func:`parse_toml` is the one reader of TOML text: a syntax error, or nesting deeper than
+``MAX_TOML_DEPTH`` (``tomllib`` recurses and would otherwise end in a ``RecursionError``
+traceback), is one ``ConfigError`` line naming the file.
 """
 
 from __future__ import annotations
@@ -35,7 +39,9 @@ from typing import IO, Any, Callable, Mapping
 
 import numpy as np
 
-__all__ = ["write_atomic", "write_bytes", "write_text", "write_json", "write_npz", "json_default",
+from atlasnn.errors import ConfigError
+
+__all__ = ["parse_toml", "MAX_TOML_DEPTH", "write_atomic", "write_bytes", "write_text", "write_json", "write_npz", "json_default",
            "current_umask"]
 
 _NEW_FILE_MODE = 0o666  # what open(path, "w") asks for; the umask takes its bits away
@@ -157,3 +163,60 @@ def write_json(path: str | os.PathLike, data: Any) -> None:
 def write_npz(path: str | os.PathLike, arrays: Mapping[str, np.ndarray]) -> None:
     """``np.savez`` of ``arrays`` (no object arrays: they would need pickle), atomically."""
     write_atomic(path, lambda f: np.savez(f, allow_pickle=False, **arrays))
+
+
+MAX_TOML_DEPTH = 32  # tables and arrays inside one another; the deepest config atlasnn reads has 4
+
+
+def _depth(value: Any) -> int:
+    if isinstance(value, dict):
+        return 1 + max((_depth(v) for v in value.values()), default=0)
+    if isinstance(value, list):
+        return 1 + max((_depth(v) for v in value), default=0)
+    return 0
+
+
+def _bracket_depth(text: str) -> int:
+    """The deepest nesting of [ and { outside strings and comments: a cheap check made before
+    parsing, so that a hostile file never reaches tomllib's recursion."""
+    deepest = depth = 0
+    quote = None
+    i, n = 0, len(text)
+    while i < n:
+        c = text[i]
+        if quote:
+            if c == "\\" and quote == '"':
+                i += 1
+            elif c == quote:
+                quote = None
+        elif c in "\"'":
+            quote = c
+        elif c == "#":
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        elif c in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif c in "]}":
+            depth = max(depth - 1, 0)
+        i += 1
+    return deepest
+
+
+def parse_toml(text: str, source: str = "config") -> dict[str, Any]:
+    """``tomllib.loads`` with one-line errors naming ``source``, and a nesting limit."""
+    import tomllib
+
+    if _bracket_depth(text) > MAX_TOML_DEPTH:
+        raise ConfigError(f"{source}: nested more than {MAX_TOML_DEPTH} levels deep (arrays and inline "
+                          f"tables inside one another); flatten it")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise ConfigError(f"{source}: nested more than {MAX_TOML_DEPTH} levels deep; flatten it") from None
+    if _depth(data) > MAX_TOML_DEPTH:
+        raise ConfigError(f"{source}: nested more than {MAX_TOML_DEPTH} levels deep; flatten it")
+    return data

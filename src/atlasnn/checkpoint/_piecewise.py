@@ -36,7 +36,8 @@ from atlasnn.solutions import PiecewiseSolution, WindowRecord, stack_models, uns
 from atlasnn.nn import make_model
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["KIND_PIECEWISE", "save_piecewise", "load_piecewise"]
+__all__ = ["KIND_PIECEWISE", "save_piecewise", "load_piecewise", "piecewise_payload", "piecewise_from",
+           "write_payload"]
 
 # ------------------------------------------------------- piecewise (time-marching) solutions
 KIND_PIECEWISE = "piecewise"
@@ -65,6 +66,14 @@ def save_piecewise(
     any JSON-able dict.
     """
     p = os.fspath(path)
+    meta, arrays = piecewise_payload(p, solution, train_config, extra, histories)
+    return write_payload(p, meta, arrays)
+
+
+def piecewise_payload(p: str, solution: Any, train_config: Any, extra: Mapping[str, Any] | None,
+                      histories: bool) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The meta and arrays :func:`save_piecewise` writes (before the hash), for writers that add
+    their own (a march's progress)."""
     if not isinstance(solution, PiecewiseSolution):
         raise _fail(p, f"save_piecewise needs a PiecewiseSolution, got {type(solution).__name__}")
     models = list(solution.models)
@@ -88,6 +97,11 @@ def save_piecewise(
         }
     except (TypeError, ValueError) as exc:
         raise _fail(p, f"cannot save: {exc}") from None
+    return meta, arrays
+
+
+def write_payload(p: str, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
+    """Hash ``meta`` and ``arrays`` together, store the meta beside them, write atomically."""
     meta["content_sha256"] = _content_hash(meta, arrays)
     arrays["meta"] = np.frombuffer(_canonical(meta), dtype=np.uint8)
     _write_atomic(p, arrays)
@@ -120,6 +134,15 @@ def load_piecewise(path: str | os.PathLike, system: HamiltonianSystem | None = N
     arrays, meta = _read(p)
     if meta.get("kind") != KIND_PIECEWISE or not isinstance(meta.get("piecewise"), dict):
         raise _fail(p, f"holds no piecewise solution (kind {meta.get('kind')!r}); use load_checkpoint")
+    return piecewise_from(p, arrays, meta, system, expect, owner)
+
+
+def piecewise_from(p: str, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any],
+                   system: HamiltonianSystem | None, expect: Mapping[str, Any] | None = None,
+                   owner: str = "the expected problem") -> PiecewiseSolution:
+    """The piecewise solution held by a file's ``arrays`` and ``meta`` (read and verified)."""
+    if not isinstance(meta.get("piecewise"), dict):
+        raise _fail(p, "holds no piecewise windows")
     pw = meta["piecewise"]
     n = pw.get("n_windows")
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:

@@ -7,6 +7,7 @@ Imports of the heavy parts (JAX, the trainer, Matplotlib) happen inside the comm
 from __future__ import annotations
 
 import os
+import math
 import shlex
 import sys
 import time
@@ -17,8 +18,10 @@ from atlasnn.errors import AtlasError
 def _seeds(args) -> tuple[int, ...] | None:
     if args.seeds is None:
         return None
-    if args.seeds < 1:
-        raise AtlasError(f"--seeds must be >= 1, got {args.seeds}")
+    from atlasnn.experiments.config import MAX_SEEDS
+
+    if not 1 <= args.seeds <= MAX_SEEDS:
+        raise AtlasError(f"--seeds must be between 1 and {MAX_SEEDS}, got {args.seeds}")
     return tuple(range(args.seeds))
 
 
@@ -136,6 +139,7 @@ def cmd_reproduce(args) -> int:
 
 def cmd_run(args) -> int:
     from atlasnn.experiments.config import load_config
+    from atlasnn.fileio import parse_toml
 
     if args.resume is not None:
         def check(cfg, meta, out):
@@ -154,8 +158,11 @@ def cmd_run(args) -> int:
     if args.config is None:
         raise AtlasError("run needs a CONFIG.toml, or --resume DIR")
     cfg = load_config(args.config, quick=args.quick, profile=args.profile)
-    return _run_config(cfg, args, Path(args.config).read_text(encoding="utf-8"), _default_out(cfg, args),
-                       str(args.config))
+    text = Path(args.config).read_text(encoding="utf-8")
+    if args.quick and "quick" not in parse_toml(text, str(args.config)):
+        print(f"{args.config} has no [quick] table; --quick uses the default smoke test: every epoch budget "
+              f"capped at 300, a 200-point evaluation grid, SE-10 for the figures, rtol >= 1e-3 when marching")
+    return _run_config(cfg, args, text, _default_out(cfg, args), str(args.config))
 
 
 def _sweep_config(name: str) -> Path:
@@ -262,10 +269,12 @@ def cmd_integrate(args) -> int:
     import numpy as np
 
     from atlasnn.evaluation import INTEGRATORS, REFERENCE_DESCRIPTION, energy_drift, error_table, integrate, reference_solution
+    from atlasnn.limits import check_integration_memory
 
     if args.steps is not None and args.steps < 1:
         raise AtlasError(f"--steps must be >= 1, got {args.steps}")
     system, z0, t0, T, steps = _integrate_problem(args)
+    check_integration_memory(steps, 2 * system.dim, key="--steps", value=steps)
     print(f"{system.name}: z0 = {z0.tolist()}, [{t0:g}, {T:.4f}], {steps} steps; reference: {REFERENCE_DESCRIPTION}")
     E0 = float(system.energy64(z0))
     if not system.separable:
@@ -296,6 +305,23 @@ def cmd_integrate(args) -> int:
     return 0
 
 
+def _init_params(items: list[str]) -> dict[str, float]:
+    """``["lam=0.5", "k=2"]`` as ``{"lam": 0.5, "k": 2.0}``; a malformed item is one line."""
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        if not sep or not name.strip():
+            raise AtlasError(f"--params {item[:60]}: expected NAME=VALUE, e.g. lam=0.5")
+        try:
+            value = float(text)
+        except ValueError:
+            raise AtlasError(f"--params {item[:60]}: {text[:40]!r} is not a number") from None
+        if not math.isfinite(value):
+            raise AtlasError(f"--params {item[:60]}: the value must be finite")
+        out[name.strip()] = value
+    return out
+
+
 def cmd_init(args) -> int:
     from atlasnn.experiments.config import write_template
 
@@ -307,7 +333,8 @@ def cmd_init(args) -> int:
             raise AtlasError(f"--z0 {' '.join(args.z0)}: expected numbers") from None
     split = lambda names: [n for part in names or () for n in part.split(",") if n]  # noqa: E731  "q1,q2" or q1 q2
     write_template(args.path, force=args.force, transfer=args.transfer, system=args.system,
-                   hamiltonian=args.hamiltonian, coordinates=split(args.coordinates), momenta=split(args.momenta), z0=z0)
+                   hamiltonian=args.hamiltonian, coordinates=split(args.coordinates), momenta=split(args.momenta), z0=z0,
+                   params=_init_params(split(args.params)))
     kind = "transfer (source -> target)" if args.transfer else "single interval"
     print(f"wrote {args.path} ({kind}); every key is commented there, all of them: `atlasnn config`")
     print(f"  smoke test (a few hundred epochs): atlasnn run {shlex.quote(args.path)} --quick")

@@ -29,10 +29,21 @@ import sys
 import threading
 
 from atlasnn.cli._errors import _check_out, _os_error_line, _raise_interrupt, _resume_command, _RunWatch
+
+_MESSAGE_LIMIT = 1000  # characters of an error line; a longer one is cut, with its length
 from atlasnn.errors import AtlasError
 
 
 from atlasnn.cli._parser import build_parser
+
+
+def quiet_interrupts(unraisable) -> None:
+    """``sys.unraisablehook`` for the command line: an interrupt that lands in a finaliser (a
+    ``__del__``, a generator being closed) is the one the command is already stopping for, not an
+    "Exception ignored" traceback; anything else is reported as Python would."""
+    if isinstance(unraisable.exc_value, KeyboardInterrupt):
+        return
+    sys.__unraisablehook__(unraisable)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -43,6 +54,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     # SIGTERM (kill, a batch system's time limit) is handled like Ctrl-C: the training state is
     # saved and the run can be resumed
+    old_unraisable, sys.unraisablehook = sys.unraisablehook, quiet_interrupts
     old_term = None
     if threading.current_thread() is threading.main_thread():
         old = signal.getsignal(signal.SIGTERM)
@@ -55,6 +67,8 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except AtlasError as exc:
         message = " ".join(str(exc).splitlines()) or type(exc).__name__  # one line, always
+        if len(message) > _MESSAGE_LIMIT:  # whatever it quotes, a message stays readable
+            message = f"{message[:_MESSAGE_LIMIT - 40]}... ({len(message)} characters in all)"
         print(f"atlasnn: error: {message}", file=sys.stderr)
         return watch.status()
     except OSError as exc:  # the file system: a path we cannot create, write or read
@@ -73,6 +87,7 @@ def main(argv: list[str] | None = None) -> int:
             print("atlasnn: interrupted", file=sys.stderr)
         return 130
     finally:
+        sys.unraisablehook = old_unraisable
         if old_term is not None:
             signal.signal(signal.SIGTERM, old_term)
 

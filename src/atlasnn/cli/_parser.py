@@ -115,6 +115,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--momenta", nargs="+", default=None, metavar="NAME", help="names of p (with --hamiltonian)")
     s.add_argument("--z0", nargs="+", default=None, metavar="X", help="initial state (q..., p...); "
                    "default: the built-in's, or q = 1, p = 0")
+    s.add_argument("--params", nargs="+", default=None, metavar="NAME=VALUE", help="parameter values, e.g. "
+                   "lam=0.5 (a built-in's parameters, or names used in --hamiltonian)")
     s.add_argument("--force", action="store_true", help="overwrite an existing file")
     s.set_defaults(func=cmd_init)
 

@@ -29,12 +29,15 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import math
 import sys
 import time
 import uuid
 from pathlib import Path
 from typing import Any, Mapping
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.errors import ConfigError
@@ -90,6 +93,26 @@ def _json_round_trip(obj: Any) -> Any:
     return json.loads(json.dumps(obj, default=json_default, allow_nan=True))
 
 
+STATE_SCALE_LIMIT = 1e4  # beyond this the state's size, not the learning rate, is the cause
+
+
+def state_scale(cfg: ExperimentConfig) -> float:
+    """The largest of max |z0| and max |J∇H(z0)|·(T − t0): how far the trial solution must move
+    from z0 (the network's outputs start of order 1)."""
+    try:
+        system = cfg.system.build()
+        z0 = np.asarray(system.initial_state(cfg.system.z0), np.float64)
+        with jax.enable_x64(True):
+            rate = np.asarray(system.vector_field(jnp.asarray(z0)), np.float64)
+    except Exception:  # noqa: BLE001 - advice only; the run already validated its system
+        return 0.0
+    stage = cfg.eval_stage
+    span = stage.T - stage.t0
+    values = np.concatenate([np.abs(z0), np.abs(rate) * span])
+    values = values[np.isfinite(values)]
+    return float(values.max()) if values.size else math.inf
+
+
 def divergence_advice(cfg: ExperimentConfig, record: Mapping | TrainingRecord) -> str | None:
     """One line saying that a training diverged, what was kept, and what to change; None otherwise."""
     r = _as_record(record)
@@ -101,8 +124,15 @@ def divergence_advice(cfg: ExperimentConfig, record: Mapping | TrainingRecord) -
     else:
         kept = "no finite loss was reached; kept the initial parameters"
     lr_txt = f"now {r.lr:g}, e.g. {r.lr / 10:g}" if isinstance(r.lr, (int, float)) else "now ?"
-    line = (f"{r.who()} diverged at epoch {r.diverged_epoch} (non-finite loss); {kept}. "
-            f"Lower {key}.lr ({lr_txt}) and, if it then learns too slowly, raise {key}.epochs (now {r.epochs_budget}).")
+    budget = cfg.march.scheme.train.epochs if (r.role == "march" and cfg.march) else r.epochs_budget
+    where = f"{r.who()} diverged at epoch {r.diverged_epoch} (non-finite loss); {kept}."
+    scale = state_scale(cfg)
+    if scale > STATE_SCALE_LIMIT:
+        return (f"{where} The state is large (max |z0|, |dz/dt|·(T − t0) ≈ {scale:.3g}) against the network's "
+                f"outputs of order 1 in float32: rescale the variables (units in which the state is of order 1); "
+                f"a lower learning rate will not cure this.")
+    line = (f"{where} Lower {key}.lr ({lr_txt}) and, if it then learns too slowly, raise {key}.epochs "
+            f"(now {budget}{' per window' if r.role == 'march' else ''}).")
     if r.role == "source":
         line += " Its target starts from the kept parameters."
     return line

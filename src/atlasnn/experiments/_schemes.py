@@ -32,7 +32,8 @@ __all__ = ["Scheme", "SCHEMES", "table_columns", "baseline_column", "column_labe
 
 def _hook(event: str, task: Any, column: str, state: Any) -> None:
     """A seam for tests: called per seed after every chunk of epochs (``"chunk"``, with the host
-    copy of that seed's TrainState) and when a transfer source is done (``"source_done"``)."""
+    copy of that seed's TrainState), when a transfer source is done (``"source_done"``) and after
+    every finished window of a march (``"window"``, with its MarchProgress)."""
 
 
 def host_state(state) -> TrainState:
@@ -282,12 +283,17 @@ class March(Scheme):
             return None if tc is None else tc.replace(seed=s, progress=run.progress)
 
         schemes = [m.scheme.replace(train=seeded(m.scheme.train, s), first=seeded(m.scheme.first, s)) for s in seeds]
+        paths = [state_path(run.run_dir, task.column, s) for s in seeds]
         if m.scheme.adaptive:  # every seed gets windows of its own: one after the other
-            for seed, model, scheme in zip(seeds, models, schemes):
-                sol = march(model, run.system, st.T, scheme, on_chunk=lambda states: check_interrupt())
+            for seed, path, model, scheme in zip(seeds, paths, models, schemes):
+                saved = run.load_march([path], [seed])
+                sol = march(model, run.system, st.T, scheme, on_chunk=lambda states: check_interrupt(),
+                            resume=None if saved is None else saved[0],
+                            on_progress=lambda p, keep=run.march_saver([path], [seed]): keep([p]))
                 run.finish_march(sol, scheme, st, seed)
             return
-        solutions = march_batch(models, run.system, st.T, schemes, on_chunk=lambda states: check_interrupt())
+        solutions = march_batch(models, run.system, st.T, schemes, on_chunk=lambda states: check_interrupt(),
+                                resume=run.load_march(paths, seeds), on_progress=run.march_saver(paths, seeds))
         for seed, sol, scheme in zip(seeds, solutions, schemes):
             run.finish_march(sol, scheme, st, seed)
 

@@ -24,7 +24,6 @@ import json
 import math
 import os
 import platform
-import tomllib
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -32,7 +31,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.experiments.config import parse_config
-from atlasnn.fileio import write_json, write_npz
+from atlasnn.fileio import parse_toml, write_json, write_npz
 
 TASK_DIR = "tasks"
 STATE_DIR = "state"
@@ -198,7 +197,7 @@ def load_run_config(out: str | Path):
     toml = out / "config.toml"
     try:
         if toml.is_file():
-            data = tomllib.loads(toml.read_text(encoding="utf-8"))
+            data = parse_toml(toml.read_text(encoding="utf-8"), str(toml))
         else:
             data = json.loads((out / "config.json").read_text(encoding="utf-8"))["as_given"]
             quick = False  # the recorded config is the merged one

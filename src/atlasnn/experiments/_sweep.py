@@ -29,6 +29,7 @@ import csv
 import hashlib
 import itertools
 import json
+import math
 import re
 import sys
 import time
@@ -41,6 +42,7 @@ import numpy as np
 
 import tomli_w
 
+from atlasnn.fileio import parse_toml
 from atlasnn.errors import ConfigError
 from atlasnn.evaluation import METRICS as METRIC_REGISTRY
 from atlasnn.evaluation import TrainingRecord
@@ -111,6 +113,9 @@ def parse_set(given: str) -> Axis:
     return Axis(key, tuple(values))
 
 
+MAX_SWEEP_POINTS = 1000  # points of one sweep: each is a run directory with its own trainings
+
+
 def parse_sets(given: list[str]) -> list[Axis]:
     axes = [parse_set(g) for g in given]
     if not axes:
@@ -119,6 +124,11 @@ def parse_sets(given: list[str]) -> list[Axis]:
     for k in keys:
         if keys.count(k) > 1:
             raise ConfigError(f"--set {k} is given twice; give all its values in one --set")
+    count = math.prod(len(a.values) for a in axes)
+    if count > MAX_SWEEP_POINTS:
+        sizes = " x ".join(str(len(a.values)) for a in axes)
+        raise ConfigError(f"the sweep has {count} points ({sizes} values), more than {MAX_SWEEP_POINTS}; "
+                          f"give fewer values per --set")
     return axes
 
 
@@ -209,7 +219,7 @@ class _Sweep:
         write_json(self.out / SWEEP_FILE, self.spec)
 
     def point_config(self, point: dict) -> tuple[ExperimentConfig, str]:
-        data = tomllib.loads((self.out / "config.toml").read_text(encoding="utf-8"))
+        data = parse_toml((self.out / "config.toml").read_text(encoding="utf-8"), str(self.out / "config.toml"))
         data = apply_profile(data, self.spec.get("profile"), self.spec["config_source"])
         pdata = point_data(data, point["set"], self.spec["quick"])
         return parse_config(pdata, quick=self.spec["quick"], source=self.spec["config_source"]), tomli_w.dumps(pdata)
@@ -269,11 +279,9 @@ def run_sweep(config: str | Path, sets: list[str], *, seeds: tuple[int, ...] | N
     config = Path(config)
     try:
         text = config.read_text(encoding="utf-8")
-        data = tomllib.loads(text)
     except OSError as exc:
         raise ConfigError(f"cannot read config file {config}: {one_line(exc)}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{config}: not valid TOML: {one_line(exc)}") from None
+    data = parse_toml(text, str(config))
     if metric not in METRICS:
         raise ConfigError(f"--metric {metric}: choose one of {list(METRICS)}")
     axes = parse_sets(sets)
@@ -382,12 +390,24 @@ def summarise_point(pdir: Path, metric: str) -> dict:
         values = np.array([_value(r, metric, state) for r in runs], dtype=float)
         columns[col] = {"label": results["labels"].get(col, col), "values": values.tolist(),
                         "median": float(np.median(values)), "min": float(np.min(values)),
-                        "max": float(np.max(values))}
+                        "max": float(np.max(values)),
+                        "diverged": sum(r.stop_reason == "diverged" for r in runs),
+                        "failed": sum(r.status == "failed" for r in runs),
+                        "suspect": sum(r.status == "suspect" for r in runs)}
     return {"state": state, "seeds": len(results["seeds"]), "columns": columns}
 
 
 def _number(x: float) -> str:
     return format_number(x)
+
+
+_CSV_STATS = ("median", "min", "max", "diverged", "failed", "suspect")
+
+
+def _marks(stats: dict) -> str:
+    """" (1 diverged; 2 failed)": what a cell's numbers do not show on their own."""
+    parts = [f"{stats[k]} {k}" for k in ("diverged", "failed", "suspect") if stats.get(k)]
+    return f" ({'; '.join(parts)})" if parts else ""
 
 
 def write_summary(out: Path, spec: dict) -> list[dict]:
@@ -405,14 +425,15 @@ def write_summary(out: Path, spec: dict) -> list[dict]:
         cells = [f"[{r['point']}](<{r['dir']}/tables.md>)", *(_value_text(r["set"][k]) for k in keys), str(r["seeds"])]
         for c in cols:
             s = r["columns"].get(c)
-            cells.append("" if s is None else f"{_number(s['median'])} [{_number(s['min'])}–{_number(s['max'])}]")
+            cells.append("" if s is None else f"{_number(s['median'])} [{_number(s['min'])}–{_number(s['max'])}]"
+                         + _marks(s))
         lines.append("| " + " | ".join(cells) + " |")
     (out / "summary.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     with open(out / "summary.csv", "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
-        w.writerow(["point", "dir", *keys, "seeds", *(f"{c}_{s}" for c in cols for s in ("median", "min", "max"))])
+        w.writerow(["point", "dir", *keys, "seeds", *(f"{c}_{s}" for c in cols for s in _CSV_STATS)])
         for r in rows:
-            stats = [repr(r["columns"][c][s]) if c in r["columns"] else "" for c in cols for s in ("median", "min", "max")]
+            stats = [repr(r["columns"][c].get(s, "")) if c in r["columns"] else "" for c in cols for s in _CSV_STATS]
             w.writerow([r["point"], r["dir"], *(_value_text(r["set"][k]) for k in keys), r["seeds"], *stats])
     plot_sweep(out / "sweep", spec, rows, labels, what)
     return rows

@@ -18,13 +18,22 @@ of the same batch — and a missing or unusable state means that training starts
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
-from atlasnn.checkpoint import load_checkpoint, load_state, save_checkpoint, save_piecewise, save_state
+from atlasnn.checkpoint import (
+    load_checkpoint,
+    load_march_progress,
+    load_state,
+    save_checkpoint,
+    save_march_progress,
+    save_piecewise,
+    save_state,
+)
 from atlasnn.errors import CheckpointError
 from atlasnn.evaluation import MarchSummary, TrainingRecord, judge_training, measure_solution
 from atlasnn.experiments import _schemes
@@ -34,7 +43,7 @@ from atlasnn.experiments._tasks import Task
 from atlasnn.experiments.config import ExperimentConfig, Stage
 from atlasnn.nn import make_model
 from atlasnn.solutions import Solution
-from atlasnn.training import LMConfig, refine
+from atlasnn.training import LMConfig, MarchProgress, refine
 from atlasnn.experiments._store import (
     checkpoint_seconds,
     state_files,
@@ -58,6 +67,8 @@ def system_of(cfg: ExperimentConfig):
 
 def lr_key(cfg: ExperimentConfig, role: str) -> str:
     """The config table that sets a training's lr: a stage's own ``train`` table, else ``train``."""
+    if role == "march":
+        return "march.train"
     stage = {"short": "interval", "source": "source", "target": "target"}.get(role, "interval")
     per_stage = (cfg.raw.get(stage) or {}).get("train") if isinstance(cfg.raw.get(stage), dict) else None
     return f"{stage}.train" if isinstance(per_stage, dict) and "lr" in per_stage else "train"
@@ -121,13 +132,14 @@ def march_record(training: Task, sol, scheme, metrics_: dict, ckpt: str, stage: 
 
 
 def march_verdict(cfg: ExperimentConfig, sol, rec: TrainingRecord, energy: np.ndarray, e0: float,
-                  stage: Stage) -> dict:
+                  stage: Stage, window_epochs: int) -> dict:
     """The quality verdict of a time-marching training: its error estimate first; its windows' loss
-    histories one after the other, the worst window's loss as the returned one."""
+    histories one after the other, the worst window's loss as the returned one. The advice names
+    ``window_epochs``, the budget of one window (march.train.epochs), not the sum over windows."""
     history = np.concatenate([np.asarray(r.history, np.float64) for r in sol.windows if r.history is not None])
     return judge_training(history, stop_reason=rec.stop_reason, tolerance=None, energy=energy, energy0=e0,
                           gamma=rec.gamma, returned_loss=rec.returned_loss, interval=(stage.t0, stage.T),
-                          lr=rec.lr, epochs_budget=rec.epochs_budget, key="march.train", estimate=rec.estimate,
+                          lr=rec.lr, epochs_budget=window_epochs, key="march.train", estimate=rec.estimate,
                           thresholds=cfg.quality, estimate_advice="lower march.rtol (adaptive windows) or shorten "
                           "march.window, or raise march.train.epochs").as_dict()
 
@@ -143,7 +155,7 @@ class TaskRun:
         self.e0 = float(self.system.energy64(self.z0))
         self.names = list(self.system.state_names)
         self.out = {s: {"records": [], "arrays": {}, "notes": []} for s in task.seeds}
-        self.unsaved: dict[Path, tuple] = {}  # state file -> (host TrainState, TrainConfig, extra)
+        self.unsaved: dict[Path, Callable[[], Any]] = {}  # state file -> what writes it
         self.every = checkpoint_seconds()
         (self.run_dir / "state").mkdir(exist_ok=True)
 
@@ -152,8 +164,7 @@ class TaskRun:
         self.out[seed]["notes"].append(text)
 
     def write_state(self, path: Path) -> None:
-        state, tc, extra = self.unsaved.pop(path)
-        save_state(path, state, self.system, tc, extra=extra)
+        self.unsaved.pop(path)()
 
     def write_all(self) -> None:
         for path in list(self.unsaved):
@@ -162,7 +173,52 @@ class TaskRun:
     def keep(self, path: Path, state, tc, column: str, seed: int, wall: float) -> None:
         extra = {"run_id": self.run_id, "experiment": self.cfg.name, "column": column, "seed": seed,
                  "wall_time_before": wall}
-        self.unsaved[path] = (state, tc, extra)
+        self.unsaved[path] = lambda: save_state(path, state, self.system, tc, extra=extra)
+
+    def march_saver(self, paths: list[Path], seeds: list[int]) -> Callable[[list[MarchProgress]], None]:
+        """The ``on_progress`` of a march of ``seeds``: keeps every finished window's progress, writes
+        it at most every ``checkpoint_seconds()`` (and on an interrupt), and stops at a signal."""
+        last = [time.monotonic()]
+
+        def keep(progress: list[MarchProgress]) -> None:
+            for path, seed, prog in zip(paths, seeds, progress):
+                prog.info = {"run_id": self.run_id, "experiment": self.cfg.name, "column": self.task.column,
+                             "seed": seed}
+                self.unsaved[path] = functools.partial(save_march_progress, path, prog, self.system)
+            if time.monotonic() - last[0] >= self.every:
+                for path in paths:
+                    self.write_state(path)
+                last[0] = time.monotonic()
+            for seed, prog in zip(seeds, progress):  # every seed is kept before a hook can interrupt
+                _schemes._hook("window", self.task.one(seed), self.task.column, prog)
+            check_interrupt()
+
+        return keep
+
+    def load_march(self, paths: list[Path], seeds: list[int]) -> list[MarchProgress] | None:
+        """The saved progress of every seed of a march of this run, or None (a fresh start) when a
+        seed has none, it is another run's, or the seeds stopped after different windows."""
+        if not self.resume or not all(p.is_file() for p in paths):
+            return None
+        saved = []
+        for path, seed in zip(paths, seeds):
+            try:
+                prog = load_march_progress(path, self.system)
+            except CheckpointError as exc:
+                self.note(seed, f"{exc}; marching {self.task.column} seed {seed} from its first window")
+                return None
+            if prog.info.get("run_id") != self.run_id:
+                return None
+            saved.append(prog)
+        if len({p.windows for p in saved}) != 1:
+            for seed in seeds:
+                self.note(seed, f"the saved windows of {self.task.column} differ between seeds of one batch; "
+                                "marching the batch from its first window")
+            return None
+        for seed, prog in zip(seeds, saved):
+            self.note(seed, f"{self.task.column} seed {seed} resumed after window {prog.windows} "
+                            f"(t = {prog.t:.6g})")
+        return saved
 
     def load_resume(self, path: Path, seed: int):
         """(saved TrainState of this run or None, wall time it had already taken)."""
@@ -264,7 +320,7 @@ class TaskRun:
         per["estimate_relative"] = est.relative_max
         rec = march_record(self.task.one(seed), sol, scheme, per, rel, stage)
         rec.estimate = est.summary()
-        rec.quality = march_verdict(self.cfg, sol, rec, energy, self.e0, stage)
+        rec.quality = march_verdict(self.cfg, sol, rec, energy, self.e0, stage, scheme.train.epochs)
         self.out[seed]["records"].append(rec.as_dict())
         self.out[seed]["arrays"][f"pred_{column}_seed{seed}"] = z
         self.out[seed]["arrays"][f"energy_{column}_seed{seed}"] = energy

@@ -22,7 +22,7 @@ from atlasnn.report._suite import suite_markdown, suite_summary
 from atlasnn.report._summary_plots import plot_loss_vs_accuracy, plot_overview
 from atlasnn.report._sweep_plot import plot_sweep
 from atlasnn.report._tables import CSV_FIELDS, render_tables, write_tables
-from atlasnn.report._text import format_number, format_percent
+from atlasnn.report._text import format_number, format_percent, replace_generated
 from atlasnn.report._workprecision_plot import plot_work_precision
 
 __all__ = [
@@ -37,6 +37,7 @@ __all__ = [
     "CSV_FIELDS",
     "format_number",
     "format_percent",
+    "replace_generated",
     "write_report",
     "write_figures",
     "summary_lines",

@@ -175,7 +175,8 @@ class Series:
 
     ``t``: (N,) times; ``z``: (N, 2d) prediction, columns (q_1..q_d, p_1..p_d); ``z_ref``: (N, 2d)
     reference on the same ``t``; ``energy``: optional (N,) Hamiltonian evaluated along ``z``;
-    ``estimate``: optional (N, 2d) a-posteriori error estimate δ ≈ z_ref − z (no reference used).
+    ``estimate``: optional (N, 2d) a-posteriori error estimate δ ≈ z_ref − z (no reference used);
+    ``edges``: optional window edges of a time-marched solution (drawn as ticks on the error axes).
     Arrays are converted to float64 and shapes are checked on construction.
     """
 
@@ -185,6 +186,7 @@ class Series:
     z_ref: np.ndarray
     energy: np.ndarray | None = None
     estimate: np.ndarray | None = None
+    edges: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.label = str(self.label)
@@ -210,6 +212,8 @@ class Series:
             if self.estimate.shape != self.z.shape:
                 raise ConfigError(f"Series {self.label!r} estimate must have shape {self.z.shape}, "
                                   f"got {self.estimate.shape}")
+        if self.edges is not None:
+            self.edges = _float_array(self.edges, f"Series {self.label!r} edges", 1)
 
     @property
     def dof(self) -> int:
@@ -305,6 +309,20 @@ def _time_axis(ax: Axes, t_lo: float, t_hi: float, interval: tuple[float, float]
     if interval is not None:
         ax.axvspan(interval[0], interval[1], color="tab:gray", alpha=0.15, lw=0, zorder=0,
                    label="source interval")
+
+
+def _window_ticks(ax: Axes, series: Iterable[Series]) -> None:
+    """Each time-marched series' window edges as short ticks along the top of ``ax`` (in the
+    series' colour), so an error jump can be matched with the hand-over where it was born."""
+    marked = False
+    for s in series:
+        if s.edges is None or s.edges.size < 3:
+            continue
+        inner = s.edges[1:-1]
+        ax.plot(inner, np.full(inner.shape, 0.97), linestyle="none", marker="|", markersize=9,
+                color=model_style(s.label).get("color"), transform=ax.get_xaxis_transform(), clip_on=False,
+                label="window edges" if not marked else "_nolegend_")
+        marked = True
 
 
 def _reference_source(series: Sequence[Series]) -> Series:

@@ -52,6 +52,7 @@ from atlasnn.report._plotkit import (
     _state_label,
     _t_range,
     _time_axis,
+    _window_ticks,
     model_style,
     pi_ticks,
 )
@@ -314,6 +315,7 @@ def plot_errors(stem: str | Path, series: Sequence[Series], state_names: Sequenc
             e = np.where(np.isfinite(e), np.maximum(e, floor), np.nan)
             ax.plot(s.t, e, label=s.label, **model_style(s.label))
         ax.set_yscale("log")
+        _window_ticks(ax, series)
         _time_axis(ax, t_lo, t_hi, interval)
         ax.set_ylabel(_delta_label(names[k], absolute=True))
         ax.grid(alpha=0.3, which="major")

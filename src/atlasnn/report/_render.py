@@ -128,11 +128,12 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
         if f"int_t_{c}" in arrays:
             series.append(Series(ir["label"], arrays[f"int_t_{c}"], arrays[f"int_z_{c}"],
                                        arrays[f"int_zref_{c}"], arrays[f"int_energy_{c}"]))
+    edges = {r.column: r.march.edges for r in runs if r.seed == seed0 and r.march is not None and r.march.edges}
     for c in table_cols:
         key = f"pred_{c}_seed{seed0}"
         if key in arrays:
             series.append(Series(labels[c], t, arrays[key], arrays["z_ref"], arrays[f"energy_{c}_seed{seed0}"],
-                                 arrays.get(f"estimate_{c}_seed{seed0}")))
+                                 arrays.get(f"estimate_{c}_seed{seed0}"), edges.get(c)))
     ref = Series("reference", t, arrays["z_ref"], arrays["z_ref"], arrays["energy_ref"])
     title = figure_title(results, f"{results['experiment']} (seed {seed0})")
     written += plot_overview(fig_dir / "overview", [ref] + series, names, results["energy0"], src_iv,

@@ -34,6 +34,7 @@ from atlasnn.report._plotkit import (
     _save,
     _state_label,
     _t_range,
+    _window_ticks,
     _time_axis,
     model_style,
 )
@@ -146,6 +147,7 @@ def plot_overview(stem: str | Path, series: Sequence[Series], state_names: Seque
             ax_e.plot(s.t, _clip_log(est[id(s)], floor), label=f"{s.label}: estimate", **style)
     ax_e.set_yscale("log")
     _log_limits(ax_e, [*err.values(), *est.values()])
+    _window_ticks(ax_e, models)
     ax_e.set_ylabel(r"$\|\hat z(t) - z_{\mathrm{ref}}(t)\|$" + ("\n(dotted: estimate)" if est else ""))
 
     with_energy = [s for s in models if s.energy is not None]

@@ -11,15 +11,29 @@ both definitions and the evaluation grids.
 from __future__ import annotations
 
 import math
+import re
 from typing import Any
 
+from atlasnn.errors import AtlasError
 from atlasnn.evaluation import METRICS
 from atlasnn.report._caveats import QUICK_BANNER
 from atlasnn.report._stats import _f, _resolve_paper, load_results, summarize
 
-__all__ = ["format_number", "format_percent"]
+__all__ = ["format_number", "format_percent", "replace_generated"]
 
 _EPOCHS_DEFINITION = "training epochs run (target task for transfer)"
+
+
+# ============================================================================ generated docs
+def replace_generated(text: str, name: str, body: str, where: str = "the page") -> str:
+    """``text`` with ``body`` between its ``<!-- generated:NAME -->`` and ``<!-- /generated:NAME -->``
+    markers (the parts of a docs page a script writes from committed runs); an ``AtlasError``
+    naming ``where`` when the markers are missing."""
+    start, end = f"<!-- generated:{name} -->", f"<!-- /generated:{name} -->"
+    pattern = re.compile(re.escape(start) + r".*?" + re.escape(end), re.S)
+    if not pattern.search(text):
+        raise AtlasError(f"{where} has no {start} ... {end} markers")
+    return pattern.sub(lambda _: f"{start}\n{body.strip()}\n{end}", text)
 
 
 # ============================================================================ formatting

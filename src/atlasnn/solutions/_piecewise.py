@@ -27,7 +27,7 @@ import numpy as np
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
 from atlasnn.solutions._base import AbstractSolution
-from atlasnn.solutions._solution import bucket_size, check_inside, check_outside_mode
+from atlasnn.solutions._solution import bucket_size, check_inside, check_outside_mode, check_state_size
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["WindowRecord", "PiecewiseSolution", "stack_models", "unstack_models", "window_edges"]
@@ -126,6 +126,8 @@ class PiecewiseSolution(AbstractSolution):
                               f"got {n} models and edges of shape {self.edges.shape}")
         if any(float(m.t0) != 0.0 for m in self.models):
             raise ConfigError("every window model of a piecewise solution must use local time (t0 = 0)")
+        for k, m in enumerate(self.models):
+            check_state_size(m, self.system, f"window {k}'s model")
         self._stacked = stack_models(list(self.models))
 
     # ------------------------------------------------------------------ evaluation

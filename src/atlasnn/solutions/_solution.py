@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from atlasnn.errors import AtlasError
+from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.nn import TrialSolution
 from atlasnn.solutions._base import AbstractSolution
 from atlasnn.systems import HamiltonianSystem
@@ -35,6 +35,16 @@ def check_outside_mode(outside: str) -> None:
     """Refuse an ``outside=`` option that is not one of :data:`OUTSIDE_MODES`."""
     if outside not in OUTSIDE_MODES:
         raise ValueError(f"outside must be one of {list(OUTSIDE_MODES)}, got {outside!r}")
+
+
+def check_state_size(model: TrialSolution, system: HamiltonianSystem, what: str = "the model") -> None:
+    """Refuse a network whose output size is not the system's state size (2d), both named."""
+    size = int(np.shape(model.z0)[-1])
+    if size != system.state_dim:
+        raise ConfigError(f"{what} has {size} state components but the system {system.name!r} has "
+                          f"{system.state_dim} (2d, d = {system.dim}); train a model for this system")
+
+
 #: Relative slack at the interval's ends (times within it count as inside).
 INTERVAL_SLACK = 1e-9
 
@@ -105,6 +115,7 @@ class Solution(AbstractSolution):
 
     def __post_init__(self) -> None:
         check_outside_mode(self.outside)
+        check_state_size(self.model, self.system)
         if self.interval is not None:
             try:
                 t0, T = (float(x) for x in self.interval)

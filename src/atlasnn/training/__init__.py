@@ -16,6 +16,7 @@ from atlasnn.training._marching import (
     march_batch,
     n_windows_for,
 )
+from atlasnn.training._progress import MarchProgress
 from atlasnn.training._polish import PRECISIONS, PolishConfig, PolishResult, polish
 from atlasnn.training._refine import RefineConfig, refine
 from atlasnn.training._step import init_opt_state, trainable_filter
@@ -67,6 +68,7 @@ __all__ = [
     "PRECISIONS",
     "polish",
     "MarchConfig",
+    "MarchProgress",
     "march",
     "march_batch",
     "march_adaptive",

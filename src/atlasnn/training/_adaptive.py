@@ -34,7 +34,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
-from atlasnn.solutions import PiecewiseSolution, WindowRecord, estimate_error, state_range
+from atlasnn.solutions import PiecewiseSolution, WindowRecord, estimate_error
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._marching import (
     MarchConfig,
@@ -48,6 +48,7 @@ from atlasnn.training._marching import (
     window_config,
     window_polish,
 )
+from atlasnn.training._progress import MarchProgress
 from atlasnn.training._transfer import restrict_opt_state
 
 __all__ = ["march", "march_adaptive", "first_window", "SAFETY", "GROWTH", "SHRINK", "EXPONENT", "CUT_FRACTION"]
@@ -87,12 +88,16 @@ def march_adaptive(
     on_window: Callable[[WindowRecord], None] | None = None,
     on_chunk: Callable | None = None,
     log: Callable[[str], None] | None = None,
+    resume: MarchProgress | None = None,
+    on_progress: Callable[[MarchProgress], None] | None = None,
 ) -> PiecewiseSolution:
     """March ``model`` over [model.t0, T] with windows chosen by the error estimate (module docstring).
 
     ``config``: its ``rtol``, ``atol``, ``first_window``, ``min_window``, ``max_rejects``,
     ``max_windows`` drive the windows; ``train``/``first``/``polish``/``start``/``thaw``/
-    ``carry_adam`` the training of each, as for fixed windows.
+    ``carry_adam`` the training of each, as for fixed windows. ``on_progress`` is called with a
+    :class:`~atlasnn.training._progress.MarchProgress` after every accepted window; given back as
+    ``resume``, the march goes on from there exactly as it would have.
     """
     t0, T = float(model.t0), float(T)
     if not T > t0:
@@ -106,9 +111,18 @@ def march_adaptive(
     w = float(config.first_window) if config.first_window else first_window(system, z0, span)
     w_min = float(config.min_window) if config.min_window else span * 1e-4
     initial = current = local_model(model)
-    opt_state, edges, trained, records, attempts = None, [t0], [], [], []
-    path = [z0[None, :]]  # the solution so far, for the scale of the tolerance
+    opt_state, opt_config, edges, trained, records, attempts = None, None, [t0], [], [], []
+    lo, hi = z0.copy(), z0.copy()  # the solution's extent so far: the tolerance's scale
     t, k, rejects = t0, 0, 0
+    if resume is not None:
+        if abs(resume.edges[0] - t0) > 1e-12 * span or resume.t > T:
+            raise ConfigError(f"the saved progress covers [{resume.edges[0]:g}, {resume.t:g}], not a start of "
+                              f"[{t0:g}, {T:g}]")
+        edges, trained, records = list(resume.edges), list(resume.trained), list(resume.records)
+        attempts, opt_state, opt_config = list(resume.attempts), resume.opt_state, resume.opt_config
+        lo, hi, w = np.array(resume.lo, np.float64), np.array(resume.hi, np.float64), resume.next_length
+        current = next_window_model(config.start, initial, trained[-1], end_state(trained[-1], resume.last_length))
+        t, k = resume.t, resume.windows
     while t < T - 1e-12 * span:
         if len(trained) >= config.max_windows:
             raise ConfigError(f"march needs more than march.max_windows = {config.max_windows} windows at "
@@ -131,7 +145,8 @@ def march_adaptive(
             net = pol.model
         wall = time.perf_counter() - clock - res.compile_time - (0.0 if pol is None else pol.compile_time)
         nodes, err, est = _local_error(system, net, w)
-        scale = max(state_range(np.concatenate([*path, est.z])), float(np.abs(z0).max()), 1e-300)
+        extent = np.maximum(hi, est.z.max(0)) - np.minimum(lo, est.z.min(0))
+        scale = max(float(extent.max()), float(np.abs(z0).max()), 1e-300)
         tol = config.atol + config.rtol * scale
         worst = float(err.max()) if np.all(np.isfinite(err)) else math.inf
         outcome, length = "accepted", w
@@ -158,14 +173,17 @@ def march_adaptive(
         record = _record(k, np.asarray(edges), current.z0, res, pol, net, wall)
         trained.append(net)
         records.append(record)
-        keep = nodes <= length + 1e-12
-        path.append(est.z[keep])
+        kept = est.z[nodes <= length + 1e-12]
+        lo, hi = np.minimum(lo, kept.min(0)), np.maximum(hi, kept.max(0))
         if on_window is not None:
             on_window(record)
-        opt_state = res.opt_state
+        opt_state, opt_config = res.opt_state, cfg
         current = next_window_model(config.start, initial, net, end_state(net, length))
         t, k, rejects = t + length, k + 1, 0
         w = length if outcome == "cut" else max(length, _next_length(length, worst, tol))
+        if on_progress is not None:
+            on_progress(MarchProgress(list(edges), list(trained), list(records), opt_state, opt_config,
+                                      next_length=w, lo=lo.copy(), hi=hi.copy(), attempts=list(attempts)))
     edges_arr = np.asarray(edges, dtype=np.float64)
     edges_arr[-1] = T
     info = {"scheme": "time-marching", "windows": "auto", "n_windows": len(trained), "rtol": config.rtol,
@@ -183,6 +201,8 @@ def march(
     *,
     on_window: Callable[[WindowRecord], None] | None = None,
     on_chunk: Callable | None = None,
+    resume: MarchProgress | None = None,
+    on_progress: Callable[[MarchProgress], None] | None = None,
 ) -> PiecewiseSolution:
     """Train a time-marching ATLAS-NN on [model.t0, T] and return the piecewise solution: windows
     chosen by the error estimate (:func:`march_adaptive`; ``window = "auto"``, the default), or
@@ -197,8 +217,13 @@ def march(
         on_window: called with each window's :class:`WindowRecord` when it is done.
         on_chunk: passed to the trainer (called after every chunk of epochs with the list of
             current training states); raising KeyboardInterrupt there stops the march.
+        resume, on_progress: continue from a :class:`~atlasnn.training._progress.MarchProgress`;
+            be handed one after every finished window (to save it: ``atlasnn.checkpoint``).
     """
     if config.adaptive:
-        return march_adaptive(model, system, T, config, on_window=on_window, on_chunk=on_chunk)
+        return march_adaptive(model, system, T, config, on_window=on_window, on_chunk=on_chunk,
+                              resume=resume, on_progress=on_progress)
     callback = None if on_window is None else (lambda i, record: on_window(record))
-    return march_batch([model], system, T, [config], on_window=callback, on_chunk=on_chunk)[0]
+    batch_progress = None if on_progress is None else (lambda progress: on_progress(progress[0]))
+    return march_batch([model], system, T, [config], on_window=callback, on_chunk=on_chunk,
+                       resume=None if resume is None else [resume], on_progress=batch_progress)[0]

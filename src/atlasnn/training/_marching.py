@@ -45,6 +45,7 @@ from atlasnn.nn import TrialSolution
 from atlasnn.solutions import PiecewiseSolution, WindowRecord, window_edges
 from atlasnn.training._lm import LMConfig, LMResult
 from atlasnn.training._polish import PolishConfig, PolishResult
+from atlasnn.training._progress import MarchProgress
 from atlasnn.training._refine import refine
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._train import TrainConfig, TrainResult, train_batch
@@ -272,6 +273,19 @@ def _record(k: int, edges: np.ndarray, z_start, res: TrainResult, pol: PolishRes
 
 
 # ---------------------------------------------------------------------- march
+def _resumed_windows(resume: list[MarchProgress], edges: np.ndarray, n_models: int) -> int:
+    """The number of finished windows of a resumed batch (the same for every model, on ``edges``)."""
+    counts = {p.windows for p in resume}
+    if len(resume) != n_models or len(counts) != 1:
+        raise ConfigError(f"resume needs one progress per model with the same number of windows, got "
+                          f"{len(resume)} for {n_models} models ({sorted(counts)} windows)")
+    k = counts.pop()
+    if k >= len(edges) or not np.allclose(resume[0].edges, edges[:k + 1], rtol=0, atol=1e-12 * abs(edges[-1])):
+        raise ConfigError(f"the saved progress ({k} windows, edges ending at {resume[0].t:g}) does not "
+                          f"fit these windows ({len(edges) - 1} of length {edges[1] - edges[0]:g})")
+    return k
+
+
 def march_batch(
     models: list[TrialSolution],
     system: HamiltonianSystem,
@@ -280,11 +294,16 @@ def march_batch(
     *,
     on_window: Callable[[int, WindowRecord], None] | None = None,
     on_chunk: Callable | None = None,
+    resume: list[MarchProgress] | None = None,
+    on_progress: Callable[[list[MarchProgress]], None] | None = None,
 ) -> list[PiecewiseSolution]:
     """:func:`march` for several models at once (typically the seeds of one config: the same
     windows, the configs differing in their ``train.seed``): every window trains all of them as
     one compiled program (:func:`atlasnn.training._train.train_batch`). ``on_window(i, record)`` names the
-    model. A training stopped by KeyboardInterrupt raises it (the march is not resumable mid-way).
+    model. ``on_progress`` is called after every window with each model's
+    :class:`~atlasnn.training._progress.MarchProgress`; given back as ``resume`` (one per model,
+    the same number of windows), the march continues after those windows exactly as it would have
+    gone on. A training stopped by KeyboardInterrupt raises it.
     """
     if not models or len(configs) != len(models):
         raise ConfigError(f"march_batch needs one config per model, got {len(models)} models and {len(configs)} configs")
@@ -305,10 +324,19 @@ def march_batch(
     initial = [local_model(m) for m in models]
     current = list(initial)
     opt_states: list[Any] = [None] * len(models)
+    opt_configs: list[Any] = [None] * len(models)
     trained_all: list[list[TrialSolution]] = [[] for _ in models]
     records_all: list[list[WindowRecord]] = [[] for _ in models]
     n = len(edges) - 1
-    for k in range(n):
+    first = 0
+    if resume is not None:
+        first = _resumed_windows(resume, edges, len(models))
+        for i, (prog, conf) in enumerate(zip(resume, configs)):
+            trained_all[i], records_all[i] = list(prog.trained), list(prog.records)
+            opt_states[i], opt_configs[i] = prog.opt_state, prog.opt_config
+            current[i] = next_window_model(conf.start, initial[i], prog.trained[-1],
+                                           end_state(prog.trained[-1], length))
+    for k in range(first, n):
         cfgs = [window_config(c, k) for c in configs]
         starts = [restrict_opt_state(o, m, c.freeze_gamma) if (k > 0 and conf.carry_adam) else None
                   for o, m, c, conf in zip(opt_states, current, cfgs, configs)]
@@ -329,8 +357,11 @@ def march_batch(
             records_all[i].append(record)
             if on_window is not None:
                 on_window(i, record)
-            opt_states[i] = res.opt_state
+            opt_states[i], opt_configs[i] = res.opt_state, cfg
             current[i] = next_window_model(conf.start, initial[i], trained, end_state(trained, length))
+        if on_progress is not None:
+            on_progress([MarchProgress(list(edges[:k + 2]), list(trained_all[i]), list(records_all[i]),
+                                       opt_states[i], opt_configs[i]) for i in range(len(models))])
     out = []
     for i, conf in enumerate(configs):
         info = {"scheme": "time-marching", "n_windows": n, "window": length, "thaw": conf.thaw,

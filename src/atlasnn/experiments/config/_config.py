@@ -29,17 +29,14 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from atlasnn.errors import AtlasError, ConfigError
+from atlasnn.fileio import parse_toml
+from atlasnn.errors import ConfigError
 from atlasnn.evaluation import Thresholds
 from atlasnn.experiments.config._schema import (
     MAX_STEPS,
@@ -49,7 +46,8 @@ from atlasnn.experiments.config._schema import (
     parse_value,
     settings_fields,
 )
-from atlasnn.experiments.config._types import _fail, _number, _one_line, _table
+from atlasnn.experiments.config._system_checks import check_system_builds
+from atlasnn.experiments.config._types import _fail, _number, _table
 from atlasnn.systems import BUILTIN_SYSTEMS, builtin_system, expression_system
 from atlasnn.training import DEFAULT_WINDOW_TRAIN, LMConfig, MarchConfig, PolishConfig, TrainConfig, n_windows_for
 
@@ -263,6 +261,38 @@ def _check_fine_steps(evaluation: EvaluationConfig, stage: Stage) -> None:
 
 
 # ----------------------------------------------------------------------- parsing
+QUICK_EPOCHS = 300  # --quick without a [quick] table: every epoch budget capped here
+QUICK = (("train.epochs", QUICK_EPOCHS), ("evaluation.eval_points", 200), ("evaluation.fine_factor", 10))
+_STAGE_TRAINS = ("interval", "source", "target")
+_MARCH_TRAINS = ("train", "first_train")
+
+
+def default_quick(data: dict[str, Any]) -> dict[str, Any]:
+    """The smoke-test settings --quick uses on a file without a ``[quick]`` table: :data:`QUICK`
+    (300 epochs, a 200-point evaluation grid, a fine SE 10x), every epoch budget the file gives
+    elsewhere (a stage's or [march]'s train table) capped at 300, and adaptive marching at
+    rtol ≥ 1e-3."""
+    out: dict[str, Any] = {}
+    for dotted, value in QUICK:
+        table, key = dotted.split(".")
+        out.setdefault(table, {})[key] = value
+    for stage in _STAGE_TRAINS:
+        epochs = ((data.get(stage) or {}).get("train") or {}).get("epochs") if isinstance(data.get(stage), dict) else None
+        if isinstance(epochs, int):
+            out.setdefault(stage, {}).setdefault("train", {})["epochs"] = min(epochs, QUICK_EPOCHS)
+    march = data.get("march")
+    if isinstance(march, dict):
+        q = out.setdefault("march", {})
+        for table in _MARCH_TRAINS:
+            given = march.get(table)
+            if table == "train" or isinstance(given, dict):
+                epochs = given.get("epochs") if isinstance(given, dict) else None
+                q.setdefault(table, {})["epochs"] = min(epochs, QUICK_EPOCHS) if isinstance(epochs, int) else QUICK_EPOCHS
+        rtol = march.get("rtol")
+        q["rtol"] = max(rtol, 1e-3) if isinstance(rtol, (int, float)) else 1e-3
+    return out
+
+
 def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "config",
                  profile: str | None = None) -> ExperimentConfig:
     """Validate a config dict (as read from TOML) and return an :class:`ExperimentConfig`.
@@ -277,7 +307,7 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     if quick:
         q = data.get("quick")
         if q is None:
-            raise ConfigError(f"{source}: has no [quick] table for --quick")
+            q = default_quick(data)
         parse_value(SCHEMA[""].key("quick").type, "quick", q)
         data = _deep_merge(data, q)
     data = {k: v for k, v in data.items() if k != "quick"}
@@ -308,7 +338,7 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
         "polish": None if v["polish"] is None else _polish_config("polish", v["polish"]),
         "quality": _quality(v["quality"]),
     })
-    _check_system_builds(system)
+    check_system_builds(system)
     return cfg
 
 
@@ -378,7 +408,13 @@ def _march_settings(v: dict[str, Any], given: dict[str, Any], stage: Stage) -> M
                           "with window = \"auto\" give sigma (in units of the collocation spacing)")
         length = stage.T - stage.t0
     else:
-        length = (stage.T - stage.t0) / n_windows_for(stage.t0, stage.T, scheme)
+        count = n_windows_for(stage.t0, stage.T, scheme)
+        if count > scheme.max_windows:
+            key = "n_windows" if v.get("n_windows") is not None else "window"
+            _fail(f"march.{key}", given.get(key, v.get(key)), f"cuts [{stage.t0:g}, {stage.T:g}] into {count} windows, "
+                  f"more than march.max_windows = {scheme.max_windows}; use longer windows or raise max_windows "
+                  f"(at most 100000)")
+        length = (stage.T - stage.t0) / count
     train = _window_train("march.train", given.get("train") or {}, DEFAULT_WINDOW_TRAIN, length)
     first = None
     if given.get("first_train"):
@@ -387,56 +423,6 @@ def _march_settings(v: dict[str, Any], given: dict[str, Any], stage: Stage) -> M
     return MarchSettings(models=tuple(v["models"]), width=net["width"], depth=net["depth"],
                          activation=net["activation"], first_layer_scale=net["first_layer_scale"],
                          scheme=scheme.replace(train=train, first=first))
-
-
-def _check_system_builds(system: SystemConfig) -> None:
-    """Build the system now so that a bad expression or z0 fails before any training."""
-    try:
-        sysm = system.build()
-        z0 = sysm.initial_state()
-    except ConfigError:
-        raise
-    except Exception as exc:  # AtlasError subclasses carry one-line messages
-        if isinstance(exc, AtlasError):
-            raise ConfigError(_one_line(f"system: {exc}")) from None
-        raise
-    _check_finite_at_z0(sysm, z0, system)
-
-
-def _check_finite_at_z0(sysm, z0, system: SystemConfig) -> None:
-    """H and J∇H must be finite at z0 (in float64): a singular or overflowing start would give
-    non-finite losses from the first epoch and a reference solver that cannot start."""
-    with jax.enable_x64(True):
-        z = jnp.asarray(z0, jnp.float64)
-        energy = float(sysm.energy(z))
-        field = np.asarray(sysm.vector_field(z), dtype=np.float64)
-    if math.isfinite(energy) and np.all(np.isfinite(field)):
-        if system.hamiltonian is not None and system.separable:
-            _check_separable(sysm, np.asarray(z0, np.float64))
-        return
-    where = "system.z0" if system.z0 is not None else ("system.hamiltonian" if system.hamiltonian else "system.params")
-    value = list(system.z0) if system.z0 is not None else (system.hamiltonian or dict(system.params))
-    at = "there" if where == "system.z0" else f"at z0 = {[float(x) for x in z0]}"
-    _fail(where, value, f"the Hamiltonian or its gradient is not finite {at} "
-          f"(H = {energy:g}, J∇H = {[float(x) for x in field]})")
-
-
-def _check_separable(sysm, z0) -> None:
-    """``separable = true`` lets the symplectic integrators run (they need H = T(p) + V(q)): the
-    mixed second derivatives ∂²H/∂q∂p must vanish (checked at z0 and three nearby states)."""
-    d = sysm.dim
-    shifts = [np.zeros_like(z0), np.full_like(z0, 0.1), np.resize([0.3, -0.2], z0.shape), np.full_like(z0, -0.25)]
-    with jax.enable_x64(True):
-        hess = jax.hessian(lambda z: sysm.energy(z))
-        for shift in shifts:
-            h = np.asarray(hess(jnp.asarray(z0 + shift, jnp.float64)), dtype=np.float64)
-            cross = np.abs(h[:d, d:])
-            if not np.all(np.isfinite(h)):
-                continue
-            if cross.max() > 1e-9 * (1.0 + np.abs(h).max()):
-                at = [round(float(x), 6) for x in z0 + shift]
-                _fail("system.separable", True, f"the Hamiltonian is not separable (d²H/dq dp = "
-                      f"{float(h[:d, d:].flat[int(np.argmax(cross))]):g} at {at}); set separable = false")
 
 
 def load_config(path: str | Path, *, quick: bool = False, profile: str | None = None) -> ExperimentConfig:
@@ -448,10 +434,7 @@ def load_config(path: str | Path, *, quick: bool = False, profile: str | None = 
         raise ConfigError(f"config file not found: {path}") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"cannot read config file {path}: {exc}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    data = parse_toml(text, str(path))
     return parse_config(data, quick=quick, source=str(path), profile=profile)
 
 

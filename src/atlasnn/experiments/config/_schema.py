@@ -221,7 +221,8 @@ _STATIC_TABLES: dict[str, TableSpec] = {
             "merged over the file by --profile NAME (e.g. [profiles.release]: the authors' release's settings).",
             default_text="none"),
         Key("quick", Variant(), None, "A smoke-test variant merged over the file by --quick: any of the keys "
-            "above, typically far fewer epochs.", default_text="none (--quick then refuses the file)"),
+            "above, typically far fewer epochs.", default_text="none: --quick then caps every epoch budget at "
+            "300, evaluates on 200 points, draws SE-10 and marches at rtol >= 1e-3"),
     )),
     "system": TableSpec("A built-in system by name, or your own Hamiltonian written as an expression.", (
         Key("name", String(), None, "A built-in system (`atlasnn systems` lists them) or, with hamiltonian, "
@@ -262,7 +263,8 @@ _STATIC_TABLES: dict[str, TableSpec] = {
             "the shortest window (one that still fails there is kept and marked forced).",
             default_text="(T − t0)·1e-4"),
         Key("max_rejects", Integer(0, 1000), 8, "Adaptive windows: retrainings of one window at most."),
-        Key("max_windows", Integer(1, 100_000), 10_000, "Adaptive windows: windows in all at most."),
+        Key("max_windows", Integer(1, 100_000), 10_000, "Windows in all at most, fixed or adaptive (a fixed window "
+            "that cuts the interval into more is refused before training)."),
         Key("start", Choice(("initial", "previous", "features")), "initial", "Where window k ≥ 1 starts its "
             "network: the initial weights (measured best), the previous window's trained ones (the paper's "
             "transfer, window to window), or its hidden layers with a zeroed output layer."),

@@ -13,35 +13,39 @@ from __future__ import annotations
 import inspect
 import re
 import textwrap
-import tomllib
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
+from atlasnn.fileio import parse_toml
 from atlasnn.nn import MODELS
 from atlasnn.systems import BUILTIN_SYSTEMS, builtin_system
 from atlasnn.errors import ConfigError
-from atlasnn.experiments.config._config import parse_config
+from atlasnn.experiments.config._config import QUICK, parse_config
 from atlasnn.experiments.config._reference import toml_value
 from atlasnn.experiments.config._schema import key_spec
 
 PENDULUM = ("p**2/2 - cos(q)", ("q",), ("p",))
 
-# The smoke test: a few hundred epochs, a coarse evaluation grid, SE-10 for the figures.
-QUICK = [("train.epochs", 300), ("evaluation.eval_points", 200), ("evaluation.fine_factor", 10)]
 
 
 def _system_items(system: str | None, hamiltonian: str | None, coordinates: Sequence[str],
-                  momenta: Sequence[str], z0: Sequence[float] | None, separable: bool) -> list[tuple[str, Any]]:
+                  momenta: Sequence[str], z0: Sequence[float] | None, separable: bool,
+                  given: Mapping[str, float]) -> list[tuple[str, Any]]:
     if system is not None:
         sysm = builtin_system(system)  # refuses an unknown name (one line)
         key = system.replace("-", "_")
         params = {n: p.default for n, p in inspect.signature(BUILTIN_SYSTEMS[key].factory).parameters.items()
                   if isinstance(p.default, (int, float)) and not isinstance(p.default, bool)}
-        items = [("name", key)] + ([("params", {k: float(v) for k, v in params.items()})] if params else [])
+        unknown = sorted(set(given) - set(params))
+        if unknown:
+            raise ConfigError(f"--params {unknown[0]}: not a parameter of {key} (its parameters: {sorted(params)})")
+        params = {k: float(v) for k, v in {**params, **given}.items()}
+        items = [("name", key)] + ([("params", params)] if params else [])
         return items + [("z0", [float(x) for x in (z0 if z0 is not None else sysm.z0)])]
     d = len(coordinates)
-    return [("hamiltonian", hamiltonian), ("coordinates", list(coordinates)), ("momenta", list(momenta)),
-            ("separable", separable), ("z0", [float(x) for x in z0] if z0 is not None else [1.0] * d + [0.0] * d)]
+    items = [("hamiltonian", hamiltonian), ("coordinates", list(coordinates)), ("momenta", list(momenta)),
+             ("separable", separable)] + ([("params", {k: float(v) for k, v in given.items()})] if given else [])
+    return items + [("z0", [float(x) for x in z0] if z0 is not None else [1.0] * d + [0.0] * d)]
 
 
 def _tables(name: str, transfer: bool, system_items: list, what: str) -> list[tuple[str, list[tuple[str, Any]]]]:
@@ -103,15 +107,17 @@ def _render(path_name: str, tables, transfer: bool) -> str:
 
 
 def _check(text: str, source: str) -> None:
-    data = tomllib.loads(text)
+    data = parse_toml(text, source)
     parse_config(data, source=source)
     parse_config(data, quick=True, source=source)
 
 
 def init_template(path: str | Path, *, transfer: bool = False, system: str | None = None,
                   hamiltonian: str | None = None, coordinates: Sequence[str] = (),
-                  momenta: Sequence[str] = (), z0: Sequence[float] | None = None) -> str:
-    """The text of a validated template for ``path`` (not written). Default system: the pendulum."""
+                  momenta: Sequence[str] = (), z0: Sequence[float] | None = None,
+                  params: Mapping[str, float] | None = None) -> str:
+    """The text of a validated template for ``path`` (not written). Default system: the pendulum.
+    ``params``: values of named parameters (a built-in's, which must exist, or names used in H)."""
     path = Path(path)
     if system is not None and hamiltonian is not None:
         raise ConfigError("give --system or --hamiltonian, not both")
@@ -128,7 +134,7 @@ def init_template(path: str | Path, *, transfer: bool = False, system: str | Non
     name = re.sub(r"[^A-Za-z0-9_.-]+", "-", path.stem).strip("-") or "experiment"
     text = None
     for separable in (True, False):  # separable = true if H passes the check
-        items = _system_items(system, hamiltonian, coordinates, momenta, z0, separable)
+        items = _system_items(system, hamiltonian, coordinates, momenta, z0, separable, dict(params or {}))
         text = _render(path.name, _tables(name, transfer, items, what), transfer)
         try:
             _check(text, str(path))

@@ -35,6 +35,8 @@ def _fail(path: str, value: Any, why: str) -> None:
 
 def _key(path: str, key: Any) -> str:
     """``path.key``, or ``path['odd key']`` when the key is not a plain name."""
+    if isinstance(key, str) and len(key) > 60:
+        key = f"{key[:40]}...({len(key)} characters)"
     if isinstance(key, str) and re.fullmatch(r"[A-Za-z0-9_-]+", key):
         return f"{path}.{key}" if path else key
     return f"{path}[{_fmt(key)}]" if path else f"[{_fmt(key)}]"
