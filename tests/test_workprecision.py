@@ -67,3 +67,38 @@ def test_plot_writes_png_and_pdf(problem, tmp_path):
 
     paths = plot_work_precision(tmp_path / "wp", pts, title="t")
     assert [p.suffix for p in paths] == [".png", ".pdf"] and all(p.stat().st_size > 5000 for p in paths)
+
+
+def test_dop853_timings_are_not_dominated_by_dispatch():
+    """DOP853 through atlasnn's compiled right-hand side against the same solve with a hand-written
+    NumPy one (the cheapest a Python right-hand side can be): same steps, and a time within 6× (it
+    was 9–10× in round 2; 2.9–4× measured here with two other processes busy, docs/PERFORMANCE.md)."""
+    import math
+    import time
+
+    from scipy.integrate import solve_ivp
+
+    from atlasnn.systems import henon_heiles
+
+    system = henon_heiles()
+    z0 = np.array([0.3, -0.3, 0.3, 0.15])
+    t = np.linspace(0.0, 24 * math.pi, 500)
+
+    def numpy_rhs(_, z):
+        x, y, px, py = z
+        return np.array([px, py, -x - 2 * x * y, -y - x * x + y * y])
+
+    def best(fn, repeats=5):
+        out, times = None, []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            out = fn()
+            times.append(time.perf_counter() - start)
+        return out, min(times)
+
+    (z, nfev), ours = best(lambda: wp.dop853(system, z0, t, 1e-10, 1e-10))
+    ref, plain = best(lambda: solve_ivp(numpy_rhs, (0.0, t[-1]), z0, method="DOP853", t_eval=t, rtol=1e-10, atol=1e-10))
+    assert nfev == ref.nfev and np.allclose(z, ref.y.T, rtol=0, atol=1e-9)
+    points = wp.dop853_points(system, z0, t, ref.y.T, tolerances=(1e-10,), min_seconds=0.0)
+    assert points[0].evaluations == nfev
+    assert ours < 6 * plain, f"DOP853 {ours:.3f} s with atlasnn's right-hand side, {plain:.3f} s with NumPy"

@@ -12,7 +12,9 @@ reference solution on it, every method becomes points (wall time, error):
 The errors are the maximum |z − z_ref| over all components and times, the release-form L2 of the
 first coordinate, sqrt(Σ_i err(t_i)²) on the evaluation grid (the paper's tables' number), and the
 energy drift (:func:`~atlasnn.evaluation.energy_drift`). Times exclude JAX compilation (recorded
-apart); each is the median of repeats that together last at least ``min_seconds``. The figure is
+apart); each is the median of repeats that together last at least ``min_seconds``. Each point
+records its right-hand-side (DOP853) or gradient (symplectic: steps × stages) evaluations, so a
+time can be read against the work it bought. The figure is
 drawn by :func:`atlasnn.report.plot_work_precision`.
 """
 
@@ -26,11 +28,13 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from atlasnn.evaluation._integrators import integrate, reference_solution
+from atlasnn.evaluation._integrators import dop853, integrate
 from atlasnn.evaluation._metrics import energy_drift
 from atlasnn.systems import HamiltonianSystem
 
 SYMPLECTIC = {"symplectic_euler": "symplectic Euler", "stormer_verlet": "Störmer–Verlet", "yoshida4": "Yoshida-4"}
+#: gradient evaluations (∇V and ∇T each once) per step of each symplectic method
+STAGES = {"symplectic_euler": 1, "stormer_verlet": 1, "yoshida4": 3}
 STEP_MULTIPLES = (1, 2, 4, 8, 16, 32)
 TOLERANCES = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
 
@@ -47,6 +51,7 @@ class WorkPoint:
     energy_drift: float
     kind: str = "classical"  # "classical" | "network"
     compile_seconds: float = 0.0
+    evaluations: int = 0  # right-hand-side (DOP853) or gradient (symplectic) evaluations; 0 for networks
 
 
 def _timed(fn: Callable[[], Any], min_seconds: float, max_repeats: int = 50) -> tuple[Any, float]:
@@ -82,18 +87,21 @@ def symplectic_points(system: HamiltonianSystem, z0: np.ndarray, t_eval: np.ndar
             first = time.perf_counter() - start
             (_, z), seconds = _timed(lambda: integrate(method, system, z0, t0, T, n), min_seconds)
             points.append(WorkPoint(method, f"N={n}", seconds, **errors(system, z[::m], z_ref, e0),
-                                    compile_seconds=max(first - seconds, 0.0)))
+                                    compile_seconds=max(first - seconds, 0.0), evaluations=n * STAGES[method]))
     return points
 
 
 def dop853_points(system: HamiltonianSystem, z0: np.ndarray, t_eval: np.ndarray, z_ref: np.ndarray,
                   *, tolerances: Sequence[float] = TOLERANCES, min_seconds: float = 0.2) -> list[WorkPoint]:
-    """DOP853 at rtol = atol = each tolerance (dense output at the evaluation times)."""
+    """DOP853 at rtol = atol = each tolerance (dense output at the evaluation times), its
+    right-hand side compiled ahead of time (:func:`~atlasnn.evaluation.reference_rhs`)."""
     e0 = float(system.energy64(z0))
+    z_init = np.asarray(z0, np.float64)
+    t = np.asarray(t_eval, np.float64)
     points = []
     for tol in tolerances:
-        z, seconds = _timed(lambda: reference_solution(system, z0, t_eval, rtol=tol, atol=tol), min_seconds)
-        points.append(WorkPoint("dop853", f"tol={tol:g}", seconds, **errors(system, z, z_ref, e0)))
+        (z, nfev), seconds = _timed(lambda: dop853(system, z_init, t, tol, tol), min_seconds)
+        points.append(WorkPoint("dop853", f"tol={tol:g}", seconds, **errors(system, z, z_ref, e0), evaluations=nfev))
     return points
 
 

@@ -225,6 +225,19 @@ def task_stem(task: Training) -> str:
     return f"{task.role}_{task.model}_seed{task.seed}"
 
 
+def run_state(run_dir: Path) -> str:
+    """``complete`` (results written), ``resumable`` (a run was started there) or ``new``."""
+    try:
+        meta = json.loads((Path(run_dir) / "meta.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return "new"
+    if not isinstance(meta, dict):
+        return "new"
+    if meta.get("status") == "complete" and (Path(run_dir) / "results.json").is_file():
+        return "complete"
+    return "resumable" if isinstance(meta.get("run_id"), str) else "new"
+
+
 def state_path(run_dir: Path, column: str, seed: int) -> Path:
     """Where the training state of ``column`` (seed ``seed``) is kept while it is unfinished."""
     return Path(run_dir) / STATE_DIR / f"{column}_seed{seed}.npz"

@@ -10,15 +10,14 @@ one is kept, an interrupted one resumed, so the command can be stopped and run a
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Callable
 
 from atlasnn.errors import ConfigError
+from atlasnn.fileio import parse_toml, write_text
 from atlasnn.experiments._runner import resume_experiment, run_experiment
-from atlasnn.experiments._store import write_json
+from atlasnn.experiments._store import run_state, write_json
 from atlasnn.experiments.config import builtin_config_path, builtin_experiments, load_config
-from atlasnn.fileio import write_text
 from atlasnn.report import suite_markdown, suite_summary
 
 __all__ = ["SUITE_PROFILES", "suite_members", "run_suite"]
@@ -36,14 +35,6 @@ def suite_members(name: str) -> list[str]:
     return members
 
 
-def _status(run_dir: Path) -> str:
-    try:
-        meta = json.loads((run_dir / "meta.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return "new"
-    return "complete" if meta.get("status") == "complete" and (run_dir / "results.json").is_file() else "resumable"
-
-
 def run_suite(name: str, out: str | Path | None = None, *, seeds: tuple[int, ...] | None = None, jobs: int = 1,
               quick: bool = False, only: list[str] | None = None, progress: bool = False,
               log: Callable[[str], None] = print) -> Path:
@@ -59,12 +50,13 @@ def run_suite(name: str, out: str | Path | None = None, *, seeds: tuple[int, ...
     dirs = []
     for exp in members:
         path = builtin_config_path(exp)
-        profiles = [None] + [p for p in SUITE_PROFILES if p in (load_config(path).raw.get("profiles") or {})]
+        listed = parse_toml(path.read_text(encoding="utf-8"), str(path)).get("profiles") or {}
+        profiles = [None] + [p for p in SUITE_PROFILES if p in listed]
         for profile in profiles:
             cfg = load_config(path, quick=quick, profile=profile)
             run_dir = out / exp / (profile or "default")
             dirs.append(run_dir)
-            state = _status(run_dir)
+            state = run_state(run_dir)
             if state == "complete":
                 log(f"suite {name}: {exp} ({profile or 'default'}): complete, kept")
                 continue

@@ -49,7 +49,7 @@ from atlasnn.evaluation import TrainingRecord
 from atlasnn.experiments._executor import Executor
 from atlasnn.experiments._executors import open_executor
 from atlasnn.experiments._runner import resume_experiment, run_experiment
-from atlasnn.experiments._store import RunLock, check_run_dir, one_line, write_json
+from atlasnn.experiments._store import RunLock, check_run_dir, one_line, run_state, write_json
 from atlasnn.experiments.config import ExperimentConfig, apply_profile, parse_config
 from atlasnn.report import format_number, plot_sweep
 
@@ -194,19 +194,6 @@ def plan_points(data: dict, axes: list[Axis], quick: bool, source: str) -> list[
 
 
 # ------------------------------------------------------------------------ running
-def _point_state(pdir: Path) -> str:
-    """``complete``, ``resumable`` (a run was started there) or ``new``."""
-    try:
-        meta = json.loads((pdir / "meta.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return "new"
-    if not isinstance(meta, dict):
-        return "new"
-    if meta.get("status") == "complete" and (pdir / "results.json").is_file():
-        return "complete"
-    return "resumable" if isinstance(meta.get("run_id"), str) else "new"
-
-
 class _Sweep:
     """A sweep while it runs: its directory, its record (sweep.json) and its executor."""
 
@@ -226,7 +213,7 @@ class _Sweep:
 
     def run_point(self, point: dict) -> None:
         pdir = self.out / point["dir"]
-        state = _point_state(pdir)
+        state = run_state(pdir)
         if state == "complete":
             self.log(f"sweep: {point['name']}: complete, skipped")
             return
@@ -363,7 +350,7 @@ def resume_sweep(out: str | Path, *, config: str | Path | None = None, sets: lis
             sweep = _Sweep(out, spec, executor=executor,
                            seed_batch=seed_batch if seed_batch is not None else spec.get("seed_batch", "auto"),
                            progress=progress, log=log)
-            done = sum(_point_state(out / p["dir"]) == "complete" for p in spec["points"])
+            done = sum(run_state(out / p["dir"]) == "complete" for p in spec["points"])
             log(f"sweep: resuming {out}: {done} of {len(spec['points'])} point(s) complete")
             return out, sweep.go()
         finally:

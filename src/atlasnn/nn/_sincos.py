@@ -100,13 +100,14 @@ def sin_cos(x: jax.Array) -> tuple[jax.Array, jax.Array]:
     minimax polynomials: absolute error ≤ 5e-8 (XLA's: 3.3e-8), at most 0.8 ulp for |x| ≤ 100
     (XLA's: 0.56), mean 0.25 ulp like XLA's; near the zeros of sin/cos at |x| ≳ 1000 the error in
     ulps of the (tiny) result grows, the absolute error does not. Otherwise (a larger argument
-    anywhere in x, NaN, float64) ``jnp.sin`` and ``jnp.cos``; under ``vmap`` the range test covers
-    the whole batch.
+    anywhere in x, NaN, float64, or a backend other than the CPU) ``jnp.sin`` and ``jnp.cos``;
+    under ``vmap`` the range test covers the whole batch.
     """
     x = jnp.asarray(x)
     if x.dtype != jnp.float32:
         return _sin_cos_xla(x)
-    return _sin_cos_f32(x)
+    # the polynomials pay on a CPU, where XLA's float32 sin/cos are slow; a GPU's are fast
+    return jax.lax.platform_dependent(x, cpu=_sin_cos_f32, default=_sin_cos_xla)
 
 
 @sin_cos.defjvp

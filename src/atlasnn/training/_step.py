@@ -178,7 +178,13 @@ def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, mo
 
     def body(carry, epoch):
         running = (carry[2]["stop"] == 0) & (epoch < settings["budget"])
-        return jax.lax.cond(running, one_epoch, skipped, carry, epoch)
+        # on a CPU a conditional skips the finished epochs' work; elsewhere (a GPU) each
+        # conditional would wait for its predicate on the host, so the epoch is computed and
+        # masked instead (the same values: a finished run keeps its carry either way)
+        return jax.lax.platform_dependent(
+            carry, epoch,
+            cpu=lambda c, e: jax.lax.cond(running, one_epoch, skipped, c, e),
+            default=lambda c, e: _select(running, one_epoch(c, e), skipped(c, e)))
 
     (params, opt_state, track), (loss, res, en, gamma) = jax.lax.scan(
         body, (params, opt_state, track), epochs

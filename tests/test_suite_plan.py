@@ -1,0 +1,34 @@
+"""`atlasnn suite`: every member in its default profile and in ``fixed``; a finished run is kept,
+an interrupted one resumed. The trainings themselves are replaced by stubs here."""
+
+from __future__ import annotations
+
+import json
+
+from atlasnn.experiments import _suite
+from atlasnn.experiments._suite import SUITE_PROFILES, run_suite, suite_members
+
+
+def test_every_member_runs_in_both_profiles_and_finished_runs_are_kept(tmp_path, monkeypatch):
+    started, resumed = [], []
+
+    def fake_run(cfg, run_dir, **kw):
+        started.append((cfg.name, cfg.profile, run_dir.name))
+        run_dir.mkdir(parents=True)
+        (run_dir / "meta.json").write_text(json.dumps({"status": "complete"}))
+        (run_dir / "results.json").write_text("{}")
+
+    monkeypatch.setattr(_suite, "run_experiment", fake_run)
+    monkeypatch.setattr(_suite, "resume_experiment", lambda run_dir, **kw: resumed.append(run_dir.parent.name))
+    monkeypatch.setattr(_suite, "suite_summary", lambda dirs: {"dirs": [str(d) for d in dirs], "problems": []})
+    monkeypatch.setattr(_suite, "suite_markdown", lambda summary: "")
+    members = suite_members("hard")
+    assert "fixed" in SUITE_PROFILES and len(members) == 7
+    run_suite("hard", tmp_path, log=lambda *a: None)
+    assert [(n, d) for n, _, d in started] == [(m, p) for m in members for p in ("default", "fixed")]
+    assert {p for n, p, d in started if d == "fixed"} == {"fixed"}
+    # a second call keeps what is complete and resumes what is not
+    (tmp_path / members[0] / "fixed" / "meta.json").write_text(json.dumps({"status": "interrupted", "run_id": "r1"}))
+    started.clear()
+    run_suite("hard", tmp_path, log=lambda *a: None)
+    assert started == [] and resumed == [members[0]]
