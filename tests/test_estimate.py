@@ -137,3 +137,33 @@ def test_a_march_s_estimate_crosses_the_window_edges():
     keep = np.concatenate([np.diff(est.t) > 0, [True]])  # the reference takes each time once
     true = reference_solution(system, system.z0, est.t[keep]) - est.z[keep]
     assert np.abs(est.delta[keep] - true).max() < 0.05 * np.abs(true).max() + 1e-6  # H is quadratic: exact
+
+
+def test_the_estimate_grid_stays_within_its_memory_budget(monkeypatch):
+    """A solution of many windows whose residual is rough (an untrained network) asks for fine
+    grids; past the budget the grid stays coarser and the estimate says it did not converge,
+    instead of running out of memory (a Kepler e = 0.9 march once took 21 GB here)."""
+    from atlasnn.solutions import _estimate, _linearised
+
+    system = harmonic_oscillator()
+    model = make_model(system.z0, scaling="atlas_exp", width=16, depth=2, first_layer_scale=30.0, seed=0)
+    windows = [(model, float(k), 1.0, 0.0) for k in range(40)]
+    free = _estimate.estimate_error(system, windows)
+    monkeypatch.setattr(_linearised, "ESTIMATE_MEMORY_BYTES", 40 * 160 * 8 * (6 * 4 + 10 * 2))
+    budget = _linearised.max_total_steps(system.state_dim)
+    capped = _estimate.estimate_error(system, windows)
+    assert sum(free.steps) > budget  # the unconstrained grid is larger than the budget
+    assert sum(capped.steps) <= budget + 40 * 128 and not capped.converged
+    assert np.all(np.isfinite(capped.delta))
+
+
+def test_a_fast_window_does_not_refine_a_slow_one():
+    """Bandwidth per window: the long, smooth window keeps a grid for its own residual."""
+    system = harmonic_oscillator()
+    smooth = make_model(system.z0, scaling="atlas_exp", width=8, depth=1, first_layer_scale=0.5, seed=0)
+    rough = make_model(system.z0, scaling="atlas_exp", width=16, depth=2, first_layer_scale=60.0, seed=1)
+    from atlasnn.solutions import estimate_error
+
+    est = estimate_error(system, [(rough, 0.0, 1e-3, 0.0), (smooth, 1e-3, 10.0, 0.0)])
+    alone = estimate_error(system, [(smooth, 0.0, 10.0, 0.0)])
+    assert est.steps[1] <= 2 * alone.steps[0]

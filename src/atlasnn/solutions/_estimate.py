@@ -12,8 +12,10 @@ How the solution is sampled: every window network on its own local time, both si
 window edge, and in float64 — the trained weights cast to float64, the same function up to
 float32 rounding (≲ 1e-6), but its dẑ/dt then carries no float32 bias, which the flow can
 amplify (an 8 % under-estimate on a pendulum near its separatrix when sampled in float32).
-The grid: ``steps_for`` per window, raised to the residual's bandwidth after a first pass, then
-doubled until max‖δ‖ moves by less than 1 %.
+The grid: ``steps_for`` per window, raised to that window's residual bandwidth after a first
+pass, then doubled until max‖δ‖ moves by less than 1 % — within a memory budget
+(:func:`~._linearised.max_total_steps`, 1 GiB; 65 536 steps a window at most): a grid that would
+need more stays coarser and the estimate says it did not converge.
 """
 
 from __future__ import annotations
@@ -27,7 +29,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.nn import TrialSolution
-from atlasnn.solutions._linearised import propagate, residual_and_jacobian, residual_bandwidth, steps_for
+from atlasnn.solutions._linearised import (
+    MAX_STEPS_PER_WINDOW,
+    MIN_STEPS_PER_WINDOW,
+    max_total_steps,
+    propagate,
+    residual_and_jacobian,
+    segment_bandwidths,
+    steps_for,
+)
 
 __all__ = ["ErrorEstimate", "estimate_error", "TRUST_FRACTION", "state_range"]
 
@@ -148,6 +158,7 @@ def estimate_error(system: Any, windows: list[tuple[TrialSolution, float, float,
         steps: RK4 steps per window (default: the grid rule, then doubling, see the module docstring).
     """
     n = [steps or steps_for(length) for _, _, length, _ in windows]
+    budget = max_total_steps(int(system.state_dim))
     history, est, omega_c, converged = [], None, None, False
     for _ in range(max_doublings + 2):
         t, z, dz = _sample(windows, n)
@@ -156,8 +167,9 @@ def estimate_error(system: Any, windows: list[tuple[TrialSolution, float, float,
             delta = np.full_like(z, np.inf)
             return ErrorEstimate(t[::2], delta[::2], z[::2], n, False, float("nan"))
         if omega_c is None and steps is None:
-            omega_c = residual_bandwidth(t, r)
-            needed = [max(k, steps_for(length, omega_c)) for k, (_, _, length, _) in zip(n, windows)]
+            bands = segment_bandwidths(t, r)  # per window: a fast window must not refine a slow one
+            omega_c = max(bands, default=0.0)
+            needed = _within(budget, [max(k, steps_for(length, w)) for k, (_, _, length, _), w in zip(n, windows, bands)])
             if needed != n:  # the first guess was too coarse for this residual
                 n = needed
                 continue
@@ -170,7 +182,15 @@ def estimate_error(system: Any, windows: list[tuple[TrialSolution, float, float,
             return ErrorEstimate(tn, delta, z[idx], list(n), True, float(omega_c or 0.0))
         history.append(peak)
         est = new
-        if steps is not None or len(history) > max_doublings:
-            break
-        n = [2 * k for k in n]
+        if steps is not None or len(history) > max_doublings or 2 * sum(n) > budget:
+            break  # (past the memory budget the grid stays as it is: not converged)
+        n = [min(2 * k, MAX_STEPS_PER_WINDOW) for k in n]
     return ErrorEstimate(est.t, est.delta, est.z, est.steps, converged, est.omega_c)
+
+
+def _within(budget: int, steps: list[int]) -> list[int]:
+    """``steps`` scaled down to at most ``budget`` in all (never below the grid rule's minimum)."""
+    total = sum(steps)
+    if total <= budget:
+        return steps
+    return [max(MIN_STEPS_PER_WINDOW, int(k * budget / total)) for k in steps]

@@ -29,7 +29,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["residual_and_jacobian", "propagate", "segments", "steps_for", "residual_bandwidth", "dense_grid"]
+__all__ = ["residual_and_jacobian", "propagate", "segments", "steps_for", "residual_bandwidth", "segment_bandwidths",
+           "dense_grid", "MAX_STEPS_PER_WINDOW", "ESTIMATE_MEMORY_BYTES", "max_total_steps"]
 
 
 @functools.lru_cache(maxsize=64)
@@ -149,37 +150,53 @@ def propagate(t: Any, A: Any, r: Any, *, jumps: Any = None, y0: Any = None):
 STEPS_PER_UNIT_TIME = 64
 STEP_TIMES_OMEGA = 0.5
 MIN_STEPS_PER_WINDOW = 128
+#: the most RK4 steps of one window, and the memory all windows' steps may take together (the
+#: samples, Jacobians and step maps of the grid, float64): a grid that would need more is left
+#: coarser and the estimate marked not converged, instead of running out of memory
+MAX_STEPS_PER_WINDOW = 1 << 16
+ESTIMATE_MEMORY_BYTES = 1 << 30
+
+
+def max_total_steps(state_dim: int) -> int:
+    """The most RK4 steps of a whole grid for a state of ``state_dim`` components (about 6
+    (2d)²-matrices and 10 vectors of float64 per step), from :data:`ESTIMATE_MEMORY_BYTES`."""
+    return max(MIN_STEPS_PER_WINDOW, ESTIMATE_MEMORY_BYTES // (8 * (6 * state_dim**2 + 10 * state_dim)))
 
 
 def steps_for(length: float, omega_c: float | None = None) -> int:
     """RK4 steps for a window: max(128, ⌈64·length⌉, ⌈length·ω_c/0.5⌉), ω_c the residual's bandwidth
-    if known. Measured on trained sin networks: h·ω_c = 0.5 leaves a relative quadrature error
-    ≤ 3e-4 in δ, h·ω_c = 1 about 5e-3."""
+    if known, at most :data:`MAX_STEPS_PER_WINDOW`. Measured on trained sin networks: h·ω_c = 0.5
+    leaves a relative quadrature error ≤ 3e-4 in δ, h·ω_c = 1 about 5e-3."""
     n = max(MIN_STEPS_PER_WINDOW, math.ceil(STEPS_PER_UNIT_TIME * float(length)))
     if omega_c is not None and omega_c > 0:
         n = max(n, math.ceil(float(length) * float(omega_c) / STEP_TIMES_OMEGA))
-    return int(n)
+    return int(min(n, MAX_STEPS_PER_WINDOW))
 
 
-def residual_bandwidth(t: Any, r: Any, quantile: float = 0.9999) -> float:
-    """ω_c: the angular frequency below which ``quantile`` of the residual's energy lies, the
-    largest over the segments (each uniformly sampled). The Hann taper matters: a window's
-    residual is not periodic, and untapered the jump between its ends leaks power everywhere."""
+def segment_bandwidths(t: Any, r: Any, quantile: float = 0.9999) -> list[float]:
+    """Per segment (window) of a uniformly sampled grid, ω_c: the angular frequency below which
+    ``quantile`` of the residual's energy lies (0 where it cannot be told). The Hann taper
+    matters: a window's residual is not periodic, and untapered the jump between its ends leaks
+    power everywhere."""
     t = np.asarray(t, dtype=np.float64)
     r = np.asarray(r, dtype=np.float64)
-    best = 0.0
+    out = []
     for a, b in segments(t):
         n = b - a
-        if n < 8:
-            continue
         rk = r[a:b] - r[a:b].mean(0)
-        power = (np.abs(np.fft.rfft(rk * np.hanning(n)[:, None], axis=0)) ** 2).sum(1)
+        power = (np.abs(np.fft.rfft(rk * np.hanning(n)[:, None], axis=0)) ** 2).sum(1) if n >= 8 else np.zeros(1)
         if not power.sum() > 0 or not np.isfinite(power.sum()):
+            out.append(0.0)
             continue
         omega = 2 * np.pi * np.fft.rfftfreq(n, d=(t[b - 1] - t[a]) / (n - 1))
         share = np.cumsum(power) / power.sum()
-        best = max(best, float(omega[min(np.searchsorted(share, quantile), omega.size - 1)]))
-    return best
+        out.append(float(omega[min(np.searchsorted(share, quantile), omega.size - 1)]))
+    return out
+
+
+def residual_bandwidth(t: Any, r: Any, quantile: float = 0.9999) -> float:
+    """ω_c of the whole grid: the largest of :func:`segment_bandwidths`."""
+    return max(segment_bandwidths(t, r, quantile), default=0.0)
 
 
 def dense_grid(edges: Any, steps: int | list[int]) -> np.ndarray:
