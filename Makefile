@@ -3,7 +3,7 @@ PY ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: quick test reproduce-all reproduce-release reproduction-doc suite suite-doc bench clean-venv
+.PHONY: quick test reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc bench clean-venv
 
 $(BIN)/atlasnn: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -30,6 +30,22 @@ reproduce-all: $(BIN)/atlasnn
 reproduce-release: $(BIN)/atlasnn
 	$(BIN)/python scripts/timed.py runs/release/timing.json -- $(foreach e,$(PAPER),\
 	  "$(BIN)/atlasnn reproduce $(e) --profile release --seeds $(SEEDS) --jobs $(JOBS) --out runs/release/$(e) --overwrite --no-progress")
+
+# The two long-time experiments (time-marching against the paper's transfer and the classical
+# integrators), 5 seeds; `make long-doc` rewrites only their parts of docs/REPRODUCTION*.md.
+LONG := oscillator-long henon-heiles-long
+
+reproduce-long: $(BIN)/atlasnn
+	$(BIN)/python scripts/timed.py runs/paper/long-timing.json -- $(foreach e,$(LONG),\
+	  "$(BIN)/atlasnn reproduce $(e) --seeds $(SEEDS) --jobs $(JOBS) --out runs/paper/$(e) --overwrite --no-progress")
+
+long-doc: $(BIN)/atlasnn
+	$(BIN)/python scripts/reproduction_doc.py --long-only $(foreach e,$(LONG),runs/paper/$(e))
+
+# The estimate and verdict against the true error over the paper's experiments (after
+# reproduce-all and reproduce-long): only that section of docs/REPRODUCTION.md.
+estimate-doc: $(BIN)/atlasnn
+	$(BIN)/python scripts/reproduction_doc.py --estimate-only $(foreach e,$(PAPER) $(LONG),runs/paper/$(e))
 
 reproduction-doc: $(BIN)/atlasnn
 	$(BIN)/python scripts/reproduction_doc.py $(foreach e,$(PAPER),runs/paper/$(e) runs/release/$(e)) runs/paper/oscillator-long runs/paper/henon-heiles-long

@@ -7,10 +7,10 @@ run the library's L-BFGS polish and its Levenberg–Marquardt phase (float32, an
 back). Error = max over 2 001 times and the components of |ẑ − z_ref| / the state's range.
 Seconds are the phases' own wall times, compilation excluded (reported apart).
 
-    XLA_FLAGS="--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1" \\
+    taskset -c 0 env XLA_FLAGS=--xla_cpu_multi_thread_eigen=false \\
         python -m benchmarks.window_optimisers [--seeds 3] [--out docs/benchmarks/window_optimisers.json]
 
-(one thread: the timings of a shared machine are otherwise dominated by XLA's thread pool
+(one core, pinned: the timings of a shared machine are otherwise dominated by XLA's thread pool
 waiting for a busy core; see docs/PERFORMANCE.md). About 5 minutes.
 """
 

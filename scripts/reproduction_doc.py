@@ -193,14 +193,102 @@ def replace_generated(text: str, name: str, body: str) -> str:
         raise SystemExit(str(exc)) from None
 
 
+def update_long(runs: list[Path], docs: Path) -> None:
+    """Rewrite only what the long-time runs make: their sections of REPRODUCTION_RESULTS.md (in
+    place) and the ``long`` section of REPRODUCTION.md."""
+    results_page = docs / "REPRODUCTION_RESULTS.md"
+    text = results_page.read_text(encoding="utf-8")
+    by_exp: dict[str, dict[str, dict]] = {}
+    for run in runs:
+        res = json.loads((run / "results.json").read_text())
+        if not res.get("work_precision"):
+            raise SystemExit(f"{run}: not a long-time run (no work-precision record); drop --long-only")
+        new = section(run, docs)
+        head = new.splitlines()[0]
+        start = text.find(head + "\n")
+        if start < 0:
+            text = text.rstrip("\n") + "\n\n" + new
+        else:
+            end = text.find("\n## ", start + len(head))
+            text = text[:start] + new.rstrip("\n") + "\n" + (text[end:] if end >= 0 else "")
+        by_exp.setdefault(res["experiment"], {})[_profile(run, res)] = res
+    results_page.write_text(text, encoding="utf-8")
+    doc = docs / "REPRODUCTION.md"
+    text = replace_generated(doc.read_text(encoding="utf-8"), "long", long_time(by_exp))
+    for row in headline(by_exp).splitlines()[2:]:  # the long experiments' rows of the headline table
+        start = row[: row.index("|", row.index("|", 1) + 1) + 1]  # "| name | profile |"
+        lines = text.splitlines()
+        hits = [i for i, line in enumerate(lines) if line.startswith(start)]
+        if len(hits) != 1:
+            raise SystemExit(f"{doc}: expected one headline row starting {start!r}, found {len(hits)}")
+        lines[hits[0]] = row
+        text = "\n".join(lines) + "\n"
+    doc.write_text(text, encoding="utf-8")
+    print(f"updated the long-time sections of {results_page} and {doc} (and their headline rows)")
+
+
+def estimate_table(runs: list[Path], docs: Path) -> str:
+    """The error estimate and the verdict on the paper's experiments: per experiment and column,
+    the true max error / range (worst, median), the estimate's worst, its effectivity range, the
+    verdicts, and the verdict's false ok (> 5 % of the range) and false alarms (< 1e-3). Runs that
+    are not long-time ones are copied to docs/runs/estimate/EXPERIMENT/ (results.json, meta.json)."""
+    from atlasnn.report import suite_summary
+
+    for run in runs:
+        res = json.loads((run / "results.json").read_text())
+        if not res.get("work_precision"):
+            dest = docs / "runs" / "estimate" / res["experiment"]
+            dest.mkdir(parents=True, exist_ok=True)
+            for name in ("results.json", "meta.json"):
+                shutil.copyfile(run / name, dest / name)
+    summary = suite_summary(runs)
+    rows = ["| experiment | model | worst max err/range | median | estimate, worst | effectivity | verdicts "
+            "| false ok / false alarm |", "|---|---|---|---|---|---|---|---|"]
+    effs: list[float] = []
+    for p in summary["problems"]:
+        for r in p["rows"]:
+            eff = [e for e, t in zip(r["effectivity"], r["relative_max"]) if e is not None and t is not None and t > 1e-5]
+            effs += eff
+            span = f"{_ratio(min(eff))}–{_ratio(max(eff))}" if eff else "n/a"
+            verdicts = ", ".join(f"{k} {v}" for k, v in r["verdicts"].items())
+            rows.append(f"| {p['experiment']} | {r['label']} | {_num(r['worst'])} | {_num(r['median'])} | "
+                        f"{_num(r['estimate_worst'])} | {span} | {verdicts} | {r['false_ok']} / {r['false_alarm']} |")
+    t = summary["totals"]
+    rows += ["", f"{t['trainings']} trainings; judged ok with a true error above 5 % of the range: {t['false_ok']}; "
+             f"judged suspect or failed with one below 1e-3: {t['false_alarm']}; effectivity where the true error "
+             f"exceeds 1e-5 of the range: {min(effs):.3g}–{max(effs):.3g}." if effs else ""]
+    return "\n".join(rows)
+
+
+def _ratio(v: float) -> str:
+    """An effectivity: two decimals near 1, a power of ten where the estimate is only a flag."""
+    return f"{v:.2f}" if 1e-2 <= v < 100 else f"{v:.1e}"
+
+
+def _num(v) -> str:
+    return "n/a" if v is None else format_number(v)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", type=Path)
     ap.add_argument("--docs", type=Path, default=Path("docs"))
+    ap.add_argument("--long-only", action="store_true", help="the runs given are the long-time experiments: "
+                    "replace their sections of REPRODUCTION_RESULTS.md and the long-time section of "
+                    "REPRODUCTION.md, nothing else")
+    ap.add_argument("--estimate-only", action="store_true", help="write only the estimate section of "
+                    "REPRODUCTION.md (the error estimate and the verdict against the true error) from the runs given")
     args = ap.parse_args()
     args.runs = [r for r in args.runs if (r / "results.json").is_file()]  # `runs/paper/*` also matches timing.json
     if not args.runs:
         raise SystemExit("no run directory with a results.json among the paths given")
+    if args.long_only:
+        return update_long(args.runs, args.docs)
+    if args.estimate_only:
+        doc = args.docs / "REPRODUCTION.md"
+        doc.write_text(replace_generated(doc.read_text(encoding="utf-8"), "estimate",
+                                         estimate_table(args.runs, args.docs)), encoding="utf-8")
+        return print(f"updated the estimate section of {doc}")
     by_exp: dict[str, dict[str, dict]] = {}
     dirs: dict[str, list[Path]] = {}
     parts = ["# Reproduction results (generated)", "",

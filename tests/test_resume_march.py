@@ -8,7 +8,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 import tomllib
 from pathlib import Path
@@ -21,6 +20,8 @@ from atlasnn.checkpoint import load_march_progress, load_piecewise
 from atlasnn.experiments import RunInterrupted, resume_experiment, run_experiment
 from atlasnn.experiments import _schemes as schemes
 from atlasnn.experiments.config import parse_config
+
+from test_signals_stages import ATLASNN
 
 MARCH = """\
 name = "resume-march"
@@ -105,8 +106,8 @@ def test_a_march_interrupted_in_window_k_resumes_at_window_k(tmp_path, monkeypat
 
 
 def _atlasnn(args, env, **kw):
-    return subprocess.Popen([sys.executable, "-m", "atlasnn.cli._main", *args], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, **kw)
+    return subprocess.Popen([*ATLASNN, *args], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, **kw)
 
 
 def test_sigint_during_a_march_with_two_jobs_then_resume(tmp_path):

@@ -41,10 +41,18 @@ fine_factor = 20
 LIMIT_S = 15.0  # from the signal to the exit, on a loaded 2-core machine
 
 
+#: the command line of a child ``atlasnn`` with SIGINT at Python's usual handler. A test session
+#: started in the background (`... &`) has SIGINT ignored, a child inherits that, and a run rightly
+#: leaves an ignored signal ignored; these tests send SIGINT as a terminal would. (Set in the child
+#: itself: a ``preexec_fn`` would fork this multithreaded process.)
+ATLASNN = [sys.executable, "-c", "import runpy, signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
+           "runpy.run_module('atlasnn.cli._main', run_name='__main__', alter_sys=True)"]
+
+
 def _start(args, cwd):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.Popen([sys.executable, "-m", "atlasnn.cli._main", *args], cwd=cwd, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    return subprocess.Popen([*ATLASNN, *args], cwd=cwd, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
 
 
 def _signal_after(proc, marker: str, timeout: float = 300.0) -> tuple[str, float]:

@@ -17,8 +17,10 @@ from atlasnn.evaluation._integrators import (
 )
 from atlasnn.evaluation._measure import error_metrics, measure_solution
 from atlasnn.evaluation._metrics import (
+    BLOW_UP_FACTOR,
     METRICS,
     Metric,
+    blow_up_index,
     drift_denominator,
     energy_drift,
     error_table,
@@ -51,6 +53,8 @@ from atlasnn.evaluation._record import TABLE_ROLES, MarchSummary, TrainingRecord
 from atlasnn.evaluation._workprecision import SYMPLECTIC, WorkPoint
 
 __all__ = [
+    "blow_up_index",
+    "BLOW_UP_FACTOR",
     "symplectic_euler",
     "stormer_verlet",
     "yoshida4",

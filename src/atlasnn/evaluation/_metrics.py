@@ -27,6 +27,8 @@ from scipy.interpolate import CubicSpline
 from atlasnn.errors import ConfigError
 
 __all__ = [
+    "blow_up_index",
+    "BLOW_UP_FACTOR",
     "Metric",
     "METRICS",
     "register_metric",
@@ -340,3 +342,21 @@ def error_table(
     components = {n: {m: float(per[m][j]) for m in names_m} for j, n in enumerate(names)}
     whole = {m: float(METRICS[m].compute(t, pred, ref, True)) for m in names_m}
     return {"components": components, "whole": whole, "n_points": int(pred.shape[0])}
+
+
+#: a trajectory has blown up once it is this many state ranges away from the reference
+BLOW_UP_FACTOR = 100.0
+
+
+def blow_up_index(z: Any, z_ref: Any, factor: float = BLOW_UP_FACTOR) -> int | None:
+    """The first index where ``z`` is not finite or is more than ``factor`` × the reference's
+    range away from it (an unstable integrator: drawn up to there, its errors reported n/a), or
+    None when it never is."""
+    z = np.asarray(z, dtype=np.float64)
+    z_ref = np.asarray(z_ref, dtype=np.float64)
+    span = float((z_ref.max(0) - z_ref.min(0)).max()) if z_ref.size else 0.0
+    limit = factor * max(span, float(np.abs(z_ref).max(initial=0.0)), 1e-300)
+    with np.errstate(invalid="ignore", over="ignore"):
+        bad = ~np.all(np.isfinite(z), axis=1) | (np.abs(z - z_ref).max(axis=1) > limit)
+    hits = np.nonzero(bad)[0]
+    return int(hits[0]) if hits.size else None

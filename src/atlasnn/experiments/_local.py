@@ -51,26 +51,38 @@ def _stop_workers(pool: cf.ProcessPoolExecutor) -> None:
             pass
 
 
-#: XLA flags of a worker process: one core each (XLA's own thread pool, set to every core, fights
-#: the other workers for them: measured, a float64 Cholesky of 300 rows took 0.6 ms alone and
-#: 0.3–0.5 s while another process kept a core busy; see docs/PERFORMANCE.md)
-WORKER_XLA_FLAGS = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+#: XLA flags of a worker process: Eigen's thread pool off (set to every core, it fights the other
+#: workers for them: measured, a float64 Cholesky of 300 rows took 0.6 ms alone and 0.3–0.5 s
+#: while another process kept a core busy; see docs/PERFORMANCE.md). Only flags that start with
+#: "--": XLA stops reading XLA_FLAGS at the first word that does not (docs/REPRODUCTION.md,
+#: "What a rerun reproduces").
+WORKER_XLA_FLAGS = "--xla_cpu_multi_thread_eigen=false"
+
+#: BLAS/LAPACK threads of a worker process (jaxlib's CPU Cholesky and other LAPACK kernels call
+#: SciPy's OpenBLAS, whose threads spin-wait): one. Unset, each worker's OpenBLAS spun on every
+#: core while the other worker computed: a time-marching seed of oscillator-long took 141–245 s in
+#: one of two workers against 5–8 s with this (docs/PERFORMANCE.md, "Worker processes"). A value
+#: the user set is kept.
+WORKER_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
 def _run_processes(tasks: Sequence[Task], work: Work, on_done: OnDone, jobs: int) -> None:
     """Tasks in ``jobs`` local worker processes (spawned: a fresh JAX in each, one thread each)."""
     ctx = multiprocessing.get_context("spawn")
-    before = os.environ.get("XLA_FLAGS")
-    os.environ["XLA_FLAGS"] = f"{before or ''} {WORKER_XLA_FLAGS}".strip()  # the workers inherit it
+    before = {k: os.environ.get(k) for k in ("XLA_FLAGS", *WORKER_THREAD_ENV)}
+    os.environ["XLA_FLAGS"] = f"{before['XLA_FLAGS'] or ''} {WORKER_XLA_FLAGS}".strip()  # the workers inherit it
+    for key, value in WORKER_THREAD_ENV.items():
+        os.environ.setdefault(key, value)
     try:
         pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_worker_init)
         for _ in range(jobs):  # start them now, while the environment says so
             pool.submit(int)
     finally:
-        if before is None:
-            os.environ.pop("XLA_FLAGS", None)
-        else:
-            os.environ["XLA_FLAGS"] = before
+        for key, value in before.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
     futures: dict[Any, Task] = {}
     try:
         for task in tasks:
@@ -117,4 +129,5 @@ class LocalExecutor(Executor):
 
     def record(self) -> dict[str, Any]:
         return {"jobs": self.jobs, "scheduler": None, "xla_flags": os.environ.get("XLA_FLAGS") or None,
-                "worker_xla_flags": WORKER_XLA_FLAGS if self.jobs > 1 else None}
+                "worker_xla_flags": WORKER_XLA_FLAGS if self.jobs > 1 else None,
+                "worker_threads": {k: os.environ.get(k, v) for k, v in WORKER_THREAD_ENV.items()} if self.jobs > 1 else None}

@@ -11,7 +11,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from atlasnn.evaluation import TrainingRecord, error_metrics, integrate, reference_solution, workprecision as wp
+from atlasnn.evaluation import TrainingRecord, blow_up_index, error_metrics, integrate, reference_solution, workprecision as wp
 from atlasnn.checkpoint import load_checkpoint, load_piecewise
 from atlasnn.experiments.config import ExperimentConfig
 from atlasnn.experiments._plan import eval_grid
@@ -36,6 +36,13 @@ def reference_grids(cfg: ExperimentConfig, system, z0: np.ndarray) -> dict[str, 
     return grids
 
 
+def _quiet_metrics(t, z, z_ref, names, energy, e0) -> dict:
+    """error_metrics without NumPy's overflow warnings: a blown-up integrator's errors are inf or
+    NaN by design (reported n/a, with the time it blew up)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return error_metrics(t, z, z_ref, names, energy, e0)
+
+
 def integrator_rows(cfg: ExperimentConfig, system, z0: np.ndarray, e0: float,
                     log: Callable[[str], None]) -> tuple[list[dict], dict[str, np.ndarray]]:
     """The classical integrators of the table: SE with K − 1 steps, the fine SE, and any extra
@@ -58,8 +65,13 @@ def integrator_rows(cfg: ExperimentConfig, system, z0: np.ndarray, e0: float,
         z_ref = reference_solution(system, z0, t, rtol=ev.reference_rtol, atol=ev.reference_atol)
         energy = system.energy64(z)
         label = "SE" if column == "se" else (f"SE-{ev.fine_factor}" if column.startswith("se_") else column)
-        rows.append({"column": column, "label": label, "method": method, "steps": n,
-                     "metrics": error_metrics(t, z, z_ref, names, energy, e0)})
+        bad = blow_up_index(z, z_ref)
+        blew_up = None if bad is None else float(t[bad])
+        if blew_up is not None:
+            log(f"{label} ({method}, {n} steps) blew up at t = {blew_up:.4g}: its step {(st.T - st.t0) / n:.3g} is "
+                "too large for this system (more steps: evaluation.se_steps)")
+        rows.append({"column": column, "label": label, "method": method, "steps": n, "blew_up_at": blew_up,
+                     "metrics": _quiet_metrics(t, z, z_ref, names, energy, e0)})
         arrays.update({f"int_t_{column}": t, f"int_z_{column}": z, f"int_zref_{column}": z_ref,
                        f"int_energy_{column}": energy})
     return rows, arrays
@@ -81,7 +93,8 @@ def work_precision(cfg: ExperimentConfig, system, z0: np.ndarray, grids: dict[st
     records = [TrainingRecord.from_dict(r) for r in runs]
     source_wall = {(r.model, r.seed): r.wall_time for r in records if r.role == "source"}
     for r in (r for r in records if r.in_table):
-        wall = r.wall_time + source_wall.get((r.model, r.seed), 0.0)  # a transfer's cost: source and target
+        # a transfer's cost: its source and its target (a time-marched or baseline column has no source)
+        wall = r.wall_time + (source_wall.get((r.model, r.seed), 0.0) if r.role == "target" else 0.0)
         points.append(wp.WorkPoint(r.label, f"seed {r.seed}", wall, max(r.metric("max_abs", n) for n in names),
                                    r.metric("l2_discrete", names[0]), r.metric("energy_drift"), kind="network"))
         if r.label not in evaluation:

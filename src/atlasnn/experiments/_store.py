@@ -72,8 +72,20 @@ def versions() -> dict[str, str]:
         "atlasnn": __version__, "jax": jax.__version__, "jaxlib": jaxlib.__version__,
         "equinox": equinox.__version__, "optax": optax.__version__, "numpy": np.__version__,
         "scipy": scipy.__version__, "python": platform.python_version(), "platform": platform.platform(),
-        "backend": jax.default_backend(),
+        "backend": jax.default_backend(), "cpu": cpu_model(), "cpu_count": str(os.cpu_count()),
     }
+
+
+def cpu_model() -> str:
+    """The CPU's model name (what XLA's and YNNPACK's kernels are chosen for), or the machine type."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
 
 
 # ------------------------------------------------------------------------- the lock

@@ -15,7 +15,7 @@ import numpy as np
 
 from atlasnn.checkpoint import load_checkpoint, load_piecewise
 from atlasnn.errors import AtlasError, CheckpointError
-from atlasnn.evaluation import TrainingRecord, WorkPoint
+from atlasnn.evaluation import TrainingRecord, WorkPoint, blow_up_index
 from atlasnn.report import _plots as plots
 from atlasnn.report._caveats import QUICK_BANNER, column_verdicts, figure_title, is_quick, verdict_detail, verdict_status_text
 from atlasnn.report._plotkit import Series
@@ -126,8 +126,8 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
     for ir in results.get("integrators", []):
         c = ir["column"]
         if f"int_t_{c}" in arrays:
-            series.append(Series(ir["label"], arrays[f"int_t_{c}"], arrays[f"int_z_{c}"],
-                                       arrays[f"int_zref_{c}"], arrays[f"int_energy_{c}"]))
+            series.append(_integrator_series(ir["label"], arrays[f"int_t_{c}"], arrays[f"int_z_{c}"],
+                                             arrays[f"int_zref_{c}"], arrays[f"int_energy_{c}"]))
     edges = {r.column: r.march.edges for r in runs if r.seed == seed0 and r.march is not None and r.march.edges}
     for c in table_cols:
         key = f"pred_{c}_seed{seed0}"
@@ -165,6 +165,17 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
     return written
 
 
+def _integrator_series(label: str, t, z, z_ref, energy) -> Series:
+    """An integrator's series, cut where it blows up (:func:`~atlasnn.evaluation.blow_up_index`)
+    and labelled so: an unstable method is drawn while it means something, and its 1e173 values
+    do not squash every other curve."""
+    bad = blow_up_index(z, z_ref)
+    if bad is None:
+        return Series(label, t, z, z_ref, energy)
+    keep = max(bad, 2)
+    return Series(f"{label} (blew up at t = {float(t[bad]):.3g})", t[:keep], z[:keep], z_ref[:keep], energy[:keep])
+
+
 def _shown(results: dict) -> dict:
     """``results`` without the columns that hold nothing to show: the symplectic-Euler column of a
     non-separable system is planned but never run (no integrator row, no training runs)."""
@@ -181,7 +192,8 @@ def write_report(run_dir: str | Path) -> list[Path]:
     """Tables and figures of a finished run directory; returns the paths written."""
     run_dir = Path(run_dir)
     results = _shown(load_results(run_dir))
-    return list(write_tables(results, run_dir)) + write_figures(run_dir, results)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflowed integrator is drawn where finite
+        return list(write_tables(results, run_dir)) + write_figures(run_dir, results)
 
 
 #: the printed summary is laid out for terminals of this width
@@ -289,8 +301,11 @@ def summary_lines(results: dict | str | Path, run_dir: str | Path | None = None)
         return text.rstrip()
 
     lines.append(row("model", heads, paper_head, "verdict"))
+    blew_up = {e.get("column"): e.get("blew_up_at") for e in results.get("integrators", [])}
     for c in cols:
         lines.append(row(label[c], cells[c], paper[c], status[c]))
+        if blew_up.get(c) is not None:
+            lines.append(f"    ↳ blew up at t = {blew_up[c]:.4g} (step too large for this system): n/a = not finite")
         detail = verdict_detail(verdicts[c], max_notes=2, advice=False) if c in verdicts else ""
         if detail:
             text = f"    ↳ {detail}"

@@ -333,7 +333,8 @@ def summarize(results: Any) -> dict:
         "labels": labels,
         "models": models,
         "integrators": [
-            {"column": e.get("column"), "method": e.get("method"), "steps": e.get("steps")} for e in integ
+            {"column": e.get("column"), "method": e.get("method"), "steps": e.get("steps"),
+             "blew_up_at": e.get("blew_up_at")} for e in integ
         ],
         "state_metrics": state_metrics,
         "scalar_metrics": scalar_metrics,

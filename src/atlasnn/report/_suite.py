@@ -106,6 +106,11 @@ def _cell(v: float | None) -> str:
     return "n/a" if v is None else format_number(v)
 
 
+def _ratio(v: float) -> str:
+    """An effectivity: two decimals near 1, powers of ten where the estimate is a flag, not a measure."""
+    return f"{v:.2f}" if 1e-2 <= v < 100 else f"{v:.1e}"
+
+
 def suite_markdown(summary: dict[str, Any]) -> str:
     """The summary as Markdown: one table per problem, a row per scheme."""
     lines = []
@@ -115,7 +120,7 @@ def suite_markdown(summary: dict[str, Any]) -> str:
         lines += [f"### {p['experiment']}", "", p["description"], "", head, "|" + "---|" * 9]
         for r in p["rows"]:
             eff = [e for e in r["effectivity"] if e is not None]
-            effs = f"{min(eff):.2f}–{max(eff):.2f}" if eff else "n/a"
+            effs = f"{_ratio(min(eff))}–{_ratio(max(eff))}" if eff else "n/a"
             verdicts = ", ".join(f"{k} {v}" for k, v in r["verdicts"].items())
             win = "" if r["windows"] is None else f"{r['windows']:.0f}" + (f" ({r['rejected']})" if r["rejected"] else "")
             c = r["classical"]

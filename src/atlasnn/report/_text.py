@@ -366,6 +366,9 @@ def _header_lines(summary: dict, paper: dict | None) -> list[str]:
     if summary["integrators"]:
         tol_line += " Integrators: " + "; ".join(
             f"{summary['labels'].get(e['column'], e['column'])} = {e.get('method')} with {e.get('steps')} steps"
+            + ("" if e.get("blew_up_at") is None else
+               f" (blew up at t = {e['blew_up_at']:.4g}: its step is too large for this system; errors past "
+               "that are meaningless, non-finite ones are n/a)")
             for e in summary["integrators"]
         ) + "."
     if summary["kind"] == "transfer":

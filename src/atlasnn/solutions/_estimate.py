@@ -52,6 +52,12 @@ def state_range(z: Any) -> float:
     return float((z.max(0) - z.min(0)).max()) if z.size else 0.0
 
 
+def _norms(delta: np.ndarray) -> np.ndarray:
+    """Row norms of δ, inf without a warning where an exploding estimate overflows (a failed run)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return np.linalg.norm(delta, axis=1)
+
+
 @dataclass(frozen=True)
 class ErrorEstimate:
     """The linearised error estimate of a solution at the nodes of its grid.
@@ -73,8 +79,8 @@ class ErrorEstimate:
 
     @property
     def norm(self) -> np.ndarray:
-        """‖δ(t)‖₂ at the nodes."""
-        return np.linalg.norm(self.delta, axis=1)
+        """‖δ(t)‖₂ at the nodes (inf where it overflows)."""
+        return _norms(self.delta)
 
     @property
     def max_abs(self) -> float:
@@ -177,7 +183,7 @@ def estimate_error(system: Any, windows: list[tuple[TrialSolution, float, float,
         y0 = None if z0 is None else np.asarray(z0, dtype=np.float64).reshape(-1) - z[0]
         tn, delta, idx = propagate(t, A, r, jumps=z[cut + 1] - z[cut], y0=y0)
         new = ErrorEstimate(tn, delta, z[idx], list(n), False, float(omega_c or 0.0))
-        peak = float(np.linalg.norm(delta, axis=1).max())
+        peak = float(_norms(delta).max())
         if history and abs(peak - history[-1]) <= rtol * max(peak, 1e-300):
             return ErrorEstimate(tn, delta, z[idx], list(n), True, float(omega_c or 0.0))
         history.append(peak)
