@@ -9,7 +9,7 @@ What each kind of block must do:
   this process; ``python ...`` and ``.venv/bin/python ...`` in a fresh process. Any other command
   (``make``, ``pip``, shell pipes) cannot run here: its block needs the skip marker;
 * ```toml — a config: parsed with :func:`atlasnn.experiments.config._config.parse_config`, and with
-  ``quick=True`` too when it has a ``[quick]`` table;
+  ``quick=True`` too when it has a ``[quick]`` table (a bundle or inverse config with ``parse_family``);
 * ```json — parsed;
 * ```text — an output sample: not run. A fence without a language is an error (say ``text``).
 
@@ -264,9 +264,12 @@ def run_block(block: Block, workspace: Path) -> None:
 
 
 def _check_toml(block: Block) -> None:
-    from atlasnn.experiments.config import parse_config
+    from atlasnn.experiments.config import is_family, parse_config, parse_family
 
     data = tomllib.loads(block.code)
+    if is_family(data):  # a bundle or inverse experiment (docs/FAMILIES.md)
+        parse_family(data, source=block.id)
+        return
     parse_config(data, source=block.id)
     if "quick" in data:
         parse_config(data, quick=True, source=block.id)

@@ -17,12 +17,13 @@ ROOT = Path(__file__).resolve().parents[1] / "src" / "atlasnn"
 #: lowest first; a package may import packages of earlier layers only
 LAYERS = [
     {"atlasnn.version", "atlasnn.errors", "atlasnn.precision", "atlasnn.compile_cache"},
-    {"atlasnn.fileio", "atlasnn.limits"},
+    {"atlasnn.fileio", "atlasnn.limits", "atlasnn.observations"},
     {"atlasnn.systems", "atlasnn.nn"},
     {"atlasnn.solutions"},
     {"atlasnn.training"},
     {"atlasnn.checkpoint"},
     {"atlasnn.evaluation"},
+    {"atlasnn.inverse"},
     {"atlasnn.report"},
     {"atlasnn.experiments"},
     {"atlasnn.cli"},

@@ -2,7 +2,9 @@
 
 The package, one subpackage per concept, data flowing one way (lowest first):
 
-    systems, nn → solutions → training → checkpoint → evaluation → report → experiments → cli
+    systems, nn → solutions → training → checkpoint → evaluation → inverse → report → experiments → cli
+
+(``observations``, the data of inverse problems, sits on the ground floor with ``fileio``.)
 
 The names below are this face: what the README and a script use, e.g.
 ``from atlasnn import HamiltonianSystem, make_model, train, Solution``. They are loaded on first
@@ -24,14 +26,19 @@ enable_compile_cache()  # before anything compiles (atlasnn.compile_cache; ATLAS
 
 # name -> the subpackage that defines it
 _FACE = {
-    "systems": ("HamiltonianSystem", "builtin_system", "expression_system", "register_system", "BuiltinSystem"),
+    "systems": ("HamiltonianSystem", "builtin_system", "expression_system", "register_system", "BuiltinSystem",
+                "BundleBox", "with_params"),
     "nn": ("make_model", "TrialSolution", "TimeScaling", "ModelKind", "register_model", "MODELS"),
-    "solutions": ("Solution", "PiecewiseSolution"),
+    "solutions": ("Solution", "PiecewiseSolution", "BundleSolution"),
     "training": ("TrainConfig", "train", "train_batch", "transfer", "polish", "PolishConfig", "MarchConfig",
-                 "march", "march_batch", "DEFAULT_NETWORK", "DEFAULT_WINDOW_TRAIN"),
-    "checkpoint": ("save_checkpoint", "load_checkpoint", "save_piecewise", "load_piecewise"),
-    "evaluation": ("reference_solution", "integrate", "error_table", "judge_training", "Metric", "register_metric"),
-    "experiments": ("run_experiment", "resume_experiment", "run_sweep", "load_config"),
+                 "march", "march_batch", "DEFAULT_NETWORK", "DEFAULT_WINDOW_TRAIN", "train_bundle", "BundleTrainConfig"),
+    "checkpoint": ("save_checkpoint", "load_checkpoint", "save_piecewise", "load_piecewise", "save_bundle",
+                   "load_bundle"),
+    "evaluation": ("reference_solution", "integrate", "error_table", "judge_training", "Metric", "register_metric",
+                   "fit_shooting", "synthetic_observations", "reference_members"),
+    "inverse": ("fit_joint", "JointConfig", "fit_with_bundle"),
+    "observations": ("Observations", "Unknown", "load_observations"),
+    "experiments": ("run_experiment", "resume_experiment", "run_sweep", "load_config", "run_family"),
 }
 _WHERE = {name: pkg for pkg, names in _FACE.items() for name in names}
 _WHERE["load_config"] = "experiments.config"

@@ -1,8 +1,9 @@
 """Checkpoints: trained models, training states and time-marching solutions saved as one ``.npz``
 file each (arrays + JSON meta, a content hash, atomic writes, never pickle), loaded back with
 every problem reported as one line naming the file; a time-marching run's progress, window by
-window, to resume it."""
+window, to resume it; bundle solutions."""
 
+from atlasnn.checkpoint._bundle import KIND_BUNDLE, load_bundle, save_bundle
 from atlasnn.checkpoint._format import FORMAT, FORMAT_VERSION
 from atlasnn.checkpoint._march import KIND_MARCH_PROGRESS, load_march_progress, save_march_progress
 from atlasnn.checkpoint._piecewise import KIND_PIECEWISE, load_piecewise, save_piecewise
@@ -24,6 +25,9 @@ __all__ = [
     "load_state",
     "save_piecewise",
     "load_piecewise",
+    "save_bundle",
+    "load_bundle",
+    "KIND_BUNDLE",
     "save_march_progress",
     "load_march_progress",
     "KIND_MARCH_PROGRESS",

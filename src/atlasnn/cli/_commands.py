@@ -157,12 +157,46 @@ def cmd_run(args) -> int:
         return _resume(args, check)
     if args.config is None:
         raise AtlasError("run needs a CONFIG.toml, or --resume DIR")
+    from atlasnn.experiments.config import is_family, read_config
+
+    if is_family(read_config(args.config)):  # a bundle or inverse experiment; a bad file is one line here
+        return _run_family(args.config, args)
     cfg = load_config(args.config, quick=args.quick, profile=args.profile)
     text = Path(args.config).read_text(encoding="utf-8")
     if args.quick and "quick" not in parse_toml(text, str(args.config)):
         print(f"{args.config} has no [quick] table; --quick uses the default smoke test: every epoch budget "
               f"capped at 300, a 200-point evaluation grid, SE-10 for the figures, rtol >= 1e-3 when marching")
     return _run_config(cfg, args, text, _default_out(cfg, args), str(args.config))
+
+
+def _run_family(path, args) -> int:
+    """A bundle or inverse experiment (a config with [bundle] or [observations])."""
+    from atlasnn.experiments import run_family
+    from atlasnn.experiments.config import load_family
+
+    cfg = load_family(path, quick=args.quick)
+    if args.seeds is not None:
+        import dataclasses
+
+        cfg = dataclasses.replace(cfg, seeds=_seeds(args))
+    for flag in ("resume", "scheduler", "seed_batch", "profile"):
+        if getattr(args, flag, None) not in (None, False):
+            raise AtlasError(f"--{flag.replace('_', '-')} is not available for bundle and inverse experiments")
+    out = Path(args.out or f"runs/{cfg.name}{'-quick' if args.quick else ''}")
+    args.run_dir = out
+    start = time.perf_counter()
+    run_family(cfg, out, overwrite=args.overwrite, config_text=Path(path).read_text(encoding="utf-8"))
+    print(f"done in {time.perf_counter() - start:.1f} s: {out}/summary.md")
+    return 0
+
+
+def cmd_family(args) -> int:
+    from atlasnn.experiments.config import builtin_families, family_config_path
+
+    if args.name is None:
+        print("built-in bundle and inverse experiments: " + ", ".join(builtin_families()))
+        return 0
+    return _run_family(family_config_path(args.name), args)
 
 
 def _sweep_config(name: str) -> Path:
@@ -229,9 +263,25 @@ def _builtin_names() -> list[str]:
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
+def _family_kind(run_dir: Path) -> str | None:
+    """"bundle" or "inverse" for such a run directory, else None."""
+    import json
+
+    try:
+        kind = json.loads((run_dir / "results.json").read_text(encoding="utf-8")).get("kind")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return kind if kind in ("bundle", "inverse") else None
+
+
 def cmd_report(args) -> int:
     from atlasnn.report import load_results, summary_lines, write_report
 
+    if _family_kind(Path(args.dir)) is not None:
+        from atlasnn.experiments import rewrite_family_summary
+
+        print(f"wrote {rewrite_family_summary(args.dir)}")
+        return 0
     paths = write_report(Path(args.dir))
     for line in summary_lines(load_results(Path(args.dir)), run_dir=Path(args.dir)):
         print(line)

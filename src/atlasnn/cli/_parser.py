@@ -8,6 +8,7 @@ from atlasnn.cli._commands import (
     _builtin_names,
     cmd_config,
     cmd_experiments,
+    cmd_family,
     cmd_init,
     cmd_integrate,
     cmd_report,
@@ -59,6 +60,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("config", nargs="?", help="path to a TOML experiment file")
     add_run_options(s)
     s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("family", help="run a bundle (a family of solutions over z0 and parameters) or an "
+                       "inverse problem (parameters from observations): a built-in name or a TOML file")
+    s.add_argument("name", nargs="?", help="built-in name (omit to list them) or path to a TOML file")
+    s.add_argument("--quick", action="store_true", help="every budget capped (a smoke test)")
+    s.add_argument("--seeds", type=int, default=None, metavar="K", help="seeds 0..K-1 (default: the config's)")
+    s.add_argument("--out", default=None, metavar="DIR", help="run directory (default runs/NAME[-quick])")
+    s.add_argument("--overwrite", action="store_true", help="reuse a non-empty run directory")
+    s.set_defaults(func=cmd_family)
 
     s = sub.add_parser("sweep", help="run a config at every point of a grid of settings, with one summary")
     s.add_argument("config", nargs="?", help="a TOML experiment file or a built-in experiment name")

@@ -1,5 +1,6 @@
 """Judging solutions: the classical integrators and the reference solution, error metrics (one
-declaration each), the quality verdict, and the work–precision numbers (no plotting here)."""
+declaration each), the quality verdict, the work–precision numbers (no plotting here), and
+least-squares shooting, the baseline for identifying parameters of H from data."""
 
 from atlasnn.evaluation import _workprecision as workprecision
 from atlasnn.evaluation._integrators import (
@@ -50,6 +51,17 @@ from atlasnn.evaluation._quality import (
     judge_training,
 )
 from atlasnn.evaluation._record import TABLE_ROLES, MarchSummary, TrainingRecord
+from atlasnn.evaluation._members import reference_members
+from atlasnn.evaluation._vectorised import MemberRun, verlet_members, yoshida4_members
+from atlasnn.evaluation._shooting import (
+    MISFIT_LIMIT,
+    FitResult,
+    fit_shooting,
+    flag_misfit,
+    gauss_newton_covariance,
+    predict_fit,
+    synthetic_observations,
+)
 from atlasnn.evaluation._workprecision import SYMPLECTIC, WorkPoint
 
 __all__ = [
@@ -101,4 +113,15 @@ __all__ = [
     "workprecision",
     "WorkPoint",
     "SYMPLECTIC",
+    "synthetic_observations",
+    "FitResult",
+    "fit_shooting",
+    "reference_members",
+    "gauss_newton_covariance",
+    "flag_misfit",
+    "MISFIT_LIMIT",
+    "predict_fit",
+    "MemberRun",
+    "verlet_members",
+    "yoshida4_members",
 ]

@@ -1,6 +1,7 @@
 """The network side of ATLAS-NN: time scalings f(t; γ), the MLP N(t; θ) and the trial solution
 ẑ(t) = z0 + f(t − t0; γ)·N(t; θ), and the model registry (a new scaling: one class, one entry)."""
 
+from atlasnn.nn._bundle import BundleTrial, make_bundle_model
 from atlasnn.nn._mlp import ACTIVATIONS, MLP
 from atlasnn.nn._models import MODELS, ModelKind, make_scaling, model_aliases, model_kind, register_model
 from atlasnn.nn._scaling import ExpDecay, RationalExp, Tanh, TimeScaling, build_scaling, inverse_softplus, softplus
@@ -28,4 +29,6 @@ __all__ = [
     "SINCOS_FAST_LIMIT",
     "TrialSolution",
     "make_model",
+    "BundleTrial",
+    "make_bundle_model",
 ]

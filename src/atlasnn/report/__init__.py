@@ -4,6 +4,13 @@ CSV, LaTeX, JSON), figures, the printed summary, the paper's claims counted seed
 from atlasnn.report._caveats import QUICK_BANNER, QUICK_TAG, column_verdicts, is_quick
 from atlasnn.report._claims import experiment_claims
 from atlasnn.report._claims import markdown as claims_markdown
+from atlasnn.report._family_plots import (
+    METHOD_COLORS,
+    plot_bundle_errors,
+    plot_bundle_map,
+    plot_estimates,
+    plot_fit_trajectory,
+)
 from atlasnn.report._plotkit import DPI, Series, model_style, pi_ticks
 from atlasnn.report._plots import (
     first_epoch_below,
@@ -26,6 +33,11 @@ from atlasnn.report._text import format_number, format_percent, replace_generate
 from atlasnn.report._workprecision_plot import plot_work_precision
 
 __all__ = [
+    "plot_bundle_map",
+    "plot_bundle_errors",
+    "plot_estimates",
+    "plot_fit_trajectory",
+    "METHOD_COLORS",
     "load_results",
     "load_paper",
     "summarize",

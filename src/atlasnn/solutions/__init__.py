@@ -3,6 +3,7 @@ with their residual; one trial solution (:class:`Solution`) or a time-marching c
 (:class:`PiecewiseSolution`); and their a-posteriori error estimate, with no reference needed."""
 
 from atlasnn.solutions._base import AbstractSolution
+from atlasnn.solutions._bundle import MEMBER_CHUNK, BundleSolution, bundle_start
 from atlasnn.solutions._bounds import log_norm, residual_bound
 from atlasnn.solutions._estimate import TRUST_FRACTION, ErrorEstimate, estimate_error, state_range
 from atlasnn.solutions._linearised import propagate, residual_and_jacobian
@@ -27,6 +28,9 @@ __all__ = [
     "log_norm",
     "Solution",
     "PiecewiseSolution",
+    "BundleSolution",
+    "MEMBER_CHUNK",
+    "bundle_start",
     "WindowRecord",
     "window_edges",
     "stack_models",

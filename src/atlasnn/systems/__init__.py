@@ -13,15 +13,20 @@ from atlasnn.systems._builtins import (
     nonlinear_oscillator,
     register_system,
     system_from_spec,
+    with_params,
 )
+from atlasnn.systems._bundle_box import BundleBox
 from atlasnn.systems._compile import CompiledExpression, compile_expression
 from atlasnn.systems._expression import expression_system, is_syntactically_separable
-from atlasnn.systems._hamiltonian import HamiltonianFn, HamiltonianSystem
+from atlasnn.systems._hamiltonian import HamiltonianFn, HamiltonianSystem, ParametricFn
 from atlasnn.systems._parse import CONSTANTS, FUNCTIONS, MAX_DEPTH, MAX_EXPRESSION_LENGTH, MAX_OPERATIONS
 
 __all__ = [
     "HamiltonianSystem",
+    "BundleBox",
     "HamiltonianFn",
+    "ParametricFn",
+    "with_params",
     "BuiltinSystem",
     "BUILTIN_SYSTEMS",
     "register_system",

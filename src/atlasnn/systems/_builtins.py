@@ -6,6 +6,7 @@ and its parameters, so :func:`system_from_spec` rebuilds it (e.g. from a checkpo
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence
 
@@ -16,7 +17,7 @@ from atlasnn.systems._expression import expression_system
 from atlasnn.systems._hamiltonian import HamiltonianSystem
 
 __all__ = ["BuiltinSystem", "BUILTIN_SYSTEMS", "register_system", "builtin_system", "system_from_spec",
-           "nonlinear_oscillator", "henon_heiles", "harmonic_oscillator", "harmonic_exact"]
+           "nonlinear_oscillator", "henon_heiles", "harmonic_oscillator", "harmonic_exact", "with_params"]
 
 
 @dataclass(frozen=True)
@@ -48,18 +49,19 @@ def register_system(entry: BuiltinSystem) -> BuiltinSystem:
     return entry
 
 
+def _oscillator_h(q, p, lam):
+    x = q[0]
+    return p[0] ** 2 / 2 + x**2 / 2 + lam * x**4 / 4
+
+
 def nonlinear_oscillator(lam: float = 1.0, z0: Sequence[float] = (1.3, 1.0)) -> HamiltonianSystem:
     """H = p²/2 + x²/2 + lam·x⁴/4 (paper §4.1); default z0 = (x, p) = (1.3, 1)."""
     lam = float(lam)
-
-    def H(q, p):
-        x = q[0]
-        return p[0] ** 2 / 2 + x**2 / 2 + lam * x**4 / 4
-
     return HamiltonianSystem(
-        H, 1, name="nonlinear_oscillator", q_names=("x",), p_names=("p",), z0=np.asarray(z0, float),
-        separable=True, params={"lam": lam},
+        lambda q, p: _oscillator_h(q, p, lam), 1, name="nonlinear_oscillator", q_names=("x",), p_names=("p",),
+        z0=np.asarray(z0, float), separable=True, params={"lam": lam},
         spec={"kind": "builtin", "name": "nonlinear_oscillator", "params": {"lam": lam}},
+        parametric=lambda q, p, th: _oscillator_h(q, p, th[0]),
     )
 
 
@@ -68,30 +70,32 @@ def henon_heiles(
 ) -> HamiltonianSystem:
     """H = (px²+py²)/2 + (x²+y²)/2 + lam·(x²y − y³/3) (paper §4.2); z = (x, y, px, py)."""
     lam = float(lam)
-
-    def H(q, p):
-        x, y = q[0], q[1]
-        return (p[0] ** 2 + p[1] ** 2) / 2 + (x**2 + y**2) / 2 + lam * (x**2 * y - y**3 / 3)
-
     return HamiltonianSystem(
-        H, 2, name="henon_heiles", q_names=("x", "y"), p_names=("px", "py"), z0=np.asarray(z0, float),
-        separable=True, params={"lam": lam},
+        lambda q, p: _henon_heiles_h(q, p, lam), 2, name="henon_heiles", q_names=("x", "y"),
+        p_names=("px", "py"), z0=np.asarray(z0, float), separable=True, params={"lam": lam},
         spec={"kind": "builtin", "name": "henon_heiles", "params": {"lam": lam}},
+        parametric=lambda q, p, th: _henon_heiles_h(q, p, th[0]),
     )
+
+
+def _henon_heiles_h(q, p, lam):
+    x, y = q[0], q[1]
+    return (p[0] ** 2 + p[1] ** 2) / 2 + (x**2 + y**2) / 2 + lam * (x**2 * y - y**3 / 3)
 
 
 def harmonic_oscillator(omega: float = 1.0, z0: Sequence[float] = (1.0, 0.0)) -> HamiltonianSystem:
     """H = p²/2 + ω² x²/2; exact solution x = x0 cos ωt + (p0/ω) sin ωt. Used for testing."""
     omega = float(omega)
-
-    def H(q, p):
-        return p[0] ** 2 / 2 + omega**2 * q[0] ** 2 / 2
-
     return HamiltonianSystem(
-        H, 1, name="harmonic_oscillator", q_names=("x",), p_names=("p",), z0=np.asarray(z0, float),
-        separable=True, params={"omega": omega},
+        lambda q, p: _harmonic_h(q, p, omega), 1, name="harmonic_oscillator", q_names=("x",), p_names=("p",),
+        z0=np.asarray(z0, float), separable=True, params={"omega": omega},
         spec={"kind": "builtin", "name": "harmonic_oscillator", "params": {"omega": omega}},
+        parametric=lambda q, p, th: _harmonic_h(q, p, th[0]),
     )
+
+
+def _harmonic_h(q, p, omega):
+    return p[0] ** 2 / 2 + omega**2 * q[0] ** 2 / 2
 
 
 def harmonic_exact(t: np.ndarray, z0: Sequence[float] = (1.0, 0.0), omega: float = 1.0) -> np.ndarray:
@@ -120,6 +124,20 @@ def builtin_system(name: str, **params: float) -> HamiltonianSystem:
         return BUILTIN_SYSTEMS[key].factory(**params)
     except TypeError as exc:
         raise SystemError_(f"bad parameters for system {name!r}: {exc}") from None
+
+
+def with_params(system: HamiltonianSystem, **values: float) -> HamiltonianSystem:
+    """The same system with some parameter values replaced (``with_params(hh, lam=0.8)``): rebuilt
+    from its spec where it has one (so H is the very function a config run uses), else from its
+    parametric H."""
+    theta = system.param_vector(**values)
+    new = dict(zip(system.param_names, (float(v) for v in theta)))
+    if system.spec is not None:
+        rebuilt = system_from_spec({**system.spec, "params": new})
+        return dataclasses.replace(rebuilt, z0=system.z0, name=system.name)
+    system.require_parametric("with_params")
+    fn, th = system.parametric, np.asarray(theta)
+    return dataclasses.replace(system, hamiltonian=lambda q, p: fn(q, p, th), params=new)
 
 
 def system_from_spec(spec: Mapping[str, Any]) -> HamiltonianSystem:

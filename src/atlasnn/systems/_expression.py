@@ -177,8 +177,18 @@ def expression_system(
         values = [q[..., i] for i in range(d)] + [p[..., i] for i in range(d)]
         return compiled(**dict(zip(names, values)))
 
+    param_names = tuple(compiled.params)
+    with_inputs = compile_expression(hamiltonian, names + param_names, {})  # θ as inputs (bundles, fits)
+
+    def H_theta(q, p, theta):
+        q, p, theta = jnp.asarray(q), jnp.asarray(p), jnp.asarray(theta)
+        values = [q[..., i] for i in range(d)] + [p[..., i] for i in range(d)]
+        values += [theta[..., i] for i in range(len(param_names))]
+        return with_inputs(*values)
+
     system = HamiltonianSystem(
         H, d, name=name, q_names=qs, p_names=ps, z0=z0, separable=sep, params=dict(compiled.params),
+        parametric=H_theta,
     )
     spec = {
         "kind": "expression",

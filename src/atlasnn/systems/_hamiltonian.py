@@ -21,6 +21,8 @@ import numpy as np
 from atlasnn.errors import SystemError_
 
 HamiltonianFn = Callable[[jax.Array, jax.Array], jax.Array]
+#: H(q, p, θ) with the parameters as a traced vector θ (ordered as ``system.param_names``)
+ParametricFn = Callable[[jax.Array, jax.Array, jax.Array], jax.Array]
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,6 +41,10 @@ class HamiltonianSystem:
         spec: a JSON-able description from which :func:`system_from_spec` can rebuild the
             system (set by the built-ins and by expression systems; ``None`` for a Python
             function, which then has to be passed again when a checkpoint is loaded).
+        parametric: the same H with its parameters as an input, ``H(q, p, θ)`` for θ of shape
+            (P,) in the order of ``params`` (set by the built-ins and expression systems). Bundles
+            over parameters and parameter identification need it; ``H(q, p)`` must equal
+            ``parametric(q, p, θ)`` at θ = the values of ``params``.
 
     Equality is identity, so a system can key a cache of compiled functions.
     """
@@ -52,6 +58,7 @@ class HamiltonianSystem:
     separable: bool = False
     params: Mapping[str, float] = field(default_factory=dict)
     spec: Mapping[str, Any] | None = None
+    parametric: ParametricFn | None = None
 
     def __post_init__(self) -> None:
         if not callable(self.hamiltonian):
@@ -71,6 +78,8 @@ class HamiltonianSystem:
         if self.z0 is not None:
             object.__setattr__(self, "z0", self.check_state(self.z0, "z0"))
         object.__setattr__(self, "params", dict(self.params))
+        if self.parametric is not None and not callable(self.parametric):
+            raise SystemError_(f"parametric must be callable, got {type(self.parametric).__name__}")
 
     # ------------------------------------------------------------------ basics
     @property
@@ -161,6 +170,44 @@ class HamiltonianSystem:
                 f"{method} needs a separable Hamiltonian H = T(p) + V(q); system {self.name!r} "
                 "is not declared separable (pass separable=True if it is)"
             )
+
+    # ------------------------------------------------------------- parameters
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        """The names of H's parameters, in the order of θ."""
+        return tuple(self.params)
+
+    def param_vector(self, **values: float) -> np.ndarray:
+        """θ as a float64 vector: the system's values, with ``values`` replacing some."""
+        unknown = sorted(set(values) - set(self.params))
+        if unknown:
+            raise SystemError_(f"system {self.name!r} has no parameter {unknown[0]!r}; its parameters are "
+                               f"{list(self.param_names)}")
+        return np.asarray([float(values.get(k, v)) for k, v in self.params.items()], np.float64)
+
+    def require_parametric(self, what: str) -> None:
+        """Raise a one-line error if H cannot take its parameters as an input."""
+        if self.parametric is None:
+            raise SystemError_(f"{what} needs H with its parameters as an input; system {self.name!r} has none "
+                               "(use a built-in or an expression system, or pass parametric=H(q, p, theta))")
+        if not self.params:
+            raise SystemError_(f"{what} needs a system with parameters; system {self.name!r} has none")
+
+    def energy_at(self, z: jax.Array, theta: jax.Array) -> jax.Array:
+        """H(z; θ) for z of shape (K, 2d) and θ of shape (K, P) (one parameter vector per state)."""
+        self.require_parametric("energy_at")
+        fn = self.parametric
+
+        def one(zi, ti):
+            return jnp.asarray(fn(zi[: self.dim], zi[self.dim :], ti)).reshape(())
+
+        return jax.vmap(one)(jnp.asarray(z), jnp.asarray(theta))
+
+    def field_at(self, z: jax.Array, theta: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """(H(z; θ), J∇_z H(z; θ)) for z (K, 2d) and θ (K, P), by one vjp of the batched energy."""
+        energy, pullback = jax.vjp(lambda zz: self.energy_at(zz, theta), jnp.asarray(z))
+        (grad,) = pullback(jnp.ones_like(energy))
+        return energy, jnp.concatenate([grad[..., self.dim :], -grad[..., : self.dim]], axis=-1)
 
     # ----------------------------------------------------------------- record
     def describe(self) -> dict[str, Any]:

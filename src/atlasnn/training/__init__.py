@@ -4,7 +4,8 @@ Adam loop (one model or a batch of seeds), transfer, L-BFGS polishing and time-m
 from atlasnn.training._collocation import check_interval, jittered, uniform_grid
 from atlasnn.training._loss import causal_physics_loss, energy_and_vector_field, hamilton_residual, physics_loss
 from atlasnn.training._adaptive import first_window, march, march_adaptive
-from atlasnn.training._lm import LMConfig, LMResult, levenberg_marquardt, lm_batch
+from atlasnn.training._bundle import BundleTrainConfig, BundleTraining, bundle_residuals, train_bundle
+from atlasnn.training._lm import LMConfig, LMOutcome, LMResult, levenberg_marquardt, lm_batch, lm_minimise
 from atlasnn.training._marching import (
     DEFAULT_NETWORK,
     DEFAULT_RTOL,
@@ -57,6 +58,12 @@ __all__ = [
     "check_same_architecture",
     "restrict_opt_state",
     "LMConfig",
+    "LMOutcome",
+    "lm_minimise",
+    "BundleTrainConfig",
+    "BundleTraining",
+    "train_bundle",
+    "bundle_residuals",
     "LMResult",
     "levenberg_marquardt",
     "lm_batch",

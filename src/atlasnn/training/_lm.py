@@ -53,7 +53,7 @@ from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._loss import energy_and_vector_field
 from atlasnn.training._step import trainable_filter
 
-__all__ = ["LMConfig", "LMResult", "levenberg_marquardt", "lm_batch", "lm_nodes", "lm_points"]
+__all__ = ["LMConfig", "LMResult", "LMOutcome", "levenberg_marquardt", "lm_batch", "lm_minimise", "lm_nodes", "lm_points"]
 
 NODES = ("chebyshev", "uniform")
 LM_PRECISIONS = ("model", "float64", "mixed")
@@ -428,3 +428,35 @@ def lm_batch(models: Sequence[TrialSolution], system: HamiltonianSystem, T: floa
             out.append(LMResult(model, hist, float(hist[0]), float(si.loss), int(si.step), int(si.accepted),
                                 _STOP.get(int(si.stop), "running"), wall / n, compile_time, config))
     return out
+
+
+class LMOutcome(NamedTuple):
+    """What :func:`lm_minimise` returns: the parameters with the lowest loss seen, the loss after
+    each trial, why it stopped, and the counts."""
+
+    x: jax.Array
+    history: np.ndarray
+    stop_reason: str
+    steps: int
+    accepted: int
+
+
+def lm_minimise(res: Callable, jac: Callable, x0: jax.Array, args: Any, config: LMConfig = LMConfig()) -> LMOutcome:
+    """The same damped Gauss–Newton loop for any least-squares problem min ‖res(x, args)‖²:
+    ``res(x, args)`` gives the residual vector (m,), ``jac(x, args)`` its Jacobian (m, n). One
+    compiled program (``args`` are its arguments, so new data of the same shape reuses nothing
+    but costs no retrace of the loop's logic). Used by bundles and parameter fits."""
+    n_hist = config.steps + 1
+    with jax.enable_x64(True):  # the factorisation is float64 (see _solve); x keeps its own type
+        data = _data(config, x0.dtype)
+
+        def run(x, args, data):
+            r, j = (lambda v: res(v, args)), (lambda v: jac(v, args))
+            body = _make_step(r, j, config, n_hist)
+            s0 = _init_state(x, r, j, config, n_hist, data)
+            return jax.lax.while_loop(lambda s: s.stop == 0, lambda s: body(s, data), s0)
+
+        state = jax.jit(run)(x0, args, data)
+        hist = np.asarray(state.history, np.float64)
+    return LMOutcome(state.x, hist[np.isfinite(hist)], _STOP.get(int(state.stop), "running"), int(state.step),
+                     int(state.accepted))

@@ -15,6 +15,16 @@ from atlasnn.experiments.config._config import (
     load_config,
     parse_config,
     parse_end_time,
+    read_config,
+)
+from atlasnn.experiments.config._family import (
+    FIT_METHODS,
+    FamilyConfig,
+    builtin_families,
+    family_config_path,
+    is_family,
+    load_family,
+    parse_family,
 )
 from atlasnn.experiments.config._reference import reference_markdown, reference_text, toml_value
 from atlasnn.experiments.config._schema import (
@@ -34,6 +44,13 @@ from atlasnn.experiments.config._templates import init_template, write_template
 
 __all__ = [
     "ExperimentConfig",
+    "FamilyConfig",
+    "FIT_METHODS",
+    "is_family",
+    "parse_family",
+    "load_family",
+    "builtin_families",
+    "family_config_path",
     "Stage",
     "MarchSettings",
     "SystemConfig",
@@ -41,6 +58,7 @@ __all__ = [
     "EvaluationConfig",
     "parse_config",
     "load_config",
+    "read_config",
     "apply_profile",
     "builtin_config_dir",
     "builtin_config_path",

@@ -425,8 +425,8 @@ def _march_settings(v: dict[str, Any], given: dict[str, Any], stage: Stage) -> M
                          scheme=scheme.replace(train=train, first=first))
 
 
-def load_config(path: str | Path, *, quick: bool = False, profile: str | None = None) -> ExperimentConfig:
-    """Read and validate a TOML experiment file."""
+def read_config(path: str | Path) -> dict[str, Any]:
+    """A TOML config file as a dict; a missing or unreadable file is one line naming it."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -434,8 +434,12 @@ def load_config(path: str | Path, *, quick: bool = False, profile: str | None = 
         raise ConfigError(f"config file not found: {path}") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"cannot read config file {path}: {exc}") from None
-    data = parse_toml(text, str(path))
-    return parse_config(data, quick=quick, source=str(path), profile=profile)
+    return parse_toml(text, str(path))
+
+
+def load_config(path: str | Path, *, quick: bool = False, profile: str | None = None) -> ExperimentConfig:
+    """Read and validate a TOML experiment file."""
+    return parse_config(read_config(path), quick=quick, source=str(path), profile=profile)
 
 
 def builtin_config_dir() -> Path:

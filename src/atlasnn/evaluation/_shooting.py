@@ -1,0 +1,500 @@
+"""Classical least-squares shooting: the baseline for identifying parameters of H from data.
+
+Given observations of some state components at times t_i, :func:`fit_shooting` finds the unknown
+parameters θ of H (and, if asked, unknown components of the initial state z0) that minimise
+
+    Σ_i ‖ z(t_i; θ, z0)[observed] − obs_i ‖²,
+
+where z(t; θ, z0) is the DOP853 solution of dz/dt = J∇H(z; θ) from t0. The minimiser is SciPy's
+``least_squares`` (trust-region reflective, bounds from the unknowns, ``x_scale="jac"``).
+
+The Jacobian of the residuals comes from **forward sensitivities**: the variational equations
+dS/dt = A(z, θ) S + ∂f/∂θ · D, with A = ∂f/∂z, are integrated together with z, one column per
+unknown (D selects the parameter of the column; a z0 column starts at a unit vector instead).
+The right-hand side f(z, θ) = J∇H(z; θ) is built from ``system.parametric`` and jitted once per
+system in float64; θ reaches it as an argument of ``solve_ivp``, so trying a new θ compiles
+nothing. A column of the sensitivities is one forward-mode derivative (``jax.jvp``) of f.
+
+``segments > 1`` gives **multiple shooting**: the observation times are split into consecutive
+segments, every segment after the first starts from its own unknown state, and the residuals are
+the data misfit of every segment plus the continuity gaps (end of segment k − start of segment
+k+1) multiplied by a weight, 1 at first and ``continuity_weight`` in a second pass. Only the
+user's unknowns are reported, with standard errors from the full Gauss–Newton covariance.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import time
+from typing import Any, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.integrate import solve_ivp
+from scipy.optimize import least_squares
+
+from atlasnn.errors import AtlasError, ConfigError
+from atlasnn.evaluation._integrators import reference_solution
+from atlasnn.observations import Observations, Unknown, check_unknowns
+from atlasnn.systems import HamiltonianSystem
+
+__all__ = ["synthetic_observations", "FitResult", "fit_shooting", "predict_fit", "gauss_newton_covariance", "COND_LIMIT",
+           "flag_misfit", "MISFIT_LIMIT"]
+
+#: above this condition number of the (column-scaled) Gauss–Newton matrix an unknown is unidentifiable
+COND_LIMIT = 1e12
+
+
+# ----------------------------------------------------------------------- synthetic data
+def synthetic_observations(system: HamiltonianSystem, z0: Any, times: Any, names: Sequence[str], noise: float,
+                           seed: int, *, t0: float | None = None) -> Observations:
+    """Noisy samples of some state components along the reference trajectory.
+
+    The trajectory is the reference solution (DOP853, rtol = atol = 1e-12) from ``z0`` at ``t0``
+    (default ``times[0]``) with the system's own parameter values. To component c is added
+    Gaussian noise of standard deviation ``noise × RMS_c``, where RMS_c = sqrt(mean of z_c(t_i)²)
+    over the sampled times: ``noise=0.01`` is "1 % noise", ``noise=0`` gives exact samples. The
+    noise is drawn from ``numpy.random.default_rng(seed)``, so equal seeds give equal data.
+
+    Args:
+        system: the Hamiltonian system (its parameters are the truth).
+        z0: the state at t0, or ``None`` for the system's default.
+        times: strictly increasing, finite 1-D times (at least 2), all ≥ t0.
+        names: the observed state components, e.g. ``["x"]``.
+        noise: the relative noise level, finite and ≥ 0.
+        seed: the seed of the noise generator.
+    """
+    if not isinstance(system, HamiltonianSystem):
+        raise ConfigError(f"system must be a HamiltonianSystem, got {type(system).__name__}")
+    t = _times(times, "times")
+    start = float(t[0]) if t0 is None else _finite(t0, "t0")
+    if start > t[0]:
+        raise ConfigError(f"t0={start!r} lies after the first time {float(t[0])!r}")
+    level = _finite(noise, "noise")
+    if level < 0:
+        raise ConfigError(f"noise must be ≥ 0 (a fraction of each component's RMS), got {noise!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise ConfigError(f"seed must be an integer, got {seed!r}")
+    probe = Observations(t=t, values=np.zeros((t.size, len(names))), names=tuple(names), source="synthetic")
+    idx = probe.indices(system.state_names)
+    grid = t if start == t[0] else np.concatenate([[start], t])
+    Z = reference_solution(system, z0, grid)[grid.size - t.size:]
+    clean = Z[:, idx]
+    rms = np.sqrt(np.mean(clean**2, axis=0))
+    rng = np.random.default_rng(int(seed))
+    values = clean + level * rms * rng.standard_normal(clean.shape)
+    return Observations(t=t, values=values, names=probe.names, source="synthetic")
+
+
+def _finite(value: Any, what: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{what} must be a number, got {value!r}") from None
+    if isinstance(value, bool) or not math.isfinite(v):
+        raise ConfigError(f"{what} must be a finite number, got {value!r}")
+    return v
+
+
+def _times(times: Any, what: str) -> np.ndarray:
+    try:
+        t = np.asarray(times, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{what} must be a 1-D array of numbers") from None
+    if t.ndim != 1 or t.size < 2:
+        raise ConfigError(f"{what} must be a 1-D array of at least 2 times, got shape {t.shape}")
+    if not np.all(np.isfinite(t)):
+        raise ConfigError(f"{what} must be finite, {int(np.sum(~np.isfinite(t)))} entries are not")
+    if not np.all(np.diff(t) > 0):
+        i = int(np.argmax(~(np.diff(t) > 0)))
+        raise ConfigError(f"{what} must be strictly increasing, got {what}[{i}]={float(t[i])!r} >= "
+                          f"{what}[{i + 1}]={float(t[i + 1])!r}")
+    return t
+
+
+# ------------------------------------------------------------------ compiled right-hand sides
+@functools.lru_cache(maxsize=32)
+def _compiled(system: HamiltonianSystem):
+    """(f, g): jitted f(z, θ) = J∇H(z; θ) and g(y, θ, D) = d/dt [z, S] for the variational system."""
+    fn, d = system.parametric, system.dim
+    n = 2 * d
+
+    def field_(z, theta):
+        grad = jax.grad(lambda zz: jnp.asarray(fn(zz[:d], zz[d:], theta)).reshape(()))(z)
+        return jnp.concatenate([grad[d:], -grad[:d]])
+
+    def augmented(y, theta, dtheta):
+        z, S = y[:n], y[n:].reshape(n, dtheta.shape[1])
+        # column k: A S_k + ∂f/∂θ D_k, one forward-mode derivative of f in the direction (S_k, D_k)
+        dS = jax.vmap(lambda s, dth: jax.jvp(field_, (z, theta), (s, dth))[1], in_axes=(1, 1), out_axes=1)(S, dtheta)
+        return jnp.concatenate([field_(z, theta), dS.reshape(-1)])
+
+    return jax.jit(field_), jax.jit(augmented)
+
+
+class _SolveFailed(Exception):
+    pass
+
+
+def _rhs(fn):
+    def rhs(t, y, *args):
+        out = np.asarray(fn(y, *args))
+        if not np.all(np.isfinite(out)):
+            raise _SolveFailed(f"the right-hand side is not finite at t = {t:.6g}")
+        return out
+    return rhs
+
+
+def _solve(system, z_init, theta, t0, times, rtol, atol, S_init=None, dtheta=None):
+    """(Z (len(times), 2d), S (len(times), 2d, m) or None, nfev) from z_init at t0; times sorted ≥ t0."""
+    f, g = _compiled(system)
+    n = system.state_dim
+    grid, inverse = np.unique(times, return_inverse=True)
+    with_s = dtheta is not None
+    y0 = np.concatenate([z_init, S_init.reshape(-1)]) if with_s else np.asarray(z_init, np.float64)
+    if grid[-1] <= t0:
+        Y, nfev = np.repeat(y0[None], grid.size, axis=0), 0
+    else:
+        with jax.enable_x64(True):
+            args = (jnp.asarray(theta, jnp.float64),) + ((jnp.asarray(dtheta, jnp.float64),) if with_s else ())
+            try:
+                sol = solve_ivp(_rhs(g if with_s else f), (t0, float(grid[-1])), y0, method="DOP853",
+                                t_eval=grid, rtol=rtol, atol=atol, args=args)
+            except _SolveFailed as exc:
+                raise _SolveFailed(f"DOP853 stopped: {exc}") from None
+        if not sol.success or sol.y.shape[1] != grid.size or not np.all(np.isfinite(sol.y)):
+            raise _SolveFailed(f"DOP853 failed: {' '.join(str(sol.message).split())}")
+        Y, nfev = sol.y.T, int(sol.nfev)
+    Y = Y[inverse]
+    S = Y[:, n:].reshape(len(times), n, -1) if with_s else None
+    return Y[:, :n], S, nfev
+
+
+# --------------------------------------------------------------------------------- result
+@dataclasses.dataclass
+class FitResult:
+    """The outcome of :func:`fit_shooting`.
+
+    ``std`` are Gauss–Newton standard errors at the optimum: sqrt of the diagonal of
+    s²(JᵀJ)⁻¹ with s² = RSS/(n_data − n_unknowns) (``noise_estimate`` is s). An unknown that the
+    data cannot determine (it lies in a direction where the column-scaled JᵀJ has condition
+    number above :data:`COND_LIMIT`) gets std = inf, ``identifiable`` is False and ``notes``
+    names it.
+    """
+
+    names: tuple[str, ...]
+    estimate: np.ndarray
+    std: np.ndarray
+    covariance: np.ndarray
+    noise_estimate: float
+    residual_rms: float
+    wall_time: float
+    n_rhs: int
+    n_solves: int
+    method: str
+    success: bool
+    message: str
+    identifiable: bool
+    notes: list[str] = dataclasses.field(default_factory=list)
+    t0: float = 0.0
+    n_data: int = 0
+    segments: int = 1
+    cond: float = 1.0
+
+    def value(self, name: str) -> float:
+        """The estimate of the unknown ``name``."""
+        if name not in self.names:
+            raise ConfigError(f"the fit has no unknown {name!r}; its unknowns are {list(self.names)}")
+        return float(self.estimate[self.names.index(name)])
+
+    def as_dict(self) -> dict[str, Any]:
+        """A JSON-able summary of every field (non-finite numbers stay floats: ``inf``/``nan``)."""
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            out[f.name] = v.tolist() if isinstance(v, np.ndarray) else list(v) if isinstance(v, (tuple, list)) else v
+        return out
+
+
+# -------------------------------------------------------------------------------- problem
+class _Problem:
+    """Residuals and their Jacobian for single (one segment) or multiple shooting."""
+
+    def __init__(self, system, obs, unknowns, z0, t0, segments, rtol, atol, weight):
+        self.system, self.obs, self.rtol, self.atol, self.w = system, obs, rtol, atol, weight
+        self.idx = obs.indices(system.state_names)
+        self.theta0, self.z0 = system.param_vector(), z0
+        pn, sn = list(system.param_names), list(system.state_names)
+        self.p_cols = [(i, pn.index(u.name)) for i, u in enumerate(unknowns) if not u.is_initial_state]
+        self.z_cols = [(i, sn.index(u.component)) for i, u in enumerate(unknowns) if u.is_initial_state]
+        self.n_user, self.n = len(unknowns), system.state_dim
+        M, C = obs.values.shape
+        bounds = np.array_split(np.arange(M), segments)
+        self.rows = [(int(b[0]), int(b[-1]) + 1) for b in bounds]
+        self.starts = [float(t0)] + [float(obs.t[a]) for a, _ in self.rows[1:]]
+        self.n_x = self.n_user + self.n * (segments - 1)
+        self.n_res = M * C + self.n * (segments - 1)
+        self.n_rhs = self.n_solves = 0
+        self.memo: tuple[bytes, np.ndarray, np.ndarray] | None = None
+
+    def theta_z0(self, x):
+        theta, z = self.theta0.copy(), self.z0.copy()
+        for i, j in self.p_cols:
+            theta[j] = x[i]
+        for i, j in self.z_cols:
+            z[j] = x[i]
+        return theta, z
+
+    def trajectory(self, x, times):
+        theta, z = self.theta_z0(x)
+        Z, _, nfev = _solve(self.system, z, theta, self.starts[0], times, self.rtol, self.atol)
+        self.n_rhs, self.n_solves = self.n_rhs + nfev, self.n_solves + 1
+        return Z
+
+    def _segment(self, k, x, theta):
+        """(model at the segment's rows and its end, sensitivities, Jacobian columns of x)."""
+        n, P = self.n, self.theta0.size
+        a, b = self.rows[k]
+        end = [self.starts[k + 1]] if k + 1 < len(self.rows) else []
+        times = np.concatenate([self.obs.t[a:b], end])
+        if k == 0:
+            _, z = self.theta_z0(x)
+            cols = list(range(self.n_user))
+            S0, D = np.zeros((n, len(cols))), np.zeros((P, len(cols)))
+            for i, j in self.p_cols:
+                D[j, i] = 1.0
+            for i, j in self.z_cols:
+                S0[j, i] = 1.0
+        else:
+            off = self.n_user + n * (k - 1)
+            z = x[off:off + n]
+            cols = [i for i, _ in self.p_cols] + list(range(off, off + n))
+            S0, D = np.zeros((n, len(cols))), np.zeros((P, len(cols)))
+            for c, (_, j) in enumerate(self.p_cols):
+                D[j, c] = 1.0
+            S0[:, len(self.p_cols):] = np.eye(n)
+        Z, S, nfev = _solve(self.system, z, theta, self.starts[k], times, self.rtol, self.atol, S0, D)
+        self.n_rhs, self.n_solves = self.n_rhs + nfev, self.n_solves + 1
+        return Z, S, cols
+
+    def evaluate(self, x):
+        key = np.asarray(x, np.float64).tobytes()
+        if self.memo is not None and self.memo[0] == key:
+            return self.memo[1], self.memo[2]
+        theta, _ = self.theta_z0(x)
+        C, n = self.idx.size, self.n
+        r, J = np.zeros(self.n_res), np.zeros((self.n_res, self.n_x))
+        data_end = self.obs.values.size
+        for k, (a, b) in enumerate(self.rows):
+            Z, S, cols = self._segment(k, x, theta)
+            m = b - a
+            r[a * C:b * C] = (Z[:m, self.idx] - self.obs.values[a:b]).reshape(-1)
+            J[a * C:b * C, cols] = S[:m][:, self.idx, :].reshape(m * C, len(cols))
+            if k + 1 < len(self.rows):
+                off = self.n_user + n * k
+                c0 = data_end + n * k
+                r[c0:c0 + n] = self.w * (Z[m] - x[off:off + n])
+                J[c0:c0 + n, cols] = self.w * S[m]
+                J[c0:c0 + n, off:off + n] -= self.w * np.eye(n)
+        self.memo = (key, r, J)
+        return r, J
+
+
+def gauss_newton_covariance(J: np.ndarray, rss: float, dof: int):
+    """(covariance, cond, indices of unidentifiable columns) from Gauss–Newton at the optimum."""
+    s2 = rss / dof
+    norms = np.linalg.norm(J, axis=0)
+    dead = norms <= 1e-14 * max(float(norms.max()), np.finfo(float).tiny)  # no effect on any residual
+    scale = np.where(dead, 1.0, norms)
+    A = (J / scale).T @ (J / scale)
+    lam, V = np.linalg.eigh(A)
+    top = max(float(lam[-1]), np.finfo(float).tiny)
+    cond = float(top / lam[0]) if lam[0] > 0 else math.inf
+    weak = set(np.flatnonzero(dead).tolist())
+    if cond > COND_LIMIT:
+        for k in np.flatnonzero(lam < top / COND_LIMIT):
+            weak |= set(np.flatnonzero(np.abs(V[:, k]) > 0.1).tolist())
+    inv = np.linalg.pinv(A, rcond=1.0 / COND_LIMIT, hermitian=True)
+    cov = s2 * inv / np.outer(scale, scale)
+    for j in weak:
+        cov[j, :] = cov[:, j] = np.nan
+        cov[j, j] = np.inf
+    return cov, cond, sorted(weak)
+
+
+#: a fit whose residual RMS exceeds this fraction of the data's RMS does not explain the data
+MISFIT_LIMIT = 0.1
+
+
+def flag_misfit(fit: FitResult, observations: Observations) -> FitResult:
+    """Mark a fit whose residual RMS exceeds MISFIT_LIMIT × the data's RMS (``success`` False, a
+    note): its σ are then the curvature of a wrong valley (a Toda pair's c from a guess of 0.5:
+    0.336 ± 0.014, truth 0.8, residual 75 % of the data's RMS; from 0.7: 0.8004, residual 1 %)."""
+    scale = float(np.sqrt(np.mean(observations.values ** 2)))
+    ratio = fit.residual_rms / scale if scale > 0 else 0.0
+    if ratio > MISFIT_LIMIT:
+        fit.success = False
+        fit.notes.append(f"the fit does not explain the data: residual RMS {fit.residual_rms:.3g} is {ratio:.0%} of "
+                         "the data's RMS (a local minimum from this guess, or the wrong model): try other guesses, "
+                         "segments > 1 (multiple shooting) or a shorter record")
+    return fit
+
+
+# ------------------------------------------------------------------------------------ fit
+def fit_shooting(system: HamiltonianSystem, observations: Observations, unknowns: Sequence[Unknown],
+                 z0: Any = None, *, t0: float = 0.0, segments: int = 1, rtol: float = 1e-10,
+                 atol: float = 1e-10, max_nfev: int = 200, continuity_weight: float = 1e3) -> FitResult:
+    """Fit unknown parameters of H (and initial-state components) to observations by shooting.
+
+    Minimises Σ (model(t_i) − obs_i)² over the unknowns with ``least_squares`` (method "trf",
+    bounds from the unknowns, ``x_scale="jac"``); the model is DOP853 (``rtol``, ``atol``) from
+    ``t0`` with the system's parameters and ``z0`` (default ``system.z0``) replaced where an
+    unknown names them. The Jacobian comes from forward sensitivities (the variational equations
+    integrated with the state), not finite differences.
+
+    ``segments > 1``: multiple shooting. The observation rows are split into that many
+    consecutive groups; segment k ≥ 1 starts at its first observation time from its own unknown
+    state (initialised from one solve at the guess); the residuals are the data misfits plus the
+    continuity gaps times a weight (1/noise-scale: a gap counts as a data misfit that many times
+    larger). The weight is 1 for a first minimisation (the iterates may leave the continuous
+    trajectories, which lets them pass the many local minima that single shooting meets on a long
+    interval) and ``continuity_weight`` for a second one started from the first one's optimum (the
+    segments then join to about 1/continuity_weight of the noise). Only the user's unknowns are
+    reported; their std come from the full Gauss–Newton covariance at the end.
+
+    Raises:
+        SystemError_: the system has no ``parametric`` H or no parameters.
+        ConfigError: bad observations, unknowns, times outside [t0, last time], bad options, or
+            more unknowns than the data can determine.
+        AtlasError: the model cannot be integrated at the initial guess (or during the fit).
+    """
+    start = time.perf_counter()
+    _check_options(system, observations, t0, rtol, atol, continuity_weight, segments, max_nfev)
+    t0 = float(t0)
+    observations.indices(system.state_names)
+    observations.check_interval(t0, float(observations.t[-1]))
+    unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values)
+    _check_segments(observations, int(segments), t0)
+    prob = _Problem(system, observations, unknowns, system.initial_state(z0).copy(), t0, int(segments),
+                    float(rtol), float(atol), float(continuity_weight))
+    try:
+        res, r, J = _minimise(prob, *_start(prob, unknowns), int(max_nfev))
+    except _SolveFailed as exc:
+        raise AtlasError(f"shooting cannot integrate system {system.name!r} {exc}") from None
+    n_data, n_user = observations.n_values, len(unknowns)
+    cov, cond, weak = gauss_newton_covariance(J, float(r @ r), n_data - n_user)
+    notes = [f"{unknowns[j].name} is not identifiable from these data (condition number {cond:.3g})"
+             for j in weak if j < n_user]
+    if any(j >= n_user for j in weak):
+        notes.append(f"some segment start states are not identifiable (condition number {cond:.3g})")
+    return flag_misfit(FitResult(
+        names=tuple(u.name for u in unknowns), estimate=np.asarray(res.x[:n_user], np.float64),
+        std=np.sqrt(np.diag(cov)[:n_user]), covariance=cov[:n_user, :n_user],
+        noise_estimate=float(math.sqrt(float(r @ r) / (n_data - n_user))),
+        residual_rms=float(np.sqrt(np.mean(r[:n_data] ** 2))), wall_time=time.perf_counter() - start,
+        n_rhs=prob.n_rhs, n_solves=prob.n_solves, method="shooting" if segments == 1 else "multiple shooting",
+        success=bool(res.success), message=" ".join(str(res.message).split()), identifiable=not weak,
+        notes=notes, t0=t0, n_data=n_data, segments=int(segments), cond=cond,
+    ), observations)
+
+
+def _check_options(system, observations, t0, rtol, atol, continuity_weight, segments, max_nfev) -> None:
+    if not isinstance(system, HamiltonianSystem):
+        raise ConfigError(f"system must be a HamiltonianSystem, got {type(system).__name__}")
+    system.require_parametric("parameter identification")
+    if not isinstance(observations, Observations):
+        raise ConfigError(f"observations must be an Observations, got {type(observations).__name__}")
+    _finite(t0, "t0")
+    for name, val in (("rtol", rtol), ("atol", atol), ("continuity_weight", continuity_weight)):
+        if _finite(val, name) <= 0:
+            raise ConfigError(f"{name} must be a positive number, got {val!r}")
+    for name, val in (("segments", segments), ("max_nfev", max_nfev)):
+        if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
+            raise ConfigError(f"{name} must be a positive integer, got {val!r}")
+
+
+def _minimise(prob: _Problem, x0, lo, hi, max_nfev: int):
+    """(least_squares result, residuals, Jacobian at its optimum)."""
+    def fun(x):
+        try:
+            return prob.evaluate(x)[0]
+        except _SolveFailed:
+            return np.full(prob.n_res, np.nan)  # least_squares shrinks its step on a non-finite residual
+
+    try:
+        r0 = prob.evaluate(x0)[0]
+    except _SolveFailed as exc:
+        raise _SolveFailed(f"at the initial guess: {exc}") from None
+    if not np.all(np.isfinite(r0)):
+        raise _SolveFailed("at the initial guess: the residuals are not finite")
+    # multiple shooting: first with gaps weighted as data (the path may leave the continuous
+    # trajectories and so pass the local minima of single shooting), then with the full weight
+    ladder = [1.0, prob.w] if len(prob.rows) > 1 and prob.w > 1.0 else [prob.w]
+    for w in ladder:
+        prob.w, prob.memo = w, None
+        res = least_squares(fun, x0, jac=lambda x: prob.evaluate(x)[1], bounds=(lo, hi), method="trf",
+                            x_scale="jac", max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10)
+        x0 = np.clip(res.x, lo, hi)
+    try:
+        r, J = prob.evaluate(res.x)
+    except _SolveFailed as exc:
+        raise _SolveFailed(f"at the optimum: {exc}") from None
+    return res, r, J
+
+
+def _check_segments(obs: Observations, segments: int, t0: float) -> None:
+    if obs.count < 2 * segments:
+        raise ConfigError(f"segments={segments} needs at least {2 * segments} observation times, got {obs.count}")
+    starts = [t0] + [float(b[0]) for b in np.array_split(obs.t, segments)[1:]]
+    if segments > 1 and not np.all(np.diff(starts) > 0):
+        raise ConfigError(f"segments={segments}: segment start times {starts} are not strictly increasing "
+                          "(repeated observation times at a boundary)")
+
+
+def _start(prob: _Problem, unknowns: tuple[Unknown, ...]):
+    """x0 and bounds: the guesses, then (multiple shooting) the guess trajectory at the segment starts."""
+    x0 = np.array([u.guess for u in unknowns], np.float64)
+    lo = np.array([u.low for u in unknowns], np.float64)
+    hi = np.array([u.high for u in unknowns], np.float64)
+    if len(prob.rows) > 1:
+        try:
+            Z = prob.trajectory(x0, np.asarray(prob.starts[1:]))
+        except _SolveFailed as exc:
+            raise _SolveFailed(f"at the initial guess: {exc}") from None
+        x0 = np.concatenate([x0, Z.reshape(-1)])
+        lo = np.concatenate([lo, np.full(Z.size, -np.inf)])
+        hi = np.concatenate([hi, np.full(Z.size, np.inf)])
+    return x0, lo, hi
+
+
+# -------------------------------------------------------------------------------- predict
+def predict_fit(system: HamiltonianSystem, fit: FitResult, z0: Any, t: Any) -> np.ndarray:
+    """The fitted trajectory at the times ``t`` (sorted, ≥ ``fit.t0``): DOP853 at rtol = atol =
+    1e-12 from ``z0`` (``None``: the system's) with the fitted unknowns put in; shape (len(t), 2d)."""
+    if not isinstance(fit, FitResult):
+        raise ConfigError(f"fit must be a FitResult, got {type(fit).__name__}")
+    system.require_parametric("predict_fit")
+    try:
+        times = np.asarray(t, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ConfigError("t must be a 1-D array of numbers") from None
+    if times.size == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) < 0):
+        raise ConfigError(f"t must be a non-empty, finite, sorted array of times (got {times.size} entries)")
+    if times[0] < fit.t0:
+        raise ConfigError(f"t starts at {float(times[0])!r}, before the fit's t0={fit.t0!r}")
+    unknowns = tuple(Unknown(n, v, v - 1.0, v + 1.0) for n, v in zip(fit.names, fit.estimate))
+    check_unknowns(unknowns, system.state_names, system.param_names, len(unknowns) + 1)
+    theta, z = system.param_vector(), system.initial_state(z0).copy()
+    pn, sn = list(system.param_names), list(system.state_names)
+    for u in unknowns:
+        if u.is_initial_state:
+            z[sn.index(u.component)] = u.guess
+        else:
+            theta[pn.index(u.name)] = u.guess
+    try:
+        return _solve(system, z, theta, fit.t0, times, 1e-12, 1e-12)[0]
+    except _SolveFailed as exc:
+        raise AtlasError(f"predict_fit: cannot integrate system {system.name!r}: {exc}") from None

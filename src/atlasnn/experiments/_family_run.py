@@ -1,0 +1,267 @@
+"""Running bundle and inverse experiments: every seed, the records, the figures, a summary.
+
+A bundle run trains one bundle per seed, saves it (``models/bundle_seedS.npz``), measures it on a
+held-out set of members (drawn with ``test_seed``, the same for every seed) against DOP853
+references, and times a 10⁵-member × 100-time evaluation. An inverse run fits the unknowns per
+seed with each method of ``[fit] methods`` on the same data (synthetic data: a new noise draw per
+seed) and records estimate, standard error, error against the truth and time. Both write
+``results.json``, ``summary.md`` and ``figures/``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from atlasnn.checkpoint import save_bundle
+from atlasnn.evaluation import fit_shooting, predict_fit, reference_members, synthetic_observations
+from atlasnn.experiments._store import check_run_dir
+from atlasnn.experiments.config._family import FamilyConfig
+from atlasnn.fileio import write_json, write_text
+from atlasnn.inverse import bundle_box_for, fit_joint, fit_with_bundle
+from atlasnn.observations import Observations, load_observations
+from atlasnn.report import plot_bundle_errors, plot_bundle_map, plot_estimates, plot_fit_trajectory
+from atlasnn.training import BundleTrainConfig, train_bundle
+from atlasnn.version import __version__
+
+__all__ = ["run_family", "rewrite_family_summary", "EVAL_MEMBERS", "EVAL_TIMES"]
+
+#: the evaluation-cost measurement: members × times
+EVAL_MEMBERS, EVAL_TIMES = 100_000, 100
+
+
+def run_family(cfg: FamilyConfig, out: str | Path, *, overwrite: bool = False, log: Callable[[str], None] = print,
+               config_text: str | None = None) -> dict[str, Any]:
+    """Run a bundle or inverse experiment into ``out``; returns the results dict."""
+    out = Path(out)
+    check_run_dir(out, overwrite)
+    out.mkdir(parents=True, exist_ok=True)
+    if config_text is not None:
+        write_text(out / "config.toml", config_text)
+    system = cfg.system.build()
+    runner = _run_bundle if cfg.kind == "bundle" else _run_inverse
+    results = runner(cfg, system, out, log)
+    results.update({"kind": cfg.kind, "name": cfg.name, "description": cfg.description, "quick": cfg.quick,
+                    "atlasnn_version": __version__, "system": system.describe()})
+    write_json(out / "results.json", results)
+    write_text(out / "summary.md", _summary(results))
+    log(f"wrote {out / 'results.json'} and {out / 'summary.md'}")
+    return results
+
+
+# ------------------------------------------------------------------------------ bundles
+def _max_err(pred: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """(members, times): the max over state components of |ẑ − z_ref|."""
+    return np.max(np.abs(pred - ref), axis=-1)
+
+
+def _run_bundle(cfg: FamilyConfig, system, out: Path, log) -> dict[str, Any]:
+    st = cfg.bundle
+    box = st.box(system)
+    z_test, l_test = box.draw(np.random.default_rng(st.test_seed), st.test_members)
+    t_test = np.linspace(box.t0, box.T, st.test_times)
+    start = time.perf_counter()
+    ref = reference_members(system, box, z_test, l_test, t_test)
+    ref_time = time.perf_counter() - start
+    log(f"{cfg.name}: references of {st.test_members} held-out members in {ref_time:.1f} s")
+    (out / "models").mkdir(exist_ok=True)
+    z_eval, l_eval = box.draw(np.random.default_rng(st.test_seed + 1), EVAL_MEMBERS)
+    t_eval = np.linspace(box.t0, box.T, EVAL_TIMES)
+    seeds, errors = {}, {}
+    for seed in cfg.seeds:
+        def progress(k, epoch, loss, seed=seed):
+            if epoch % max(st.epochs // 2, 1) == 0 or epoch == st.epochs:
+                log(f"  seed {seed} window {k + 1}/{st.windows}: epoch {epoch}, loss {loss:.3g}")
+
+        def window_done(k, loss, seconds, seed=seed):
+            log(f"  seed {seed} window {k + 1}/{st.windows} done: loss {loss:.3g}, {seconds:.0f} s so far")
+
+        trained = train_bundle(system, box, st.train_config(), scaling=st.model, width=st.width, depth=st.depth,
+                               seed=seed, progress=progress, on_window=window_done)
+        sol = trained.solution
+        save_bundle(out / "models" / f"bundle_seed{seed}.npz", sol, extra={"seed": seed, "config": cfg.name})
+        err = _max_err(sol(t_test, z_test, l_test), ref)
+        errors[seed] = err
+        per_member = err.max(axis=1)
+        timings = []
+        for _ in range(2):
+            s = time.perf_counter()
+            sol(t_eval, z_eval, l_eval)
+            timings.append(time.perf_counter() - s)
+        exact = float(np.abs(sol(np.asarray([box.t0]), z_test, l_test)[:, 0] - z_test.astype(np.float32)).max())
+        seeds[str(seed)] = {
+            "train_time": trained.train_time, "compile_time": trained.compile_time,
+            "final_loss": [float(a[-1]) if a.size else None for a in trained.adam_loss],
+            "lm_loss": [float(a[-1]) if a.size else None for a in trained.lm_loss], "lm_stop": trained.lm_stop,
+            "retried": trained.retried,
+            "test": {"median": float(np.median(per_member)), "worst": float(per_member.max()),
+                     "p90": float(np.quantile(per_member, 0.9)), "per_member": per_member.tolist()},
+            "eval_seconds_first": timings[0], "eval_seconds": timings[1], "initial_state_error": exact,
+        }
+        log(f"  seed {seed}: trained in {trained.train_time:.1f} s; held-out max error median "
+            f"{np.median(per_member):.3g}, worst {per_member.max():.3g}; {EVAL_MEMBERS} members x {EVAL_TIMES} "
+            f"times in {timings[1]:.2f} s")
+    labels = [*(f"{n}(0)" for n in system.state_names), *box.param_names]
+    inputs = np.concatenate([z_test, l_test], axis=1)
+    varying = [i for i in range(inputs.shape[1]) if np.ptp(inputs[:, i]) > 0]
+    order = sorted(varying, key=lambda i: -np.ptp(inputs[:, i]) / max(np.abs(inputs[:, i]).max(), 1e-300))
+    first = cfg.seeds[0]
+    figs = [*plot_bundle_map(inputs[:, order[:2]], [labels[i] for i in order[:2]], errors[first].max(axis=1),
+                             out / "figures" / "bundle_map", f"seed {first}: held-out max error per member"),
+            *plot_bundle_errors(t_test, errors, out / "figures" / "bundle_errors", edges=list(sol.edges))]
+    medians = [v["test"]["median"] for v in seeds.values()]
+    worsts = [v["test"]["worst"] for v in seeds.values()]
+    return {"box": box.describe(), "settings": _jsonable(st.__dict__), "seeds": seeds,
+            "test_members": st.test_members, "test_times": st.test_times, "reference_seconds": ref_time,
+            "eval_members": EVAL_MEMBERS, "eval_times": EVAL_TIMES,
+            "overall": {"median_of_medians": float(np.median(medians)), "worst_median": float(max(medians)),
+                        "worst_of_worst": float(max(worsts)),
+                        "train_time_median": float(np.median([v["train_time"] for v in seeds.values()])),
+                        "eval_seconds_max": float(max(v["eval_seconds"] for v in seeds.values()))},
+            "figures": [str(p.relative_to(out)) for p in figs]}
+
+
+def _jsonable(d: dict) -> dict:
+    return json.loads(json.dumps(d, default=lambda o: list(o) if isinstance(o, tuple) else str(o)))
+
+
+# ------------------------------------------------------------------------------ inverse
+def _observations(cfg: FamilyConfig, system, seed: int) -> tuple[Observations, float]:
+    ob = cfg.observations
+    if ob.file is not None:
+        return load_observations(ob.file), ob.t0
+    times = np.sort(np.random.default_rng(ob.times_seed).uniform(ob.t0, ob.T, ob.n))
+    return synthetic_observations(system, system.initial_state(), times, list(ob.names), ob.noise, seed,
+                                  t0=ob.t0), ob.t0
+
+
+def _truth(cfg: FamilyConfig, system) -> dict[str, float] | None:
+    if cfg.observations.file is not None:
+        return None
+    z0 = system.initial_state()
+    return {u.name: (float(z0[system.state_names.index(u.component)]) if u.is_initial_state
+                     else float(system.params[u.name])) for u in cfg.unknowns}
+
+
+def _fit_once(method: str, cfg: FamilyConfig, system, obs, t0: float, seed: int):
+    fit = cfg.fit
+    if method == "shooting":
+        return fit_shooting(system, obs, cfg.unknowns, t0=t0, segments=fit.segments), 0.0
+    if method == "joint":
+        return fit_joint(system, obs, cfg.unknowns, t0=t0, config=fit.joint, seed=seed), 0.0
+    box = bundle_box_for(system, cfg.unknowns, None, float(obs.t[-1]), t0)
+    trained = train_bundle(system, box, BundleTrainConfig(windows=fit.bundle_windows, epochs=fit.bundle_epochs,
+                                                          lm_steps=fit.bundle_lm_steps,
+                                                          lm_points=fit.bundle_lm_points),
+                           width=fit.bundle_width, seed=seed)
+    return fit_with_bundle(trained.solution, obs, cfg.unknowns), trained.train_time + trained.compile_time
+
+
+def _run_inverse(cfg: FamilyConfig, system, out: Path, log) -> dict[str, Any]:
+    truth = _truth(cfg, system)
+    records, seeds, curves = [], {}, {}
+    first_obs = None
+    for seed in cfg.seeds:
+        obs, t0 = _observations(cfg, system, seed)
+        first_obs = first_obs or (obs, t0)
+        seeds[str(seed)] = {"observations": obs.describe()}
+        for method in cfg.fit.methods:
+            result, training = _fit_once(method, cfg, system, obs, t0, seed)
+            rec = {**result.as_dict(), "fit_method": result.method, "seed": seed, "method": method,
+                   "training_seconds": training, "total_seconds": result.wall_time + training}
+            if truth is not None:
+                err = np.asarray([result.value(n) - truth[n] for n in result.names])
+                rec["error"] = err.tolist()
+                rec["rel_error"] = (err / np.maximum(np.abs([truth[n] for n in result.names]), 1e-300)).tolist()
+                rec["covered_2sigma"] = bool(np.all(np.abs(err) <= 2 * np.asarray(result.std)))
+            records.append(rec)
+            if seed == cfg.seeds[0]:
+                curves[method] = result
+            log(f"  seed {seed} {method}: " + ", ".join(f"{n} = {v:.6g} ± {s:.2g}" for n, v, s in
+                                                        zip(result.names, result.estimate, result.std))
+                + f" in {rec['total_seconds']:.2f} s" + ("" if truth is None else
+                                                         f" (error {', '.join(f'{e:.2g}' for e in rec['error'])})"))
+    figs = []
+    for j, u in enumerate(cfg.unknowns):
+        rows = [{"seed": r["seed"], "method": r["method"], "estimate": r["estimate"][j], "std": r["std"][j]}
+                for r in records]
+        figs += plot_estimates(rows, u.name, None if truth is None else truth[u.name],
+                               out / "figures" / f"estimates_{u.name.replace('.', '_')}")
+    obs, t0 = first_obs
+    t = np.linspace(t0, float(obs.t[-1]), 400)
+    cols = obs.indices(system.state_names)
+    traj = {m: predict_fit(system, r, None, t)[:, cols] for m, r in curves.items()}
+    figs += plot_fit_trajectory(obs.t, obs.values, obs.names, t, traj, out / "figures" / "fit_trajectory")
+    return {"truth": truth, "unknowns": [u.__dict__ for u in cfg.unknowns], "records": records, "seeds": seeds,
+            "methods": list(cfg.fit.methods), "figures": [str(p.relative_to(out)) for p in figs],
+            "overall": _inverse_overall(records, list(cfg.fit.methods))}
+
+
+def _inverse_overall(records, methods) -> dict[str, Any]:
+    out = {}
+    for m in methods:
+        rs = [r for r in records if r["method"] == m]
+        est = np.asarray([r["estimate"] for r in rs], float)
+        row = {"seconds_median": float(np.median([r["total_seconds"] for r in rs])),
+               "seconds_max": float(max(r["total_seconds"] for r in rs)),
+               "estimate_mean": est.mean(axis=0).tolist(),
+               "estimate_sd_over_seeds": (est.std(axis=0, ddof=1) if len(rs) > 1 else est[0] * np.nan).tolist(),
+               "std_median": np.median([r["std"] for r in rs], axis=0).tolist()}
+        if rs and "rel_error" in rs[0]:
+            rel = np.abs(np.asarray([r["rel_error"] for r in rs]))
+            row.update({"rel_error_median": float(np.median(rel)), "rel_error_max": float(rel.max()),
+                        "covered_2sigma": int(sum(r["covered_2sigma"] for r in rs)), "n": len(rs)})
+        out[m] = row
+    return out
+
+
+# ------------------------------------------------------------------------------ summary
+def rewrite_family_summary(out: str | Path) -> Path:
+    """Recompute an inverse run's per-method overview from its records and rewrite summary.md
+    (``atlasnn report DIR`` on a bundle or inverse run)."""
+    out = Path(out)
+    results = json.loads((out / "results.json").read_text())
+    if results.get("kind") == "inverse":
+        results["overall"] = _inverse_overall(results["records"], results["methods"])
+        write_json(out / "results.json", results)
+    write_text(out / "summary.md", _summary(results))
+    return out / "summary.md"
+
+
+def _summary(results: dict[str, Any]) -> str:
+    lines = [f"# {results['name']}", "", results.get("description", ""), ""]
+    if results.get("quick"):
+        lines += ["**Quick run (--quick): budgets capped; the numbers are a smoke test, not results.**", ""]
+    if results["kind"] == "bundle":
+        lines += ["| seed | train s | held-out median max err | worst | 1e5 x 100 eval s | ẑ(t0) − z0 |",
+                  "|---|---|---|---|---|---|"]
+        for s, v in results["seeds"].items():
+            lines.append(f"| {s} | {v['train_time']:.1f} | {v['test']['median']:.3g} | {v['test']['worst']:.3g} | "
+                         f"{v['eval_seconds']:.2f} | {v['initial_state_error']:.1g} |")
+        o = results["overall"]
+        lines += ["", f"Median of the seeds' medians {o['median_of_medians']:.3g}; worst seed median "
+                  f"{o['worst_median']:.3g}; worst member over all seeds {o['worst_of_worst']:.3g} "
+                  f"({results['test_members']} held-out members, {results['test_times']} times, against DOP853 "
+                  "at 1e-12)."]
+    else:
+        names = [u["name"] for u in results["unknowns"]]
+        head = "| seed | method | " + " | ".join(f"{n} ± σ" for n in names) + " | rel. error | within 2σ | s |"
+        lines += [head, "|" + "---|" * (5 + len(names))]
+        for r in results["records"]:
+            est = " | ".join(f"{e:.6g} ± {s:.2g}" for e, s in zip(r["estimate"], r["std"]))
+            rel = ", ".join(f"{abs(e):.2g}" for e in r.get("rel_error", [math.nan]))
+            lines.append(f"| {r['seed']} | {r['method']} | {est} | {rel} | {r.get('covered_2sigma', 'n/a')} | "
+                         f"{r['total_seconds']:.2f} |")
+        lines += ["", "| method | mean estimate | sd over seeds | median σ (Gauss–Newton) | within 2σ | median s |",
+                  "|---|---|---|---|---|---|"]
+        for m, o in results["overall"].items():
+            fmt = lambda v: ", ".join(f"{x:.3g}" for x in v)  # noqa: E731
+            lines.append(f"| {m} | {', '.join(f'{x:.6g}' for x in o['estimate_mean'])} | "
+                         f"{fmt(o['estimate_sd_over_seeds'])} | {fmt(o['std_median'])} | "
+                         f"{o.get('covered_2sigma', 'n/a')}/{o.get('n', '?')} | {o['seconds_median']:.2f} |")
+    return "\n".join(lines) + "\n"
