@@ -44,7 +44,7 @@ from atlasnn.evaluation import FitResult, flag_misfit, gauss_newton_covariance
 from atlasnn.nn import make_model
 from atlasnn.observations import Observations, Unknown, check_unknowns
 from atlasnn.systems import HamiltonianSystem
-from atlasnn.training import LMConfig, lm_minimise
+from atlasnn.training import LMConfig, lm_minimise, trainable_filter
 
 __all__ = ["JointConfig", "fit_joint"]
 
@@ -98,15 +98,9 @@ class _Problem:
         self.scale_y = float(np.sqrt(np.mean(obs.values**2))) or 1.0
         model = make_model(self._z0_of(self.u0), scaling=cfg.scaling, width=cfg.width, depth=cfg.depth,
                            t0=t0, seed=seed)
-        params, self.rest = eqx.partition(model, self._filter(model))
+        params, self.rest = eqx.partition(model, trainable_filter(model, freeze_gamma=False))
         self.x_net, self.unravel = ravel_pytree(params)
         self.n_net = int(self.x_net.size)
-
-    @staticmethod
-    def _filter(model):
-        spec = jax.tree_util.tree_map(lambda _: False, model)
-        spec = eqx.tree_at(lambda m: m.net, spec, jax.tree_util.tree_map(eqx.is_inexact_array, model.net))
-        return eqx.tree_at(lambda m: m.scaling, spec, jax.tree_util.tree_map(eqx.is_inexact_array, model.scaling))
 
     def phi(self, u):
         if isinstance(u, jax.Array):

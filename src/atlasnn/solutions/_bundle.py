@@ -18,7 +18,6 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Any, Sequence
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -177,10 +176,3 @@ class BundleSolution:
         return {"windows": len(self.windows), "edges": self.edges.tolist(), "box": self.box.describe(),
                 "architecture": self.windows[0].architecture(),
                 "system": None if self.system is None else self.system.describe()}
-
-    def replace_windows(self, windows: Sequence[BundleTrial]) -> "BundleSolution":
-        return BundleSolution(tuple(windows), self.edges, self.box, self.system)
-
-    def tree(self) -> list[Any]:
-        """The windows' array leaves, for saving."""
-        return [leaf for w in self.windows for leaf in jax.tree_util.tree_leaves(eqx.filter(w, eqx.is_array))]

@@ -125,12 +125,17 @@ class BundleBox:
         u = rng.uniform(low[1:], high[1:], size=(int(n), len(low) - 1))
         return u[:, : self.state_dim], u[:, self.state_dim :]
 
+    def theta_layout(self, system: HamiltonianSystem) -> tuple[np.ndarray, np.ndarray]:
+        """(the system's parameter vector, the positions in it of the varying parameters λ)."""
+        idx = np.asarray([system.param_names.index(n) for n in self.params], np.int32)
+        return np.asarray(system.param_vector(), np.float64), idx
+
     def full_theta(self, system: HamiltonianSystem, lam: Any) -> np.ndarray:
         """The system's whole parameter vector per member, (n, P_all): λ where it varies."""
         lam = np.asarray(lam, np.float64).reshape(-1, len(self.params))
-        theta = np.tile(system.param_vector(), (lam.shape[0], 1))
-        for j, name in enumerate(self.params):
-            theta[:, system.param_names.index(name)] = lam[:, j]
+        base, idx = self.theta_layout(system)
+        theta = np.tile(base, (lam.shape[0], 1))
+        theta[:, idx] = lam
         return theta
 
     def describe(self) -> dict[str, Any]:

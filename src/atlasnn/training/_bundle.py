@@ -32,6 +32,7 @@ from atlasnn.nn import BundleTrial, make_bundle_model
 from atlasnn.solutions import BundleSolution, bundle_start
 from atlasnn.systems import BundleBox, HamiltonianSystem
 from atlasnn.training._lm import LMConfig, lm_minimise
+from atlasnn.training._loss import energy_and_vector_field
 
 __all__ = ["BundleTrainConfig", "BundleTraining", "train_bundle", "bundle_residuals"]
 
@@ -98,16 +99,10 @@ class BundleTraining:
     lm_stop: list[str] = field(default_factory=list)
     retried: list[bool] = field(default_factory=list)
 
-    @property
-    def final_loss(self) -> float:
-        last = self.lm_loss[-1] if self.lm_loss and self.lm_loss[-1].size else self.adam_loss[-1]
-        return float(last[-1])
-
 
 def _theta_fn(system: HamiltonianSystem, box: BundleBox) -> Callable[[jax.Array], jax.Array]:
     """λ (K, P) ↦ the system's full parameter vector per point (K, P_all)."""
-    base = np.asarray(system.param_vector(), np.float64)
-    idx = np.asarray([system.param_names.index(n) for n in box.param_names], np.int32)
+    base, idx = box.theta_layout(system)
 
     def theta(lam):
         full = jnp.tile(jnp.asarray(base, lam.dtype), (lam.shape[0], 1))
@@ -127,9 +122,7 @@ def bundle_residuals(model: BundleTrial, system: HamiltonianSystem, box: BundleB
         energy, vf = system.field_at(z, theta)
         energy0 = system.energy_at(z0, theta)
     else:
-        energy, pullback = jax.vjp(system.energy, z)
-        (g,) = pullback(jnp.ones_like(energy))
-        vf = jnp.concatenate([g[..., system.dim:], -g[..., : system.dim]], axis=-1)
+        energy, vf = energy_and_vector_field(system, z)
         energy0 = system.energy(z0)
     return dz - vf, energy - energy0
 

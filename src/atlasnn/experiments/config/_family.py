@@ -128,10 +128,6 @@ def _time(path, v, low=None):
     return _number(path, v, low=low, allow_pi=True)
 
 
-def _count(path, v, low, high):
-    return _integer(path, v, low, high)
-
-
 def _floats(path, v, n=None):
     if not isinstance(v, list) or not v:
         _fail(path, v, "expected a list of numbers")
@@ -172,7 +168,7 @@ def _bundle(v: dict, quick: bool) -> BundleSettings:
                             ("batch", 2, 65536), ("lm_steps", 0, 10**5), ("lm_points", 2, 65536),
                             ("test_members", 1, 10**5), ("test_times", 2, 10**5), ("test_seed", 0, 2**31 - 1)):
         if name in v:
-            kw[name] = _count(f"bundle.{name}", v[name], low, high)
+            kw[name] = _integer(f"bundle.{name}", v[name], low, high)
     if "lr" in v:
         kw["lr"] = _number("bundle.lr", v["lr"], low=0.0, low_open=True, high=1.0)
     if "model" in v:
@@ -204,9 +200,9 @@ def _observations(v: dict, base: Path) -> ObservationSettings:
     if not isinstance(names, list) or not names or not all(isinstance(x, str) and x for x in names):
         _fail("observations.names", names, "expected a non-empty list of state component names")
     return ObservationSettings(
-        None, _count("observations.n", v.get("n", 40), 2, 10**6), _time("observations.t0", v.get("t0", 0.0)),
+        None, _integer("observations.n", v.get("n", 40), 2, 10**6), _time("observations.t0", v.get("t0", 0.0)),
         _time("observations.T", v["T"]), tuple(names), _number("observations.noise", v.get("noise", 0.01), low=0.0),
-        _count("observations.times_seed", v.get("times_seed", 0), 0, 2**31 - 1))
+        _integer("observations.times_seed", v.get("times_seed", 0), 0, 2**31 - 1))
 
 
 def _unknowns(v: Any) -> tuple[Unknown, ...]:
@@ -239,7 +235,7 @@ def _fit(v: dict, quick: bool) -> FitSettings:
     for name, low, high in (("width", 1, 1024), ("depth", 1, 8), ("epochs", 0, 10**7), ("lm_steps", 0, 10**5),
                             ("lm_points", 2, 65536)):
         if name in v:
-            joint[name] = _count(f"fit.{name}", v[name], low, high)
+            joint[name] = _integer(f"fit.{name}", v[name], low, high)
     if "data_weight" in v:
         joint["data_weight"] = _number("fit.data_weight", v["data_weight"], low=0.0, low_open=True)
     if quick:
@@ -248,7 +244,7 @@ def _fit(v: dict, quick: bool) -> FitSettings:
     for name, low, high in (("segments", 1, 1000), ("bundle_windows", 1, 256), ("bundle_epochs", 0, 10**7),
                             ("bundle_lm_steps", 0, 10**5), ("bundle_lm_points", 2, 65536), ("bundle_width", 1, 1024)):
         if name in v:
-            kw[name] = _count(f"fit.{name}", v[name], low, high)
+            kw[name] = _integer(f"fit.{name}", v[name], low, high)
     out = FitSettings(**kw)
     if quick:
         out = dataclasses.replace(out, bundle_epochs=min(out.bundle_epochs, 300),
@@ -258,10 +254,10 @@ def _fit(v: dict, quick: bool) -> FitSettings:
 
 def _seeds(v: Any) -> tuple[int, ...]:
     if isinstance(v, int) and not isinstance(v, bool):
-        return tuple(range(_count("seeds", v, 1, MAX_SEEDS)))
+        return tuple(range(_integer("seeds", v, 1, MAX_SEEDS)))
     if not isinstance(v, list) or not v:
         _fail("seeds", v, "expected a count or a non-empty list of integers")
-    out = tuple(_count(f"seeds[{i}]", s, 0, 2**31 - 1) for i, s in enumerate(v))
+    out = tuple(_integer(f"seeds[{i}]", s, 0, 2**31 - 1) for i, s in enumerate(v))
     if len(set(out)) != len(out):
         _fail("seeds", v, "seeds must be distinct")
     return out
