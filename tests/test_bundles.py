@@ -163,7 +163,8 @@ def test_run_command_trains_a_bundle_from_a_config(tmp_path):
 
 
 @pytest.mark.parametrize("kw, match", [({"members": "corners"}, "members"), ({"retry_factor": 0.5}, "retry_factor"),
-                                       ({"windows": 0}, "windows"), ({"epochs": 0, "lm_steps": 0}, "epochs > 0")])
+                                       ({"windows": 0}, "windows"), ({"epochs": 0, "lm_steps": 0}, "epochs > 0"),
+                                       ({"lm_rounds": 0}, "lm_rounds")])
 def test_bundle_train_config_errors(kw, match):
     with pytest.raises(ConfigError, match=match):
         BundleTrainConfig(**kw)
@@ -182,3 +183,19 @@ def test_edge_sampling_crowds_the_faces():
     near = lambda v: float(np.mean((np.asarray(v) < 0.55) | (np.asarray(v) > 1.45)))  # noqa: E731
     assert near(lam) > 0.17 and abs(near(lam_u) - 0.10) < 0.01  # expected 0.19 and 0.10
     assert float(np.min(lam)) >= 0.5 and float(np.max(lam)) <= 1.5
+
+
+def test_lm_rounds_draw_fresh_points_and_record_every_trial():
+    """LM split into rounds: every trial is in the history (the start and 40 trials, not one start
+    per round), and the later rounds fit other points, so the model differs from one fixed set's."""
+    cfg = dict(windows=1, epochs=200, chunk=200, lm_steps=40, lm_points=96)
+    one = train_bundle(OSC, BundleBox.around([1.3, 1.0], 0.2, {"lam": (0.5, 1.5)}, T=1.0),
+                       BundleTrainConfig(**cfg), width=8, seed=1)
+    four = train_bundle(OSC, BundleBox.around([1.3, 1.0], 0.2, {"lam": (0.5, 1.5)}, T=1.0),
+                        BundleTrainConfig(**cfg, lm_rounds=4), width=8, seed=1)
+    for trained in (one, four):
+        assert trained.lm_loss[0].size == 41 or trained.lm_stop[0] != "budget"
+        assert np.all(np.isfinite(trained.lm_loss[0]))
+    np.testing.assert_array_equal(one.adam_loss[0], four.adam_loss[0])  # the same up to LM
+    assert not np.array_equal(np.asarray(one.solution.windows[0].weights[0]),
+                              np.asarray(four.solution.windows[0].weights[0]))

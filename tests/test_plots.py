@@ -283,3 +283,26 @@ def test_plot_seed_spread(tmp_path):
     paper = {"SE": 1.43, "HNN": 1.17e-2, "ATLAS exp": 4.31e-3, "ATLAS tanh": 1.12e-2}
     _check_outputs(plot_seed_spread(tmp_path / "spread", values, "L2(x)", paper))
     _check_outputs(plot_seed_spread(tmp_path / "spread_nopaper", values, "MSE(x)"))
+
+
+def test_large_states_draw_the_components_with_the_largest_errors(tmp_path):
+    """A 20-component state gets 8 panels in the trajectory and error figures: those with the
+    largest errors, in index order, and the figure says that the rest are in tables.md."""
+    from atlasnn.report._plotkit import MAX_COMPONENT_PANELS, _components_note, _shown_components
+
+    t = np.linspace(0, 1, 50)
+    ref = np.zeros((50, 20))
+    z = ref.copy()
+    worst = [17, 2, 9, 11, 0, 5, 19, 13]
+    for rank, k in enumerate(worst):
+        z[:, k] = 1.0 / (rank + 1)
+    z[:, 3] = 1e-3  # small errors elsewhere
+    s = Series("ATLAS exp", t, z, ref)
+    assert MAX_COMPONENT_PANELS == 8
+    assert _shown_components([s], 20) == sorted(worst)
+    assert _shown_components([s], 6) == list(range(6))
+    assert "8 of 20 components" in _components_note(sorted(worst), 20)
+    names = [f"q{i}" for i in range(1, 11)] + [f"p{i}" for i in range(1, 11)]
+    for fn in (plot_trajectories, plot_errors):
+        paths = fn(tmp_path / fn.__name__, [s], names)
+        assert all(p.exists() for p in paths)

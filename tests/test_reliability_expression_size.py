@@ -19,7 +19,8 @@ def test_the_issues_expression_is_refused_at_once():
     assert time.perf_counter() - start < 1.0
     assert str(info.value) == (
         "expression is too large: 3999 operations in 2000 terms (7999 characters); at most 500 operations "
-        "are accepted (compiling a larger one takes more than ~10 s); simplify it, e.g. collect equal terms")
+        "are accepted (compiling a larger one takes more than ~10 s); simplify it, e.g. collect equal terms, or "
+        "write H with array operations in a Python file ([system] python = \"FILE.py:FUNCTION\")")
 
 
 def test_the_limit_counts_operators_and_calls():

@@ -36,7 +36,8 @@ def _print_summary(results, out: Path, start: float) -> int:
 
     for line in summary_lines(results, run_dir=out):
         print(line)
-    print(f"done in {time.perf_counter() - start:.1f} s; see {out}/tables.md and {out}/figures/")
+    figures = " and figures/" if any((out / "figures").glob("*.png")) else ""
+    print(f"done in {time.perf_counter() - start:.1f} s; see {out}/tables.md{figures}")
     return 0
 
 
@@ -67,7 +68,7 @@ def _run_config(cfg, args, config_text: str, default_out: str, config_source: st
     results = run_experiment(
         cfg, out, seeds=seeds, jobs=jobs, progress=not args.no_progress,
         overwrite=args.overwrite, config_text=config_text, quick=args.quick, config_source=config_source,
-        seed_batch=seed_batch, scheduler=args.scheduler,
+        seed_batch=seed_batch, scheduler=args.scheduler, figures=args.figures,
     )
     return _print_summary(results, out, start)
 
@@ -98,7 +99,7 @@ def _resume(args, check) -> int:
     start = time.perf_counter()
     results = run_experiment(
         cfg, out, seeds=seeds, jobs=jobs, progress=not args.no_progress, quick=bool(meta.get("quick")),
-        resume=True, scheduler=args.scheduler,
+        resume=True, scheduler=args.scheduler, figures=args.figures,
     )
     return _print_summary(results, out, start)
 
@@ -282,7 +283,7 @@ def cmd_report(args) -> int:
 
         print(f"wrote {rewrite_family_summary(args.dir)}")
         return 0
-    paths = write_report(Path(args.dir))
+    paths = write_report(Path(args.dir), figures=args.figures)
     for line in summary_lines(load_results(Path(args.dir)), run_dir=Path(args.dir)):
         print(line)
     print(f"wrote {len(paths)} files in {args.dir}")

@@ -49,6 +49,12 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--resume", default=None, metavar="DIR",
                        help="continue an interrupted run in DIR (its config, seeds and --quick are read from DIR)")
         s.add_argument("--no-progress", action="store_true", help="no progress bars")
+        add_figures_option(s)
+
+    def add_figures_option(s):
+        s.add_argument("--figures", default="all", metavar="all|overview|none",
+                       help="what to draw: every figure (default), the overview alone, or none (tables only; "
+                            "`atlasnn report DIR` draws them later). Drawing takes about a second a figure")
 
     s = sub.add_parser("reproduce", help="run one of the built-in experiments (the paper's, the long-time ones, "
                                          "the hard-problem suite's)")
@@ -101,6 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("report", help="re-render tables and figures of a finished run")
     s.add_argument("dir", help="a run directory written by reproduce or run")
+    add_figures_option(s)
     s.set_defaults(func=cmd_report)
 
     s = sub.add_parser("integrate", help="reference solution vs symplectic integrators (a built-in system or "

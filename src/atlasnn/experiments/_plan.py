@@ -114,5 +114,5 @@ def check_memory(cfg: ExperimentConfig, tasks: list[Task], state_dim: int) -> No
         SCHEMES[task.role].check_memory(cfg, len(task.seeds), state_dim)
     ev = cfg.evaluation
     steps = (ev.se_steps or cfg.eval_stage.train.n_points - 1) * ev.fine_factor
-    if cfg.system.separable or cfg.system.hamiltonian is None:  # built-ins are separable
+    if cfg.system.separable or cfg.system.is_builtin:  # built-ins are separable
         check_integration_memory(steps, state_dim, value=ev.fine_factor)

@@ -51,7 +51,7 @@ from atlasnn.experiments._signals import NoGuard, SignalGuard
 from atlasnn.experiments._tasks import Task
 from atlasnn.experiments.config import ExperimentConfig
 from atlasnn.fileio import json_default
-from atlasnn.report import write_report
+from atlasnn.report import check_figures, write_report
 from atlasnn.experiments._store import (
     RunLock,
     check_run_dir,
@@ -179,6 +179,7 @@ def run_experiment(
     report: bool = True,
     log=print,
     resume: bool = False,
+    figures: str = "all",
     config_source: str | None = None,
     handle_signals: bool = True,
     seed_batch: int | str | None = None,
@@ -196,7 +197,9 @@ def run_experiment(
     in ``out`` (use :func:`resume_experiment`, which reads the config from ``out``).
     ``handle_signals``: while running, SIGINT and SIGTERM stop training at the end of the current
     chunk (main thread only). Raises :class:`RunInterrupted` (a KeyboardInterrupt) when
-    interrupted. ``seed_batch`` None takes the config's ``execution.seed_batch``. ``executor``:
+    interrupted. ``figures``: what the report draws (``"all"``, ``"overview"``, ``"none"``:
+    tables only; :func:`atlasnn.report.write_report`). ``seed_batch`` None takes the config's
+    ``execution.seed_batch``. ``executor``:
     an open :class:`~atlasnn.experiments._executors.Executor` to use (and leave open) instead of
     one made from ``jobs`` and ``scheduler`` (a sweep runs all its points on one).
     """
@@ -204,6 +207,7 @@ def run_experiment(
     if executor is None and (isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1):
         raise ConfigError(f"jobs must be an integer >= 1, got {jobs!r}")
     checkpoint_seconds()  # a bad ATLASNN_CHECKPOINT_SECONDS fails before anything is written
+    check_figures(figures)
     out = Path(out)
     if resume:
         if overwrite:
@@ -233,7 +237,7 @@ def run_experiment(
         with SignalGuard() if handle_signals else NoGuard():
             run = _Run(cfg, out, seeds, tasks, executor, progress, log, meta)
             return run.go(overwrite=overwrite, config_text=config_text, quick=quick, report=report,
-                          config_source=config_source)
+                          config_source=config_source, figures=figures)
     finally:
         if lock is not None:
             lock.release()
@@ -262,6 +266,7 @@ def resume_experiment(
     handle_signals: bool = True,
     scheduler: str | None = None,
     executor: Executor | None = None,
+    figures: str = "all",
 ) -> dict[str, Any]:
     """Continue an interrupted run directory (see the module docstring); returns the results.
     It may run on other executors than the run started on (``jobs``, ``scheduler``, or an open
@@ -270,7 +275,7 @@ def resume_experiment(
     return run_experiment(
         cfg, out, seeds=tuple(meta["seeds"]), jobs=jobs, progress=progress, quick=bool(meta.get("quick")),
         report=report, log=log, resume=True, handle_signals=handle_signals, scheduler=scheduler,
-        executor=executor,
+        executor=executor, figures=figures,
     )
 
 
@@ -298,7 +303,7 @@ class _Run:
             if not quiet:
                 raise
 
-    def go(self, *, overwrite, config_text, quick, report, config_source) -> dict[str, Any]:
+    def go(self, *, overwrite, config_text, quick, report, config_source, figures="all") -> dict[str, Any]:
         cfg = self.cfg
         system = system_of(cfg)
         z0 = system.initial_state(cfg.system.z0)
@@ -320,8 +325,10 @@ class _Run:
             write_json(self.out / "results.json", results)
             self.log(f"{cfg.name}: trainings done in {results['wall_time_total']:.1f} s; results in {self.out}")
             if report:
-                write_report(self.out)
-                self.log(f"{cfg.name}: tables and figures written to {self.out}")
+                write_report(self.out, figures=figures)
+                drawn = {"all": "tables and figures", "overview": "tables and the overview figure",
+                         "none": "tables (no figures: `atlasnn report DIR` draws them)"}[figures]
+                self.log(f"{cfg.name}: {drawn} written to {self.out}")
         except KeyboardInterrupt:
             finished = sum(1 for t in all_trainings if load_record(self.out, t, self.meta["run_id"]) is not None)
             self.set_status("interrupted", quiet=True, finished_tasks=finished)

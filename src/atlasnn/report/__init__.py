@@ -23,7 +23,7 @@ from atlasnn.report._plots import (
     plot_target_loss_comparison,
     plot_trajectories,
 )
-from atlasnn.report._render import SUMMARY_WIDTH, summary_lines, write_figures, write_report
+from atlasnn.report._render import FIGURE_SETS, SUMMARY_WIDTH, check_figures, summary_lines, write_figures, write_report
 from atlasnn.report._stats import SCALAR_METRICS, STATE_METRICS, column_label, load_paper, load_results, summarize
 from atlasnn.report._suite import suite_markdown, suite_summary
 from atlasnn.report._summary_plots import plot_loss_vs_accuracy, plot_overview
@@ -52,6 +52,8 @@ __all__ = [
     "replace_generated",
     "write_report",
     "write_figures",
+    "FIGURE_SETS",
+    "check_figures",
     "summary_lines",
     "SUMMARY_WIDTH",
     "experiment_claims",

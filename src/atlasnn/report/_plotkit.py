@@ -344,6 +344,34 @@ def _figure_legend(fig: Figure, axes: Iterable[Axes], ncol: int | None = None) -
                ncol=ncol or (n if n <= 8 else math.ceil(n / 2)), frameon=False, fontsize="small")
 
 
+#: Most state components drawn one panel each in the trajectory and error figures; a larger state
+#: shows the components with the largest errors (every component is in tables.md). Drawing is
+#: linear in panels: for a 32-component chain the two figures took 45 s with every panel and 13 s
+#: with 8 (both under cProfile, which inflates Matplotlib's many small calls alike).
+MAX_COMPONENT_PANELS = 8
+
+
+def _shown_components(series: Sequence[Series], n: int, limit: int = MAX_COMPONENT_PANELS) -> list[int]:
+    """The state components (indices into 2d) to draw one panel each: all of them up to ``limit``,
+    else the ``limit`` with the largest max |ẑ − z_ref| over the series (in index order)."""
+    if n <= limit:
+        return list(range(n))
+    worst = np.zeros(n)
+    for s in series:
+        err = np.abs(np.asarray(s.z, np.float64) - np.asarray(s.z_ref, np.float64))
+        err = np.where(np.isfinite(err), err, np.inf)
+        worst = np.maximum(worst, err.max(axis=0) if err.size else worst)
+    order = np.argsort(-worst, kind="stable")[:limit]
+    return sorted(int(k) for k in order)
+
+
+def _components_note(shown: Sequence[int], n: int) -> str:
+    """'' when every component is drawn, else a line saying which part is."""
+    if len(shown) == n:
+        return ""
+    return f"{len(shown)} of {n} components drawn (the largest errors); every component is in tables.md"
+
+
 def _log_floor(arrays: Iterable[np.ndarray]) -> float:
     """A positive floor for log plots: the smallest finite positive value seen (or 1e-16)."""
     best = math.inf

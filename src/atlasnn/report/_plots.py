@@ -30,6 +30,7 @@ from typing import Any, Mapping, Sequence
 import matplotlib as mpl
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.ticker import NullLocator
 
 from atlasnn.errors import ConfigError
 from atlasnn.nn import MODELS
@@ -38,7 +39,9 @@ from atlasnn.report._plotkit import (
     Series,
     _as_runs,
     _check_interval,
+    MAX_COMPONENT_PANELS,
     _check_series,
+    _components_note,
     _color,
     _delta_label,
     _figure_legend,
@@ -49,6 +52,7 @@ from atlasnn.report._plotkit import (
     _positive,
     _reference_source,
     _save,
+    _shown_components,
     _state_label,
     _t_range,
     _time_axis,
@@ -242,11 +246,13 @@ def plot_trajectories(stem: str | Path, series: Sequence[Series], state_names: S
     d = _check_series(series, state_names)
     interval = _check_interval(source_interval)
     names = list(state_names)
+    shown = _shown_components(series, 2 * d)
+    dofs = list(dict.fromkeys(k % d for k in shown))[: MAX_COMPONENT_PANELS // 2]
     phase_pairs: list[tuple[int, int]] = []
     if d == 2:
         phase_pairs.append((0, 1))
-    phase_pairs += [(i, d + i) for i in range(d)]
-    n_time = 2 * d
+    phase_pairs += [(i, d + i) for i in dofs]
+    n_time = len(shown)
     height = max(4.6, 1.9 * n_time + 1.0)
     fig = _new_figure((12.0, height))
     sf_phase, sf_time = fig.subfigures(1, 2, width_ratios=[1.0, 1.9])
@@ -266,18 +272,19 @@ def plot_trajectories(stem: str | Path, series: Sequence[Series], state_names: S
         ax.grid(alpha=0.3)
         if len(phase_pairs) == 1:
             ax.set_box_aspect(1.0)
-    for k, ax in enumerate(time_axes):
+    for row, (k, ax) in enumerate(zip(shown, time_axes)):
         ax.plot(ref.t, ref.z_ref[:, k], label="reference", **_REFERENCE_STYLE)
         for s in series:
             ax.plot(s.t, s.z[:, k], label=s.label, **model_style(s.label))
         _time_axis(ax, t_lo, t_hi, interval)
         ax.set_ylabel(_state_label(names[k]))
         ax.grid(alpha=0.3)
-        if k < n_time - 1:
+        if row < n_time - 1:
             ax.set_xlabel("")
             ax.tick_params(labelbottom=False)
+    note = _components_note(shown, 2 * d)
     sf_phase.suptitle("phase space", fontsize="medium")
-    sf_time.suptitle("state against time", fontsize="medium")
+    sf_time.suptitle("state against time" + (f"\n({note})" if note else ""), fontsize="medium")
     _figure_legend(fig, list(phase_axes) + list(time_axes))
     if title:
         fig.suptitle(title, fontsize="large")
@@ -300,7 +307,8 @@ def plot_errors(stem: str | Path, series: Sequence[Series], state_names: Sequenc
         raise ConfigError(
             f"phase_error_scale must be 'linear' or 'symlog', got {phase_error_scale!r}")
     names = list(state_names)
-    n = 2 * d
+    shown = _shown_components(series, 2 * d)
+    n = len(shown)
     errs = {id(s): s.z - s.z_ref for s in series}
     floor = _log_floor(np.abs(e) for e in errs.values())
     height = max(4.6, 1.9 * n + 1.0)
@@ -309,17 +317,18 @@ def plot_errors(stem: str | Path, series: Sequence[Series], state_names: Sequenc
     time_axes = np.atleast_1d(sf_time.subplots(n, 1, sharex=True))
     ax_pp = sf_phase.subplots()
     t_lo, t_hi = _t_range(series)
-    for k, ax in enumerate(time_axes):
+    for row, (k, ax) in enumerate(zip(shown, time_axes)):
         for s in series:
             e = np.abs(errs[id(s)][:, k])
             e = np.where(np.isfinite(e), np.maximum(e, floor), np.nan)
             ax.plot(s.t, e, label=s.label, **model_style(s.label))
         ax.set_yscale("log")
+        ax.yaxis.set_minor_locator(NullLocator())  # a panel per component: minor ticks were 40 % of the drawing
         _window_ticks(ax, series)
         _time_axis(ax, t_lo, t_hi, interval)
         ax.set_ylabel(_delta_label(names[k], absolute=True))
         ax.grid(alpha=0.3, which="major")
-        if k < n - 1:
+        if row < n - 1:
             ax.set_xlabel("")
             ax.tick_params(labelbottom=False)
     for s in series:
@@ -337,7 +346,8 @@ def plot_errors(stem: str | Path, series: Sequence[Series], state_names: Sequenc
                     fontsize="medium")
     ax_pp.grid(alpha=0.3)
     ax_pp.set_box_aspect(1.0)
-    sf_time.suptitle("absolute pointwise error against time", fontsize="medium")
+    note = _components_note(shown, 2 * d)
+    sf_time.suptitle("absolute pointwise error against time" + (f"\n({note})" if note else ""), fontsize="medium")
     _figure_legend(fig, list(time_axes) + [ax_pp])
     if title:
         fig.suptitle(title, fontsize="large")

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from atlasnn.checkpoint import load_checkpoint, load_piecewise
-from atlasnn.errors import AtlasError, CheckpointError
+from atlasnn.errors import AtlasError, CheckpointError, ConfigError
 from atlasnn.evaluation import TrainingRecord, WorkPoint, blow_up_index
 from atlasnn.report import _plots as plots
 from atlasnn.report._caveats import QUICK_BANNER, column_verdicts, figure_title, is_quick, verdict_detail, verdict_status_text
@@ -70,8 +70,24 @@ def _histories(run_dir: Path, results: dict) -> dict[str, dict]:
     return out
 
 
-def write_figures(run_dir: Path, results: dict) -> list[Path]:
-    """Every figure of the paper for this run, into ``run_dir/figures``."""
+#: what ``write_report(figures=...)`` draws: every figure, the overview alone, or none (tables only)
+FIGURE_SETS = ("all", "overview", "none")
+
+
+def check_figures(figures: str) -> str:
+    """``figures`` if it is one of :data:`FIGURE_SETS`, else a one-line error."""
+    if figures not in FIGURE_SETS:
+        raise ConfigError(f"figures must be one of {list(FIGURE_SETS)}, got {figures!r}")
+    return figures
+
+
+def write_figures(run_dir: Path, results: dict, figures: str = "all") -> list[Path]:
+    """The figures of this run into ``run_dir/figures``: every figure of the paper (``"all"``),
+    the overview alone (``"overview"``) or none."""
+    if check_figures(figures) == "none":
+        return []
+    if figures == "overview":
+        return _overview_only(run_dir, results)
     fig_dir = run_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
     arrays = dict(np.load(run_dir / "arrays.npz", allow_pickle=False))
@@ -121,23 +137,9 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
             fig_dir / "gamma", gam, title=figure_title(results, "Evolution of the scaling parameters γ"))
 
     # ---- trajectories, errors, energy (first seed), with SE and the fine SE
-    t = arrays["t_eval"]
-    series = []
-    for ir in results.get("integrators", []):
-        c = ir["column"]
-        if f"int_t_{c}" in arrays:
-            series.append(_integrator_series(ir["label"], arrays[f"int_t_{c}"], arrays[f"int_z_{c}"],
-                                             arrays[f"int_zref_{c}"], arrays[f"int_energy_{c}"]))
-    edges = {r.column: r.march.edges for r in runs if r.seed == seed0 and r.march is not None and r.march.edges}
-    for c in table_cols:
-        key = f"pred_{c}_seed{seed0}"
-        if key in arrays:
-            series.append(Series(labels[c], t, arrays[key], arrays["z_ref"], arrays[f"energy_{c}_seed{seed0}"],
-                                 arrays.get(f"estimate_{c}_seed{seed0}"), edges.get(c)))
-    ref = Series("reference", t, arrays["z_ref"], arrays["z_ref"], arrays["energy_ref"])
+    ref, series = _state_series(results, arrays, runs)
     title = figure_title(results, f"{results['experiment']} (seed {seed0})")
-    written += plot_overview(fig_dir / "overview", [ref] + series, names, results["energy0"], src_iv,
-                                   title=figure_title(results, f"{results['experiment']}: overview (seed {seed0})"))
+    written += _draw_overview(fig_dir, results, ref, series)
     written += plots.plot_trajectories(fig_dir / "trajectories", series, names, src_iv, title=title)
     written += plots.plot_errors(fig_dir / "errors", series, names, src_iv, title=title)
     written += plots.plot_energy(fig_dir / "energy", [ref] + series, results["energy0"], src_iv, title=title)
@@ -165,6 +167,38 @@ def write_figures(run_dir: Path, results: dict) -> list[Path]:
     return written
 
 
+def _state_series(results: dict, arrays: dict, runs: list[TrainingRecord]) -> tuple[Series, list[Series]]:
+    """The reference and, on the first seed, every integrator's and model's trajectory."""
+    seed0, labels, t = results["seeds"][0], results["labels"], arrays["t_eval"]
+    series = []
+    for ir in results.get("integrators", []):
+        c = ir["column"]
+        if f"int_t_{c}" in arrays:
+            series.append(_integrator_series(ir["label"], arrays[f"int_t_{c}"], arrays[f"int_z_{c}"],
+                                             arrays[f"int_zref_{c}"], arrays[f"int_energy_{c}"]))
+    edges = {r.column: r.march.edges for r in runs if r.seed == seed0 and r.march is not None and r.march.edges}
+    for c in (c for c in results["columns"] if c != "se"):
+        key = f"pred_{c}_seed{seed0}"
+        if key in arrays:
+            series.append(Series(labels[c], t, arrays[key], arrays["z_ref"], arrays[f"energy_{c}_seed{seed0}"],
+                                 arrays.get(f"estimate_{c}_seed{seed0}"), edges.get(c)))
+    return Series("reference", t, arrays["z_ref"], arrays["z_ref"], arrays["energy_ref"]), series
+
+
+def _draw_overview(fig_dir: Path, results: dict, ref: Series, series: list[Series]) -> list[Path]:
+    src_iv = tuple(results["source_interval"]) if results.get("source_interval") else None
+    return plot_overview(fig_dir / "overview", [ref] + series, results["state_names"], results["energy0"], src_iv,
+                         title=figure_title(results, f"{results['experiment']}: overview (seed {results['seeds'][0]})"))
+
+
+def _overview_only(run_dir: Path, results: dict) -> list[Path]:
+    fig_dir = run_dir / "figures"
+    fig_dir.mkdir(exist_ok=True)
+    arrays = dict(np.load(run_dir / "arrays.npz", allow_pickle=False))
+    ref, series = _state_series(results, arrays, [TrainingRecord.from_dict(r) for r in results["runs"]])
+    return _draw_overview(fig_dir, results, ref, series)
+
+
 def _integrator_series(label: str, t, z, z_ref, energy) -> Series:
     """An integrator's series, cut where it blows up (:func:`~atlasnn.evaluation.blow_up_index`)
     and labelled so: an unstable method is drawn while it means something, and its 1e173 values
@@ -188,12 +222,15 @@ def _shown(results: dict) -> dict:
     return {**results, "columns": columns, "labels": labels}
 
 
-def write_report(run_dir: str | Path) -> list[Path]:
-    """Tables and figures of a finished run directory; returns the paths written."""
+def write_report(run_dir: str | Path, figures: str = "all") -> list[Path]:
+    """Tables and figures (``figures``: one of :data:`FIGURE_SETS`) of a finished run directory;
+    returns the paths written. Drawing is most of a report's time (about a second a figure)."""
     run_dir = Path(run_dir)
+    check_figures(figures)
     results = _shown(load_results(run_dir))
     with np.errstate(over="ignore", invalid="ignore"):  # an overflowed integrator is drawn where finite
-        return list(write_tables(results, run_dir)) + write_figures(run_dir, results)
+        tables = list(write_tables(results, run_dir))
+        return tables + write_figures(run_dir, results, figures)
 
 
 #: the printed summary is laid out for terminals of this width

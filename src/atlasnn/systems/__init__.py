@@ -1,4 +1,5 @@
-"""Hamiltonian systems: H(q, p), the vector field J∇H, built-ins and Hamiltonians written as text.
+"""Hamiltonian systems: H(q, p), the vector field J∇H, built-ins, Hamiltonians written as text
+or as a Python function in a file.
 
 A new built-in system is a factory and one :func:`register_system` entry (``_builtins.py``).
 """
@@ -19,6 +20,7 @@ from atlasnn.systems._bundle_box import BundleBox
 from atlasnn.systems._compile import CompiledExpression, compile_expression
 from atlasnn.systems._expression import expression_system, is_syntactically_separable
 from atlasnn.systems._hamiltonian import HamiltonianFn, HamiltonianSystem, ParametricFn
+from atlasnn.systems._python import load_python_function, python_system
 from atlasnn.systems._parse import CONSTANTS, FUNCTIONS, MAX_DEPTH, MAX_EXPRESSION_LENGTH, MAX_OPERATIONS
 
 __all__ = [
@@ -38,6 +40,8 @@ __all__ = [
     "harmonic_exact",
     "expression_system",
     "is_syntactically_separable",
+    "python_system",
+    "load_python_function",
     "compile_expression",
     "CompiledExpression",
     "FUNCTIONS",

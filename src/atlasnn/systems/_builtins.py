@@ -15,6 +15,7 @@ import numpy as np
 from atlasnn.errors import SystemError_
 from atlasnn.systems._expression import expression_system
 from atlasnn.systems._hamiltonian import HamiltonianSystem
+from atlasnn.systems._python import python_system
 
 __all__ = ["BuiltinSystem", "BUILTIN_SYSTEMS", "register_system", "builtin_system", "system_from_spec",
            "nonlinear_oscillator", "henon_heiles", "harmonic_oscillator", "harmonic_exact", "with_params"]
@@ -141,7 +142,7 @@ def with_params(system: HamiltonianSystem, **values: float) -> HamiltonianSystem
 
 
 def system_from_spec(spec: Mapping[str, Any]) -> HamiltonianSystem:
-    """Rebuild a system from the ``spec`` a built-in or expression system records."""
+    """Rebuild a system from the ``spec`` a built-in, expression or Python-file system records."""
     kind = spec.get("kind")
     if kind == "builtin":
         return builtin_system(spec["name"], **dict(spec.get("params", {})))
@@ -151,4 +152,8 @@ def system_from_spec(spec: Mapping[str, Any]) -> HamiltonianSystem:
             params=spec.get("params", {}), name=spec.get("name", "custom"),
             separable=bool(spec.get("separable", False)), z0=spec.get("z0"),
         )
+    if kind == "python":
+        return python_system(spec["path"], spec["function"], coordinates=spec["coordinates"],
+                             momenta=spec["momenta"], params=spec.get("params", {}), name=spec.get("name", "custom"),
+                             separable=bool(spec.get("separable", False)), z0=spec.get("z0"))
     raise SystemError_(f"cannot rebuild a system from spec kind {kind!r}; pass the system explicitly")

@@ -233,7 +233,8 @@ def _check_size(tree: ast.Expression, length: int) -> None:
         raise ExpressionError(
             f"expression is too large: {ops} operations in {_top_level_terms(tree.body)} terms ({length} "
             f"characters); at most {MAX_OPERATIONS} operations are accepted (compiling a larger one takes "
-            "more than ~10 s); simplify it, e.g. collect equal terms"
+            "more than ~10 s); simplify it, e.g. collect equal terms, or write H with array operations in a Python "
+            "file ([system] python = \"FILE.py:FUNCTION\")"
         )
 
 

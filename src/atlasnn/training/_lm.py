@@ -36,6 +36,7 @@ affordable and reaches losses Adam does not (measured: a pendulum window's max e
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from dataclasses import dataclass
@@ -441,22 +442,29 @@ class LMOutcome(NamedTuple):
     accepted: int
 
 
+@functools.lru_cache(maxsize=8)
+def _minimise_program(res: Callable, jac: Callable, config: LMConfig) -> Callable:
+    """The jitted loop of :func:`lm_minimise` for one problem, kept so that calls with new ``args``
+    (e.g. fresh collocation points) reuse its program instead of tracing it again."""
+    n_hist = config.steps + 1
+
+    def run(x, args, data):
+        r, j = (lambda v: res(v, args)), (lambda v: jac(v, args))
+        body = _make_step(r, j, config, n_hist)
+        s0 = _init_state(x, r, j, config, n_hist, data)
+        return jax.lax.while_loop(lambda s: s.stop == 0, lambda s: body(s, data), s0)
+
+    return jax.jit(run)
+
+
 def lm_minimise(res: Callable, jac: Callable, x0: jax.Array, args: Any, config: LMConfig = LMConfig()) -> LMOutcome:
     """The same damped Gauss–Newton loop for any least-squares problem min ‖res(x, args)‖²:
     ``res(x, args)`` gives the residual vector (m,), ``jac(x, args)`` its Jacobian (m, n). One
     compiled program (``args`` are its arguments, so new data of the same shape reuses nothing
     but costs no retrace of the loop's logic). Used by bundles and parameter fits."""
-    n_hist = config.steps + 1
     with jax.enable_x64(True):  # the factorisation is float64 (see _solve); x keeps its own type
         data = _data(config, x0.dtype)
-
-        def run(x, args, data):
-            r, j = (lambda v: res(v, args)), (lambda v: jac(v, args))
-            body = _make_step(r, j, config, n_hist)
-            s0 = _init_state(x, r, j, config, n_hist, data)
-            return jax.lax.while_loop(lambda s: s.stop == 0, lambda s: body(s, data), s0)
-
-        state = jax.jit(run)(x0, args, data)
+        state = _minimise_program(res, jac, config)(x0, args, data)
         hist = np.asarray(state.history, np.float64)
     return LMOutcome(state.x, hist[np.isfinite(hist)], _STOP.get(int(state.stop), "running"), int(state.step),
                      int(state.accepted))

@@ -46,9 +46,9 @@ from atlasnn.experiments.config._schema import (
     parse_value,
     settings_fields,
 )
-from atlasnn.experiments.config._system_checks import check_system_builds
+from atlasnn.experiments.config._system_checks import _config_folder, _python_target, check_system_builds
 from atlasnn.experiments.config._types import _fail, _number, _table
-from atlasnn.systems import BUILTIN_SYSTEMS, builtin_system, expression_system
+from atlasnn.systems import BUILTIN_SYSTEMS, builtin_system, expression_system, python_system
 from atlasnn.training import DEFAULT_WINDOW_TRAIN, LMConfig, MarchConfig, PolishConfig, TrainConfig, n_windows_for
 
 
@@ -64,8 +64,18 @@ def _deep_merge(base: dict, over: dict) -> dict:
 
 # ----------------------------------------------------------------- settings dataclasses
 class _SystemMethods:
+    @property
+    def is_builtin(self) -> bool:
+        """Whether this names a built-in system (not an expression or a Python file)."""
+        return self.hamiltonian is None and self.python is None
+
     def build(self):
         """The :class:`~atlasnn.systems.HamiltonianSystem` this describes."""
+        if self.python is not None:
+            path, function = self.python.rsplit(":", 1)
+            return python_system(path, function, coordinates=list(self.coordinates), momenta=list(self.momenta),
+                                 params=dict(self.params), name=self.name or "custom", separable=self.separable,
+                                 z0=None if self.z0 is None else list(self.z0))
         if self.hamiltonian is not None:
             return expression_system(
                 self.hamiltonian, coordinates=list(self.coordinates), momenta=list(self.momenta),
@@ -178,9 +188,23 @@ def _default_name(values: dict, source: str) -> str:
     return parse_value(SCHEMA[""].key("name").type, "name", Path(source).stem)
 
 
-def _system_config(v: dict, given: dict) -> SystemConfig:
-    """A built-in name or a hamiltonian; with a hamiltonian, as many momenta as coordinates and
-    z0 of length 2d. Without one, coordinates and momenta are not used."""
+def _system_config(v: dict, given: dict, base: Path | None = None) -> SystemConfig:
+    """A built-in name, a hamiltonian expression or a Python file; with a hamiltonian, as many
+    momenta as coordinates and z0 of length 2d. Without one, coordinates and momenta are not used;
+    a Python file's names are optional (d from z0 then)."""
+    if v["python"] is not None:
+        if v["hamiltonian"] is not None:
+            _fail("system.python", v["python"], "give either system.python or system.hamiltonian, not both")
+        v = {**v, "python": _python_target(v["python"], base)}
+        coords, momenta = v["coordinates"], v["momenta"]
+        if len(coords) != len(momenta):
+            _fail("system.momenta", given.get("momenta"), f"must have as many names as system.coordinates "
+                  f"({len(coords)})")
+        if v["z0"] is None:
+            _fail("system.z0", None, "missing: a Python-file system needs its initial state (it also fixes d)")
+        if len(v["z0"]) % 2 or (coords and len(v["z0"]) != 2 * len(coords)):
+            _fail("system.z0", given["z0"], f"must have 2d components (coordinates first), got {len(v['z0'])}")
+        return SystemConfig(**v)
     if v["hamiltonian"] is None:
         if v["name"] is None:
             _fail("system", given, "give a built-in system name or a hamiltonian expression")
@@ -315,7 +339,7 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     v = parse_table("", "", data)
 
     kind = v["kind"] or ("transfer" if "source" in data else "short")
-    system = _system_config(v["system"], data["system"])
+    system = _system_config(v["system"], data["system"], _config_folder(source))
     base_train = _train_settings("train", v["train"], data.get("train", {}))
     _check_stages_present(kind, data)
     if not v["models"] and (kind != "short" or v["march"] is None):

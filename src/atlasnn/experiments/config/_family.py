@@ -14,6 +14,7 @@ from typing import Any, Mapping
 from atlasnn.errors import ConfigError
 from atlasnn.experiments.config._config import SystemConfig, _system_config, builtin_config_dir, read_config
 from atlasnn.experiments.config._schema import MAX_SEEDS, parse_table
+from atlasnn.experiments.config._system_checks import _config_folder
 from atlasnn.experiments.config._types import _fail, _integer, _key, _number, _string, _table
 from atlasnn.inverse import JointConfig
 from atlasnn.nn import model_aliases
@@ -28,7 +29,8 @@ FIT_METHODS = ("joint", "bundle", "shooting")
 #: --quick: every budget capped (a smoke test of the whole pipeline)
 QUICK_CAPS = {"epochs": 300, "lm_steps": 10, "test_members": 16, "windows": 2}
 _BUNDLE_KEYS = {"T", "t0", "z0_rel", "z0_low", "z0_high", "ranges", "windows", "width", "depth", "model", "epochs",
-                "batch", "lr", "lm_steps", "lm_points", "test_members", "test_times", "test_seed"}
+                "batch", "lr", "lm_steps", "lm_points", "lm_rounds", "margin", "test_members", "test_times",
+                "test_seed"}
 _OBS_KEYS = {"file", "n", "t0", "T", "names", "noise", "times_seed"}
 _FIT_KEYS = {"methods", "width", "depth", "epochs", "lm_steps", "lm_points", "data_weight", "segments",
              "bundle_windows", "bundle_epochs", "bundle_lm_steps", "bundle_lm_points", "bundle_width"}
@@ -55,6 +57,8 @@ class BundleSettings:
     lr: float = 2e-3
     lm_steps: int = 150
     lm_points: int = 512
+    lm_rounds: int = 1
+    margin: float = 0.0
     test_members: int = 200
     test_times: int = 100
     test_seed: int = 12345
@@ -69,7 +73,8 @@ class BundleSettings:
 
     def train_config(self) -> BundleTrainConfig:
         return BundleTrainConfig(windows=self.windows, epochs=self.epochs, batch=self.batch, lr=self.lr,
-                                 lm_steps=self.lm_steps, lm_points=self.lm_points)
+                                 lm_steps=self.lm_steps, lm_points=self.lm_points, lm_rounds=self.lm_rounds,
+                                 margin=self.margin)
 
 
 @dataclass(frozen=True)
@@ -166,11 +171,13 @@ def _bundle(v: dict, quick: bool) -> BundleSettings:
     kw["ranges"] = _ranges("bundle.ranges", v.get("ranges", {}))
     for name, low, high in (("windows", 1, 256), ("width", 1, 1024), ("depth", 1, 8), ("epochs", 0, 10**7),
                             ("batch", 2, 65536), ("lm_steps", 0, 10**5), ("lm_points", 2, 65536),
-                            ("test_members", 1, 10**5), ("test_times", 2, 10**5), ("test_seed", 0, 2**31 - 1)):
+                            ("lm_rounds", 1, 10**4), ("test_members", 1, 10**5), ("test_times", 2, 10**5), ("test_seed", 0, 2**31 - 1)):
         if name in v:
             kw[name] = _integer(f"bundle.{name}", v[name], low, high)
     if "lr" in v:
         kw["lr"] = _number("bundle.lr", v["lr"], low=0.0, low_open=True, high=1.0)
+    if "margin" in v:
+        kw["margin"] = _number("bundle.margin", v["margin"], low=0.0, high=1.0)
     if "model" in v:
         kw["model"] = model_aliases().get(_string("bundle.model", v["model"])) or _fail(
             "bundle.model", v["model"], f"unknown model; choose one of {sorted(set(model_aliases().values()))}")
@@ -273,7 +280,7 @@ def parse_family(data: dict[str, Any], *, source: str = "config", quick: bool = 
     _table("", data, allowed)
     if "system" not in data:
         _fail("system", None, "missing (the Hamiltonian system)")
-    system = _system_config(parse_table("system", "system", data["system"]), data["system"])
+    system = _system_config(parse_table("system", "system", data["system"]), data["system"], _config_folder(source))
     name = _string("name", data.get("name", Path(source).stem))
     description = _string("description", data.get("description", ""))
     seeds = _seeds(data.get("seeds", [0]))

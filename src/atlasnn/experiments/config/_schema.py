@@ -224,11 +224,16 @@ _STATIC_TABLES: dict[str, TableSpec] = {
             "above, typically far fewer epochs.", default_text="none: --quick then caps every epoch budget at "
             "300, evaluates on 200 points, draws SE-10 and marches at rtol >= 1e-3"),
     )),
-    "system": TableSpec("A built-in system by name, or your own Hamiltonian written as an expression.", (
+    "system": TableSpec("A built-in system by name, or your own Hamiltonian written as an expression or as a "
+                        "Python function in a file.", (
         Key("name", String(), None, "A built-in system (`atlasnn systems` lists them) or, with hamiltonian, "
             "a name for your own.", default_text="none", note=_builtin_systems),
         Key("hamiltonian", String(), None, "Your own Hamiltonian H(q, p) as an expression in the coordinates, "
             "momenta and params, e.g. \"p**2/2 - cos(q)\" (parsed, never run as Python).", default_text="none"),
+        Key("python", String(), None, "Your own Hamiltonian as a Python function in a file, \"FILE.py:FUNCTION\" "
+            "(the path relative to the config file; FUNCTION defaults to hamiltonian): H(q, p, **params) for q, p "
+            "arrays of shape (d,), returning one number, JAX-traceable. The route for large systems (an expression "
+            "costs one operation per term); the file is run as Python.", default_text="none"),
         Key("coordinates", NameList("expected a non-empty list of names"), [],
             "Names of the coordinates q of your own Hamiltonian.", default_text="required with hamiltonian"),
         Key("momenta", NameList("expected a non-empty list of names"), [],
