@@ -82,3 +82,48 @@ def test_env_switch_trains_in_float64():
     loss = np.asarray(out["loss"])
     assert loss.shape == (40,) and np.all(np.isfinite(loss))
     assert loss[-1] < loss[0]
+
+
+# ------------------------------------------------------------------ matrix-product precision
+_MATMUL_SCRIPT = "import atlasnn, jax; print(jax.config.jax_default_matmul_precision)"
+
+
+def _matmul_setting(**env_vars):
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("ATLASNN_MATMUL_PRECISION", "JAX_DEFAULT_MATMUL_PRECISION")}
+    env.update(env_vars, JAX_PLATFORMS="cpu")
+    return subprocess.run([sys.executable, "-c", _MATMUL_SCRIPT], env=env, capture_output=True, text=True,
+                          timeout=120)
+
+
+def test_full_float32_products_by_default_and_the_switches():
+    assert _matmul_setting().stdout.strip() == "highest"
+    assert _matmul_setting(ATLASNN_MATMUL_PRECISION="default").stdout.strip() == "None"  # JAX's own
+    assert _matmul_setting(ATLASNN_MATMUL_PRECISION="tensorfloat32").stdout.strip() == "tensorfloat32"
+    # JAX's own flag, set by the user, is left alone
+    assert _matmul_setting(JAX_DEFAULT_MATMUL_PRECISION="bfloat16").stdout.strip() == "bfloat16"
+
+
+def test_a_bad_matmul_precision_is_one_line():
+    proc = _matmul_setting(ATLASNN_MATMUL_PRECISION="fast")
+    assert proc.returncode != 0
+    assert "Traceback" not in proc.stderr
+    assert proc.stderr.strip().splitlines() == [
+        "atlasnn: ATLASNN_MATMUL_PRECISION='fast' is not one of highest, high, default, float32, tensorfloat32, "
+        "bfloat16"]
+
+
+def test_a_program_traced_under_another_matmul_precision_is_compiled_again():
+    from atlasnn.systems import builtin_system
+    from atlasnn.training import TrainConfig, train
+
+    system = builtin_system("harmonic_oscillator")
+    cfg = TrainConfig(epochs=20, lr=1e-2, n_points=16, chunk=20, progress=False)
+    model = make_model(system.z0, scaling="tanh", width=12, depth=1, seed=0)
+    first = train(model, system, 1.0, cfg)
+    again = train(model, system, 1.0, cfg)
+    assert again.compile_time == 0.0  # the same program, from the in-process cache
+    with jax.default_matmul_precision("bfloat16"):
+        other = train(model, system, 1.0, cfg)
+    assert other.compile_time > 0.0  # not the program traced under full float32
+    np.testing.assert_array_equal(first.history.loss, again.history.loss)

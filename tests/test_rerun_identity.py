@@ -44,3 +44,5 @@ def test_worker_flags_are_all_xla_flags_and_the_machine_is_recorded():
     assert all(word.startswith("--") and "=" in word for word in WORKER_XLA_FLAGS.split())
     v = versions()
     assert v["cpu"] and int(v["cpu_count"]) >= 1  # kernels and seed batching depend on them
+    # so do the device and, on a GPU, the precision of matrix products
+    assert v["backend"] and v["device"] and v["matmul_precision"] == "highest"

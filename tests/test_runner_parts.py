@@ -12,7 +12,9 @@ from atlasnn.cli import main
 from atlasnn.errors import ConfigError
 from atlasnn.experiments import _schemes as schemes
 from atlasnn.experiments.config import builtin_config_path, load_config, parse_config
-from atlasnn.experiments._plan import AUTO_BATCH_WORK, Task, batch_size, epoch_work, plan_tasks
+from atlasnn.experiments._plan import (AUTO_BATCH_MAX_ACCELERATOR, AUTO_BATCH_WORK, Task, batch_size,
+                                       epoch_work, plan_tasks)
+from atlasnn.experiments._plan import columns_of as schemes_columns
 from atlasnn.experiments import RunInterrupted, resume_experiment, run_experiment
 from atlasnn.experiments._store import RunLock
 
@@ -49,6 +51,19 @@ def test_auto_batches_small_epochs_and_keeps_every_job_busy():
     # one column and two jobs: at least two tasks
     one_column = _cfg()
     assert [len(t.seeds) for t in plan_tasks(one_column, (0, 1, 2, 3, 4), jobs=2, seed_batch="auto")] == [3, 2]
+
+
+def test_auto_on_a_gpu_puts_every_seed_of_a_column_in_one_program():
+    large = load_config(builtin_config_path("henon-heiles-transfer"))
+    assert batch_size(large, "transfer", 5, 2, "auto", backend="gpu") == 5
+    assert batch_size(large, "transfer", 5000, 1, "auto", backend="gpu") == AUTO_BATCH_MAX_ACCELERATOR
+    assert batch_size(large, "transfer", 5, 1, 2, backend="gpu") == 2  # a number is kept
+    sizes = [len(t.seeds) for t in plan_tasks(large, tuple(range(1030)), seed_batch="auto", backend="gpu")]
+    assert sizes == [1024, 6] * len(sizes[::2])
+    # time-marching windows are not batched, on any backend
+    march = load_config(builtin_config_path("henon-heiles-long"))
+    marching = [r for r, _ in schemes_columns(march) if schemes.SCHEMES[r].batch_limit(march) is not None]
+    assert marching and all(batch_size(march, r, 5, 1, "auto", backend="gpu") == 1 for r in marching)
 
 
 # --------------------------------------------------------------- batch interrupted

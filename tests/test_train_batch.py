@@ -45,6 +45,22 @@ def test_each_seed_of_a_batch_is_its_lone_run(ho):
     assert not np.array_equal(batch[0].history.loss, batch[1].history.loss)
 
 
+def test_runs_with_other_initial_states_keep_their_own_energy(ho):
+    """H(z0) is computed once per distinct z0 of a batch and Adam's fresh state once per layout:
+    runs that share neither must still train as they would alone."""
+    from atlasnn.nn import make_model
+
+    z0s = [(1.0, 0.0), (0.5, 0.5), (1.0, 0.0)]
+    models = [make_model(z, scaling="rational_exp", width=32, depth=2, seed=s) for s, z in enumerate(z0s)]
+    configs = [CFG.replace(seed=s, lr=lr) for s, lr in enumerate((5e-3, 2e-3, 5e-3))]
+    batch = train_batch(models, ho, T_END, configs)
+    for m, c, b in zip(models, configs, batch):
+        _same_as_alone(b, train(m, ho, T_END, c))
+    # the fresh Adam states are not one shared object's values after training
+    assert float(batch[0].opt_state.hyperparams["learning_rate"]) == pytest.approx(5e-3)
+    assert float(batch[1].opt_state.hyperparams["learning_rate"]) == pytest.approx(2e-3)
+
+
 def test_a_seed_that_stops_or_diverges_leaves_the_others_alone(ho):
     base = CFG.replace(freeze_gamma=True)  # so that an absurd lr diverges (see test_train)
     good = base.replace(seed=0)

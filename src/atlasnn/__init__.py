@@ -19,10 +19,11 @@ from typing import Any
 
 from atlasnn.compile_cache import enable_compile_cache
 from atlasnn.errors import AtlasError
-from atlasnn.precision import enable_x64, x64_enabled
+from atlasnn.precision import apply_matmul_precision, enable_x64, x64_enabled
 from atlasnn.version import __version__
 
 enable_compile_cache()  # before anything compiles (atlasnn.compile_cache; ATLASNN_CACHE_DIR=off)
+apply_matmul_precision()  # full float32 products on a GPU too (atlasnn.precision)
 
 # name -> the subpackage that defines it
 _FACE = {

@@ -1,9 +1,15 @@
-"""Floating-point precision switch.
+"""Floating-point precision switches.
 
 atlasnn trains in float32 by default (as the authors' PyTorch release does). Setting the
 environment variable ``ATLASNN_X64=1`` before import, or calling :func:`enable_x64`, switches
 JAX to float64 for everything created afterwards. The reference solver always evaluates the
 vector field in float64, whatever this switch says.
+
+Matrix products: on a GPU, JAX's default runs float32 products as TF32 (a 10-bit mantissa), which
+a physics loss driven to 1e-6 notices. atlasnn asks for full float32 products
+(``jax_default_matmul_precision = "highest"``) unless ``ATLASNN_MATMUL_PRECISION`` names another of
+JAX's settings (``default`` keeps JAX's own) or JAX's own ``JAX_DEFAULT_MATMUL_PRECISION`` is set.
+A CPU computes float32 products in full either way, so its results do not change.
 """
 
 import os
@@ -12,6 +18,34 @@ import jax
 
 if os.environ.get("ATLASNN_X64", "").strip() not in ("", "0", "false", "False"):
     jax.config.update("jax_enable_x64", True)
+
+MATMUL_ENV = "ATLASNN_MATMUL_PRECISION"
+#: the values ATLASNN_MATMUL_PRECISION takes ("default": leave JAX's own default alone)
+MATMUL_CHOICES = ("highest", "high", "default", "float32", "tensorfloat32", "bfloat16")
+
+
+def _matmul_setting() -> str | None:
+    """The matrix-product precision to set at import (None: leave JAX's as it is)."""
+    if os.environ.get("JAX_DEFAULT_MATMUL_PRECISION"):
+        return None  # the user set JAX's own flag
+    value = os.environ.get(MATMUL_ENV, "").strip().lower() or "highest"
+    if value not in MATMUL_CHOICES:
+        raise SystemExit(f"atlasnn: {MATMUL_ENV}={value!r} is not one of {', '.join(MATMUL_CHOICES)}")
+    return None if value == "default" else value
+
+
+def apply_matmul_precision() -> str | None:
+    """Set JAX's default matrix-product precision from the environment (once, at import); returns
+    what was set (None: JAX's own default or the user's JAX flag)."""
+    value = _matmul_setting()
+    if value is not None:
+        jax.config.update("jax_default_matmul_precision", value)
+    return value
+
+
+def matmul_precision() -> str:
+    """The matrix-product precision in force now ("default" when JAX's own applies)."""
+    return jax.config.jax_default_matmul_precision or "default"
 
 
 def enable_x64(on: bool = True) -> None:

@@ -116,7 +116,7 @@ def save_checkpoint(
         model: the trained :class:`~atlasnn.nn._trial.TrialSolution` (non-finite values are kept).
         system: its Hamiltonian system (its ``describe()`` is stored; a built-in or expression
             system is rebuilt from it on load, a Python-function system must be passed again).
-        history: a :class:`~atlasnn.training._train.History` to keep, or ``None``.
+        history: a :class:`~atlasnn.training._records.History` to keep, or ``None``.
         train_config: a :class:`~atlasnn.training.TrainConfig` (or a JSON-able dict), or ``None``.
         extra: a free JSON-able dict (model name, seed, ``interval``, stop reason, ...).
             An ``"interval": [t0, T]`` entry is used by :meth:`Checkpoint.solution`.
@@ -189,7 +189,7 @@ class Checkpoint:
     Attributes:
         model: the restored :class:`~atlasnn.nn._trial.TrialSolution` (bit-identical to the saved one).
         system: the system passed to :func:`load_checkpoint`, or the one rebuilt from its spec.
-        history: the stored :class:`~atlasnn.training._train.History`, or ``None``.
+        history: the stored :class:`~atlasnn.training._records.History`, or ``None``.
         meta: the file's meta dict (architecture, gamma, system, train_config, extra, hash, ...).
         path: the file it came from.
     """

@@ -16,6 +16,11 @@ compilation of one program per seed. So ``"auto"`` batches the seeds of a column
 below :data:`AUTO_BATCH_WORK` (collocation points × width²) — in the largest batch size whose
 tasks, spread over the parallel jobs, are estimated to finish first — and pairs them when it is
 larger but the machine has more cores than parallel jobs.
+
+On a GPU the measurements go the other way (``scripts/gpu_check.sh``, docs/PERFORMANCE.md "A
+GPU"): one seed alone leaves an H100 nearly idle, and a program of 16, 256 or 1 024 seeds trains
+each seed 6–13×, 14–52× and 16–63× faster than one seed alone on it. So there ``"auto"`` puts all
+the seeds of a column in one program, up to :data:`AUTO_BATCH_MAX_ACCELERATOR`.
 """
 
 from __future__ import annotations
@@ -41,6 +46,16 @@ AUTO_BATCH_MAX = 8
 #: (measured 1.29–1.39× at the batch sizes auto picks: docs/benchmarks/seed_batch.json)
 ONE_CORE_BATCH_GAIN = 1.0
 SPARE_CORE_BATCH_GAIN = 1.3
+#: "auto" on an accelerator (JAX's default backend is not the CPU): every seed of a column in one
+#: program, up to this many (the largest batch measured on the H100: docs/benchmarks/gpu/)
+AUTO_BATCH_MAX_ACCELERATOR = 1024
+
+
+def default_backend() -> str:
+    """The platform the trainings of this process run on ("cpu", "gpu", ...)."""
+    import jax
+
+    return jax.default_backend()
 
 
 def _makespan(size: int, n_seeds: int, columns: int, jobs: int) -> float:
@@ -71,13 +86,17 @@ def _explicit(seed_batch: int | str, n_seeds: int) -> int:
     return min(seed_batch, n_seeds)
 
 
-def batch_size(cfg: ExperimentConfig, role: str, n_seeds: int, jobs: int, seed_batch: int | str) -> int:
-    """How many seeds of one column to train together (see the module docstring)."""
+def batch_size(cfg: ExperimentConfig, role: str, n_seeds: int, jobs: int, seed_batch: int | str,
+               backend: str | None = None) -> int:
+    """How many seeds of one column to train together (see the module docstring); ``backend``
+    is where they train (default: JAX's default backend)."""
     limit = SCHEMES[role].batch_limit(cfg)
     if limit is not None:
         return 1 if seed_batch == "auto" else min(limit, _explicit(seed_batch, n_seeds))
     if seed_batch != "auto":
         return _explicit(seed_batch, n_seeds)
+    if (backend or default_backend()) != "cpu":
+        return min(n_seeds, AUTO_BATCH_MAX_ACCELERATOR)
     if epoch_work(cfg, role) > AUTO_BATCH_WORK:
         return 2 if (os.cpu_count() or 1) > jobs and n_seeds > 1 else 1
     columns = len(columns_of(cfg))
@@ -86,11 +105,11 @@ def batch_size(cfg: ExperimentConfig, role: str, n_seeds: int, jobs: int, seed_b
 
 
 def plan_tasks(cfg: ExperimentConfig, seeds: tuple[int, ...], *, jobs: int = 1,
-               seed_batch: int | str = 1) -> list[Task]:
+               seed_batch: int | str = 1, backend: str | None = None) -> list[Task]:
     """The tasks of a run: per column, its seeds cut into batches (in seed order)."""
     tasks = []
     for role, model in columns_of(cfg):
-        size = batch_size(cfg, role, len(seeds), jobs, seed_batch)
+        size = batch_size(cfg, role, len(seeds), jobs, seed_batch, backend)
         for i in range(0, len(seeds), size):
             tasks.append(Task(role, model, tuple(seeds[i:i + size])))
     return tasks

@@ -66,13 +66,15 @@ def versions() -> dict[str, str]:
     import optax
     import scipy
 
+    from atlasnn.precision import matmul_precision
     from atlasnn.version import __version__
 
     return {
         "atlasnn": __version__, "jax": jax.__version__, "jaxlib": jaxlib.__version__,
         "equinox": equinox.__version__, "optax": optax.__version__, "numpy": np.__version__,
         "scipy": scipy.__version__, "python": platform.python_version(), "platform": platform.platform(),
-        "backend": jax.default_backend(), "cpu": cpu_model(), "cpu_count": str(os.cpu_count()),
+        "backend": jax.default_backend(), "device": jax.devices()[0].device_kind,
+        "matmul_precision": matmul_precision(), "cpu": cpu_model(), "cpu_count": str(os.cpu_count()),
     }
 
 

@@ -21,7 +21,7 @@ from atlasnn.training._progress import MarchProgress
 from atlasnn.training._polish import PRECISIONS, PolishConfig, PolishResult, polish
 from atlasnn.training._refine import RefineConfig, refine
 from atlasnn.training._step import init_opt_state, trainable_filter
-from atlasnn.training._train import (
+from atlasnn.training._records import (
     BEST_RULES,
     LR_SCHEDULES,
     History,
@@ -29,9 +29,8 @@ from atlasnn.training._train import (
     TrainResult,
     TrainState,
     state_template,
-    train,
-    train_batch,
 )
+from atlasnn.training._train import train, train_batch
 from atlasnn.training._transfer import (
     check_same_architecture,
     restrict_opt_state,

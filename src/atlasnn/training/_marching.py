@@ -48,7 +48,8 @@ from atlasnn.training._polish import PolishConfig, PolishResult
 from atlasnn.training._progress import MarchProgress
 from atlasnn.training._refine import refine
 from atlasnn.systems import HamiltonianSystem
-from atlasnn.training._train import TrainConfig, TrainResult, train_batch
+from atlasnn.training._records import TrainConfig, TrainResult
+from atlasnn.training._train import train_batch
 from atlasnn.training._transfer import restrict_opt_state
 
 __all__ = ["MarchConfig", "march_batch", "n_windows_for", "window_model", "end_state", "window_seed"]

@@ -233,7 +233,7 @@ def _compiled_steps(args: tuple, unravel, system: HamiltonianSystem, config: Pol
     leaves, treedef = jax.tree_util.tree_flatten(args)
     sig = tuple((tuple(np.shape(x)), str(jnp.asarray(x).dtype)) for x in leaves)
     key = (id(system), config.memory, config.linesearch_steps, config.chunk, treedef, sig,
-           jax.config.read("jax_enable_x64"))
+           jax.config.read("jax_enable_x64"), jax.config.jax_default_matmul_precision)
     hit = _CACHE.get(key)
     if hit is not None and hit[0] is system:
         return hit[1], 0.0

@@ -20,7 +20,7 @@ import numpy as np
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
 from atlasnn.solutions import WindowRecord
-from atlasnn.training._train import TrainConfig
+from atlasnn.training._records import TrainConfig
 
 __all__ = ["MarchProgress"]
 

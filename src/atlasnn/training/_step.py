@@ -93,7 +93,7 @@ class Mode:
 
     @classmethod
     def of(cls, cfg) -> "Mode":
-        """The mode of a :class:`~atlasnn.training._train.TrainConfig`."""
+        """The mode of a :class:`~atlasnn.training._records.TrainConfig`."""
         rule = "lowest" if cfg.best_rule == "last" else cfg.best_rule
         ratio = float(cfg.lr_final_ratio) if cfg.lr_schedule != "constant" else 1.0
         return cls(rule, cfg.lr_schedule, ratio, cfg.causal_eps > 0, cfg.release_fixed_point)
@@ -201,7 +201,10 @@ def compiled_chunk(args: tuple, system: HamiltonianSystem, mode: Mode, batched: 
     (compiled function, seconds spent compiling: 0 on a cache hit)."""
     leaves, treedef = jax.tree_util.tree_flatten(args)
     sig = tuple((tuple(x.shape), str(x.dtype)) for x in leaves)
-    key = (id(system), mode, batched, treedef, sig, jax.config.read("jax_enable_x64"))
+    # the matrix-product precision is read when tracing (on a GPU the default may be TF32): a
+    # program traced under another setting is another program
+    key = (id(system), mode, batched, treedef, sig, jax.config.read("jax_enable_x64"),
+           jax.config.jax_default_matmul_precision)
     hit = _CHUNK_CACHE.get(key)
     if hit is not None and hit[0] is system:
         return hit[1], 0.0

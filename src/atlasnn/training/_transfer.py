@@ -16,7 +16,9 @@ import equinox as eqx
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
 from atlasnn.systems import HamiltonianSystem
-from atlasnn.training._train import TrainConfig, TrainResult, TrainState, train_batch, trainable_filter
+from atlasnn.training._records import TrainConfig, TrainResult, TrainState
+from atlasnn.training._step import trainable_filter
+from atlasnn.training._train import train_batch
 
 
 def check_same_architecture(source: TrialSolution, architecture: dict[str, Any]) -> None:
@@ -63,7 +65,7 @@ def transfer(
         architecture: the target's intended architecture (width, depth, ...); a mismatch with the
             source is an error.
         resume, on_chunk: passed to :func:`~atlasnn.training._train.train` (continue an interrupted target
-            run from its saved :class:`~atlasnn.training._train.TrainState`; a per-chunk callback).
+            run from its saved :class:`~atlasnn.training._records.TrainState`; a per-chunk callback).
     """
     return transfer_from(
         source.model, source.opt_state, system, T, config, thaw=thaw, carry_adam=carry_adam,
@@ -89,7 +91,7 @@ def transfer_from(
 
     This is what a resumed run uses: the source's returned model comes from its checkpoint
     (:func:`~atlasnn.checkpoint._single.load_checkpoint`) and its Adam state from its saved final
-    :class:`~atlasnn.training._train.TrainState` (:func:`~atlasnn.checkpoint._single.load_state`); the target then
+    :class:`~atlasnn.training._records.TrainState` (:func:`~atlasnn.checkpoint._single.load_state`); the target then
     starts exactly as it would have in the uninterrupted run. ``opt_state`` may be ``None`` when
     ``carry_adam`` is false or ``resume`` is given.
     """

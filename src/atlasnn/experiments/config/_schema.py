@@ -18,7 +18,7 @@ How to add a key
 1. Add one ``Key(...)`` to its table below: name, type with limits, default, meaning. That is all
    it takes for the key to be validated and documented; a key of [train], [evaluation] or
    [system] also becomes a field of TrainSettings / EvaluationConfig / SystemConfig, and a [train]
-   key that is also a field of :class:`atlasnn.training._train.TrainConfig` reaches the trainer. A key of
+   key that is also a field of :class:`atlasnn.training._records.TrainConfig` reaches the trainer. A key of
    the top level, [network] or [transfer] also needs its field in ExperimentConfig (config.py
    fills the fields by name). A new table: a new ``TableSpec`` here and a ``Key(name,
    Sub("its id"), ...)`` where it sits.
