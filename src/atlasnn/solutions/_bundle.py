@@ -24,7 +24,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.nn import BundleTrial
-from atlasnn.solutions._solution import bucket_size
+from atlasnn.solutions._evaluate import bucket_size
 from atlasnn.systems import BundleBox, HamiltonianSystem
 
 __all__ = ["BundleSolution", "MEMBER_CHUNK", "bundle_start"]

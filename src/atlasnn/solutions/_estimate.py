@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.nn import TrialSolution
+from atlasnn.solutions._evaluate import value_and_rate_padded
 from atlasnn.solutions._linearised import (
     MAX_STEPS_PER_WINDOW,
     MIN_STEPS_PER_WINDOW,
@@ -126,11 +127,6 @@ class ErrorEstimate:
                 "steps": [int(s) for s in self.steps], "omega_c": self.omega_c}
 
 
-@jax.jit
-def _value_and_rate(model: TrialSolution, s: jax.Array):
-    return model.value_and_rate(s)
-
-
 def _sample(windows: list[tuple[TrialSolution, float, float, float]], steps: list[int]):
     """(t, ẑ, dẑ/dt) in float64 on the grid: per window 2·steps + 1 samples of local time."""
     out_t, out_z, out_dz = [], [], []
@@ -139,8 +135,8 @@ def _sample(windows: list[tuple[TrialSolution, float, float, float]], steps: lis
         with jax.enable_x64(True):
             m64 = jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float64) if eqx.is_inexact_array(x) else x,
                                          model)
-            z, dz = _value_and_rate(m64, jnp.asarray(s + offset, dtype=jnp.float64))
-            z, dz = np.asarray(z, dtype=np.float64), np.asarray(dz, dtype=np.float64)
+            # padded to a bucket of times: one program for windows of many lengths
+            z, dz = value_and_rate_padded(m64, s + offset, jnp.float64)
         tk = start + s
         tk[-1] = start + length  # the edge exactly
         out_t.append(tk)

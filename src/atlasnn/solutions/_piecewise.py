@@ -27,7 +27,8 @@ import numpy as np
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
 from atlasnn.solutions._base import AbstractSolution
-from atlasnn.solutions._solution import bucket_size, check_inside, check_outside_mode, check_state_size
+from atlasnn.solutions._evaluate import bucket_size
+from atlasnn.solutions._solution import check_inside, check_outside_mode, check_state_size
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["WindowRecord", "PiecewiseSolution", "stack_models", "unstack_models", "window_edges"]

@@ -19,13 +19,12 @@ import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.nn import TrialSolution
 from atlasnn.solutions._base import AbstractSolution
+from atlasnn.solutions._evaluate import value_and_rate_padded
 from atlasnn.systems import HamiltonianSystem
 
 OUTSIDE_MODES = ("warn", "raise", "allow")
@@ -77,22 +76,6 @@ def check_inside(owner: Any, interval: tuple[float, float] | None, arr: np.ndarr
         warnings.warn(msg + f" (warned once per {kind})", ExtrapolationWarning, stacklevel=5)
 
 
-@jax.jit
-def _evaluate(model: TrialSolution, t: jax.Array):
-    return model.value_and_rate(t)
-
-
-def bucket_size(n: int) -> int:
-    """The padded length of ``n`` evaluation times: 8, 16, 32, ... up to 4096, then multiples of
-    4096 (a few compiled shapes instead of one per length, at most about 2× the work)."""
-    if n <= 4096:
-        size = 8
-        while size < n:
-            size *= 2
-        return size
-    return -(-n // 4096) * 4096
-
-
 @dataclass(eq=False)
 class Solution(AbstractSolution):
     """A trained trial solution for one system.
@@ -139,14 +122,9 @@ class Solution(AbstractSolution):
         """(ẑ, dẑ/dt, shape of t): the times padded to a bucket size so that a new number of
         times rarely compiles again (:func:`bucket_size`)."""
         flat, shape = self._times(t)
-        n = flat.size
-        padded = np.zeros(bucket_size(n), dtype=np.float64)
-        padded[:n] = flat
-        if n:
-            padded[n:] = flat[-1]
-        z, dz = _evaluate(self.model, jnp.asarray(padded, dtype=self.model.z0.dtype))
+        z, dz = value_and_rate_padded(self.model, flat, self.model.z0.dtype)
         d = self.system.state_dim
-        return np.asarray(z)[:n].reshape(shape + (d,)), np.asarray(dz)[:n].reshape(shape + (d,)), shape
+        return z.reshape(shape + (d,)), dz.reshape(shape + (d,)), shape
 
     def pieces(self) -> list[tuple[TrialSolution, float, float, float]]:
         if self.interval is None:
