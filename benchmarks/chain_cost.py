@@ -153,8 +153,9 @@ def main(argv=None) -> int:
     ap.add_argument("--particles", type=int, nargs="+", default=[16, 64])
     ap.add_argument("--out", default="docs/benchmarks/chain_cost.json")
     ap.add_argument("--before", default=None, metavar="SRC",
-                    help="also run the expression case (all figures) with the package in SRC (another checkout's "
-                         "src/, e.g. a git worktree of the previous commit), labelled 'before'")
+                    help="also run the expression case (all figures) and the python case (overview) with the "
+                         "package in SRC (another checkout's src/, e.g. a git worktree of the previous commit), "
+                         "labelled 'before'")
     ap.add_argument("--doc", default=None, help="also write the table into this page's generated:chain_cost section")
     args = ap.parse_args(argv)
     rows = []
@@ -162,8 +163,8 @@ def main(argv=None) -> int:
         for n in args.particles:
             forms = ("expression", "python") if n <= 16 else ("python",)
             cases = [(form, "all", None) for form in forms] + [("python", "overview", None)]
-            if args.before and n <= 16:
-                cases.insert(0, ("expression", "all", args.before))
+            if args.before and n <= 16:  # the same cases with the other package, run first
+                cases[:0] = [("expression", "all", args.before), ("python", "overview", args.before)]
             for form, figures, src in cases:
                 folder = Path(tmp) / f"{n}-{form}-{figures}-{'before' if src else 'now'}"
                 folder.mkdir()
