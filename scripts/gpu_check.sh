@@ -6,7 +6,7 @@
 #   SMALL=1 bash scripts/gpu_check.sh    # the same steps at toy sizes: a dry run on any machine
 #
 # Steps, most important first, each under its own time limit so that a slow one cannot take the
-# rest with it: (1) accuracy of 64 seeds trained on this device against DOP853, full float32 matrix
+# rest with it (on an H100 they took about 7 minutes; run it with a call limit of 600 s): (1) accuracy of 64 seeds trained on this device against DOP853, full float32 matrix
 # products (atlasnn's default); (2) per-seed throughput for S = 1, 16, 256, 1 024 seeds in one
 # program on oscillator-short and the Hénon–Heiles target; (3) the accuracy with JAX's own default
 # products (TF32 on a recent GPU); (4) an end-to-end quick reproduction through the CLI; (5) the
@@ -45,8 +45,13 @@ step() {  # step LIMIT_S NAME COMMAND...: run with a limit, say how it ended and
 {
   step 150 "accuracy, full float32 products" $PY -m benchmarks.device_accuracy --seeds $SEEDS --epochs $EPOCHS \
     --out "$OUT/device_accuracy_gpu.json"
-  step 240 "seed-batch throughput" $PY -m benchmarks.seed_batch --configs osc-short hh-target --sizes $SIZES \
-    --epochs $BEPOCHS --rounds $ROUNDS --one-core docs/benchmarks/seed_batch_one_core.json --out "$OUT/seed_batch_gpu.json"
+  # one step per configuration: on the H100 the two together took over 240 s with an empty cache
+  step 150 "seed-batch throughput, oscillator-short" $PY -m benchmarks.seed_batch --configs osc-short \
+    --sizes $SIZES --epochs $BEPOCHS --rounds $ROUNDS --one-core docs/benchmarks/seed_batch_one_core.json \
+    --out "$OUT/seed_batch_gpu_osc.json"
+  step 200 "seed-batch throughput, Hénon–Heiles target" $PY -m benchmarks.seed_batch --configs hh-target \
+    --sizes $SIZES --epochs $BEPOCHS --rounds 1 --one-core docs/benchmarks/seed_batch_one_core.json \
+    --out "$OUT/seed_batch_gpu_hh.json"
   ATLASNN_MATMUL_PRECISION=default step 90 "accuracy, JAX's default products" $PY -m benchmarks.device_accuracy \
     --seeds $SEEDS --epochs $EPOCHS --out "$OUT/device_accuracy_gpu_tf32.json"
   step 120 "quick reproduction through the CLI" $PY -c "import sys; from atlasnn.cli import main; sys.exit(main())" \
