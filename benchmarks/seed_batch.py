@@ -93,8 +93,6 @@ def measure(cfg, sizes: list[int], epochs: int, rounds: int, log=print) -> dict:
 
 def with_one_core(results: list[dict], path: str) -> None:
     """Add to each batch its per-seed throughput against the lone one-core run in ``path``."""
-    from pathlib import Path
-
     base = {r["config"]: r["lone_ms_per_epoch"] for r in json.loads(Path(path).read_text())["results"]}
     for r in results:
         one = base.get(r["config"])
