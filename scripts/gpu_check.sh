@@ -5,6 +5,9 @@
 #   bash scripts/gpu_check.sh            # results and a log in $OUT (default: gpu-out/)
 #   SMALL=1 bash scripts/gpu_check.sh    # the same steps at toy sizes: a dry run on any machine
 #
+# The GPU machine lacks tomli-w: first, here, `pip download tomli-w --no-deps --only-binary=:all: -d .whl`
+# (with .whl/ ignored by git) and carry .whl with the call; the script installs it.
+#
 # Steps, most important first, each under its own time limit so that a slow one cannot take the
 # rest with it (on an H100 they took about 7 minutes; run it with a call limit of 600 s): (1) accuracy of 64 seeds trained on this device against DOP853, full float32 matrix
 # products (atlasnn's default); (2) per-seed throughput for S = 1, 16, 256, 1 024 seeds in one
