@@ -127,3 +127,16 @@ def test_a_program_traced_under_another_matmul_precision_is_compiled_again():
         other = train(model, system, 1.0, cfg)
     assert other.compile_time > 0.0  # not the program traced under full float32
     np.testing.assert_array_equal(first.history.loss, again.history.loss)
+
+
+def test_a_levenberg_marquardt_phase_traced_under_another_matmul_precision_is_compiled_again():
+    from atlasnn.systems import builtin_system
+    from atlasnn.training import LMConfig, levenberg_marquardt
+
+    system = builtin_system("harmonic_oscillator")
+    model = make_model(system.z0, scaling="tanh", width=6, depth=1, seed=1)
+    cfg = LMConfig(steps=3, n_points=8)
+    levenberg_marquardt(model, system, 1.0, cfg)
+    assert levenberg_marquardt(model, system, 1.0, cfg).compile_time == 0.0
+    with jax.default_matmul_precision("bfloat16"):
+        assert levenberg_marquardt(model, system, 1.0, cfg).compile_time > 0.0

@@ -48,6 +48,13 @@ def matmul_precision() -> str:
     return jax.config.jax_default_matmul_precision or "default"
 
 
+def trace_settings() -> tuple[bool, str | None]:
+    """The global settings a traced program depends on (float64 mode, matrix-product precision):
+    part of the key of every cache of compiled programs atlasnn keeps itself, so that a program
+    traced under other settings is never reused."""
+    return bool(jax.config.read("jax_enable_x64")), jax.config.jax_default_matmul_precision
+
+
 def enable_x64(on: bool = True) -> None:
     """Turn JAX's 64-bit mode on (or off) globally."""
     jax.config.update("jax_enable_x64", bool(on))

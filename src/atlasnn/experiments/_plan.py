@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import os
 
+import jax
 import numpy as np
 
 from atlasnn.errors import ConfigError
@@ -50,12 +51,6 @@ SPARE_CORE_BATCH_GAIN = 1.3
 #: program, up to this many (the largest batch measured on the H100: docs/benchmarks/gpu/)
 AUTO_BATCH_MAX_ACCELERATOR = 1024
 
-
-def default_backend() -> str:
-    """The platform the trainings of this process run on ("cpu", "gpu", ...)."""
-    import jax
-
-    return jax.default_backend()
 
 
 def _makespan(size: int, n_seeds: int, columns: int, jobs: int) -> float:
@@ -95,7 +90,7 @@ def batch_size(cfg: ExperimentConfig, role: str, n_seeds: int, jobs: int, seed_b
         return 1 if seed_batch == "auto" else min(limit, _explicit(seed_batch, n_seeds))
     if seed_batch != "auto":
         return _explicit(seed_batch, n_seeds)
-    if (backend or default_backend()) != "cpu":
+    if (backend or jax.default_backend()) != "cpu":
         return min(n_seeds, AUTO_BATCH_MAX_ACCELERATOR)
     if epoch_work(cfg, role) > AUTO_BATCH_WORK:
         return 2 if (os.cpu_count() or 1) > jobs and n_seeds > 1 else 1

@@ -48,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
+from atlasnn.precision import trace_settings
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
 from atlasnn.systems import HamiltonianSystem
@@ -355,7 +356,7 @@ def _compiled_loop(config: LMConfig, system, unravel, unravel_jac, jac_dtype, ar
     leaves, treedef = jax.tree_util.tree_flatten(args)
     sig = tuple((tuple(np.shape(v)), str(jnp.asarray(v).dtype)) for v in leaves)
     key = (id(system), batched, config.replace(lam_reg=0.0, loss_tol=0.0, patience=1, min_rel_improvement=0.0),
-           treedef, sig, str(jac_dtype), jax.config.read("jax_enable_x64"))
+           treedef, sig, str(jac_dtype), trace_settings())
     hit = _COMPILED.get(key)
     if hit is not None and hit[0] is system:
         return hit[1], 0.0

@@ -43,6 +43,7 @@ import numpy as np
 import optax
 from jax.flatten_util import ravel_pytree
 
+from atlasnn.precision import trace_settings
 from atlasnn.training._collocation import check_interval, uniform_grid
 from atlasnn.errors import ConfigError
 from atlasnn.training._loss import physics_loss
@@ -233,7 +234,7 @@ def _compiled_steps(args: tuple, unravel, system: HamiltonianSystem, config: Pol
     leaves, treedef = jax.tree_util.tree_flatten(args)
     sig = tuple((tuple(np.shape(x)), str(jnp.asarray(x).dtype)) for x in leaves)
     key = (id(system), config.memory, config.linesearch_steps, config.chunk, treedef, sig,
-           jax.config.read("jax_enable_x64"), jax.config.jax_default_matmul_precision)
+           trace_settings())
     hit = _CACHE.get(key)
     if hit is not None and hit[0] is system:
         return hit[1], 0.0

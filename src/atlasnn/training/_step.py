@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
+from atlasnn.precision import trace_settings
 from atlasnn.training._collocation import jittered, uniform_grid, with_release_fixed_point
 from atlasnn.training._loss import causal_physics_loss, physics_loss
 from atlasnn.nn import TrialSolution
@@ -201,10 +202,7 @@ def compiled_chunk(args: tuple, system: HamiltonianSystem, mode: Mode, batched: 
     (compiled function, seconds spent compiling: 0 on a cache hit)."""
     leaves, treedef = jax.tree_util.tree_flatten(args)
     sig = tuple((tuple(x.shape), str(x.dtype)) for x in leaves)
-    # the matrix-product precision is read when tracing (on a GPU the default may be TF32): a
-    # program traced under another setting is another program
-    key = (id(system), mode, batched, treedef, sig, jax.config.read("jax_enable_x64"),
-           jax.config.jax_default_matmul_precision)
+    key = (id(system), mode, batched, treedef, sig, trace_settings())
     hit = _CHUNK_CACHE.get(key)
     if hit is not None and hit[0] is system:
         return hit[1], 0.0
