@@ -2,7 +2,7 @@
 
 The package, one subpackage per concept, data flowing one way (lowest first):
 
-    systems, nn → solutions → training → checkpoint → evaluation → inverse → report → experiments → cli
+    systems, nn → solutions → training → solver → checkpoint → evaluation → inverse → report → experiments → cli
 
 (``observations``, the data of inverse problems, sits on the ground floor with ``fileio``.)
 
@@ -33,6 +33,7 @@ _FACE = {
     "solutions": ("Solution", "PiecewiseSolution", "BundleSolution"),
     "training": ("TrainConfig", "train", "train_batch", "transfer", "polish", "PolishConfig", "MarchConfig",
                  "march", "march_batch", "DEFAULT_NETWORK", "DEFAULT_WINDOW_TRAIN", "train_bundle", "BundleTrainConfig"),
+    "solver": ("solve", "Collocation", "AdamMarch"),
     "checkpoint": ("save_checkpoint", "load_checkpoint", "save_piecewise", "load_piecewise", "save_bundle",
                    "load_bundle"),
     "evaluation": ("reference_solution", "integrate", "error_table", "judge_training", "Metric", "register_metric",

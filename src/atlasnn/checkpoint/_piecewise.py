@@ -78,7 +78,7 @@ def piecewise_payload(p: str, solution: Any, train_config: Any, extra: Mapping[s
         raise _fail(p, f"save_piecewise needs a PiecewiseSolution, got {type(solution).__name__}")
     models = list(solution.models)
     meta = _build_meta(p, models[0], solution.system, KIND_PIECEWISE, None, train_config, extra)
-    arrays, leaf_info = _leaf_arrays(stack_models(models), "param")
+    arrays, leaf_info = _leaf_arrays(solution.stacked, "param")
     meta["leaves"] = leaf_info
     meta["history"] = None
     arrays["piecewise_edges"] = np.asarray(solution.edges, dtype=np.float64)

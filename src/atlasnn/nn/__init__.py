@@ -3,8 +3,8 @@
 
 from atlasnn.nn._bundle import BundleTrial, make_bundle_model
 from atlasnn.nn._mlp import ACTIVATIONS, MLP
-from atlasnn.nn._models import MODELS, ModelKind, make_scaling, model_aliases, model_kind, register_model
-from atlasnn.nn._scaling import ExpDecay, RationalExp, Tanh, TimeScaling, build_scaling, inverse_softplus, softplus
+from atlasnn.nn._models import MODELS, SCALINGS, ModelKind, make_scaling, model_aliases, model_kind, register_model
+from atlasnn.nn._scaling import ExpDecay, Linear, RationalExp, Tanh, TimeScaling, build_scaling, inverse_softplus, softplus
 from atlasnn.nn._sincos import SINCOS_FAST_LIMIT, sin, sin_cos
 from atlasnn.nn._trial import TrialSolution, make_model
 
@@ -13,6 +13,8 @@ __all__ = [
     "ExpDecay",
     "Tanh",
     "RationalExp",
+    "Linear",
+    "SCALINGS",
     "build_scaling",
     "softplus",
     "inverse_softplus",

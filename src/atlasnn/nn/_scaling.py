@@ -152,6 +152,22 @@ class RationalExp(TimeScaling):
         return {"alpha": self.alpha, "beta": self.beta}
 
 
+class Linear(TimeScaling):
+    """f(t) = t: no parameters, no saturation — the constrained form z0 + t·N(t) of X-TFC, which the
+    float64 collocation solver (:mod:`atlasnn.solver`) uses on short windows by default. Unlike
+    the paper's scalings it does not tend to 1, so it suits a window, not a whole long interval."""
+
+    name: ClassVar[str] = "linear"
+    gamma_names: ClassVar[tuple[str, ...]] = ()
+    formula: ClassVar[str] = "f(t) = t"
+
+    def __call__(self, t):
+        return t
+
+    def derivative(self, t):
+        return jnp.ones_like(t)
+
+
 def build_scaling(cls: type[TimeScaling], gamma: dict[str, float] | None = None) -> TimeScaling:
     """An instance of the scaling class ``cls`` with initial γ (each defaults to
     ``cls.gamma_defaults``, 1.0 as the paper says), after checking every given γ by name."""

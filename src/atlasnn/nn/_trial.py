@@ -21,7 +21,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.nn._mlp import MLP
-from atlasnn.nn._models import model_kind
+from atlasnn.nn._models import make_scaling
 from atlasnn.nn._scaling import TimeScaling
 from atlasnn.precision import default_float
 
@@ -91,7 +91,7 @@ def make_model(
     """Build a trial solution for initial state z0 (length 2d) at time t0.
 
     ``scaling`` is a scaling instance or a name: ``"exp_decay"`` (HNN baseline), ``"tanh"`` or
-    ``"rational_exp"`` (ATLAS-NN); paper model names ``"hnn"``, ``"atlas_tanh"``, ``"atlas_exp"``
+    ``"rational_exp"`` (ATLAS-NN), ``"linear"`` (f = t, the collocation solver's); paper model names ``"hnn"``, ``"atlas_tanh"``, ``"atlas_exp"``
     are accepted too. ``gamma`` gives the initial γ (default 1.0 for each, as in the paper).
     ``first_layer_scale`` scales the first layer's initial weights (see :class:`MLP`); it is an
     initialisation choice only (a checkpoint stores the weights, not the scale).
@@ -100,7 +100,7 @@ def make_model(
     if z0.size < 2 or z0.size % 2 or not np.all(np.isfinite(z0)):
         raise ConfigError(f"z0 must be an even number (2d) of finite values, got {z0.tolist()}")
     if isinstance(scaling, str):
-        scaling = model_kind(scaling).make_scaling(gamma)
+        scaling = make_scaling(scaling, gamma)
     elif gamma:
         raise ConfigError("give gamma only together with a scaling name, not with a scaling instance")
     key = seed if isinstance(seed, jax.Array) else jax.random.PRNGKey(int(seed))

@@ -17,6 +17,7 @@ extrapolation, as with :class:`~atlasnn.solutions._solution.Solution`.
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -46,12 +47,19 @@ def window_edges(t0: float, T: float, n_windows: int) -> np.ndarray:
 
 
 def stack_models(models: list[TrialSolution]) -> TrialSolution:
-    """The window models as one pytree whose array leaves have a leading window axis."""
-    return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *models)
+    """The window models as one pytree whose array leaves have a leading window axis (float64
+    models stay float64 whatever JAX's global switch says)."""
+    with _float64_if(np.dtype(models[0].z0.dtype) == np.float64):
+        return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *models)
 
 
 def unstack_models(stacked: TrialSolution, n: int) -> list[TrialSolution]:
     return [jax.tree_util.tree_map(lambda x, i=i: x[i], stacked) for i in range(n)]
+
+
+def _float64_if(on: bool):
+    """JAX's float64 mode for the block when ``on`` (float64 models), else the mode as it is."""
+    return jax.enable_x64(True) if on else contextlib.nullcontext()
 
 
 @jax.jit
@@ -106,6 +114,8 @@ class PiecewiseSolution(AbstractSolution):
         edges: the window edges t_0..t_n (float64).
         windows: one :class:`WindowRecord` per window (may be empty for a bare solution).
         info: free-form record (scheme settings, training summary).
+        stacked: the window models as one pytree with a leading window axis (built from ``models``
+            when not given; a solver that has it already passes it).
         outside: what evaluating outside [t0, T] does, as for :class:`~atlasnn.solutions._solution.Solution`:
             ``"warn"`` (once), ``"raise"`` or ``"allow"`` (the first or last window extrapolates).
     """
@@ -116,6 +126,7 @@ class PiecewiseSolution(AbstractSolution):
     windows: list[WindowRecord] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
     outside: str = "warn"
+    stacked: Any = field(default=None, repr=False)
     _warned: bool = field(default=False, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -129,7 +140,11 @@ class PiecewiseSolution(AbstractSolution):
             raise ConfigError("every window model of a piecewise solution must use local time (t0 = 0)")
         for k, m in enumerate(self.models):
             check_state_size(m, self.system, f"window {k}'s model")
-        self._stacked = stack_models(list(self.models))
+        # float64 window models (the collocation solver's) are stacked and evaluated in float64
+        # whatever JAX's global switch says
+        self._x64 = np.dtype(self.models[0].z0.dtype) == np.float64
+        if self.stacked is None:
+            self.stacked = stack_models(list(self.models))
 
     # ------------------------------------------------------------------ evaluation
     def window_index(self, t) -> np.ndarray:
@@ -156,7 +171,8 @@ class PiecewiseSolution(AbstractSolution):
         grid = np.zeros((n, width), dtype=np.float64)
         grid[k, col] = s
         dtype = self.models[0].z0.dtype
-        z, dz = _evaluate_stacked(self._stacked, jnp.asarray(grid, dtype=dtype))
+        with _float64_if(self._x64):
+            z, dz = _evaluate_stacked(self.stacked, jnp.asarray(grid, dtype=dtype))
         z, dz = np.asarray(z)[k, col], np.asarray(dz)[k, col]
         d = self.system.state_dim
         return z.reshape(shape + (d,)), dz.reshape(shape + (d,)), shape

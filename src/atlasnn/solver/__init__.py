@@ -1,0 +1,31 @@
+"""Solving Hamilton's equations for one trajectory: :func:`solve`, and the solver objects it takes.
+
+:class:`Collocation` (the default) solves ATLAS-NN's trial solution window by window in float64 —
+random tanh features, the output layer found by Gauss–Newton on collocation points, windows
+accepted by their estimated error — as one compiled program. :class:`AdamMarch` is the paper's
+network trained by Adam window by window. A new solver is one :class:`AbstractSolver` subclass and
+one :func:`register_solver` entry.
+"""
+
+from atlasnn.solver._base import SOLVERS, AbstractSolver, register_solver, solver_from_name
+from atlasnn.solver._collocation import Collocation, require_float64
+from atlasnn.solver._features import WINDOW_SCALINGS, RandomFeatures, collocation_nodes
+from atlasnn.solver._solve import DEFAULT_ATOL, DEFAULT_RTOL, TIGHTEST_TOLERANCE, solve
+from atlasnn.solver._trained import AdamMarch
+
+__all__ = [
+    "solve",
+    "AbstractSolver",
+    "Collocation",
+    "AdamMarch",
+    "SOLVERS",
+    "register_solver",
+    "solver_from_name",
+    "require_float64",
+    "RandomFeatures",
+    "collocation_nodes",
+    "WINDOW_SCALINGS",
+    "DEFAULT_RTOL",
+    "DEFAULT_ATOL",
+    "TIGHTEST_TOLERANCE",
+]

@@ -1,0 +1,196 @@
+"""The float64 collocation solver: ATLAS-NN's trial solution per window, its output layer solved
+(not trained) by Gauss–Newton over random features, windows chosen by their estimated error.
+
+The method is in :mod:`._program` (one compiled program) and :mod:`._features` (the basis);
+this module holds the settings, checks them, runs the program chunk by chunk and turns its
+windows into the :class:`~atlasnn.solutions.PiecewiseSolution` every other part of atlasnn reads.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from atlasnn.errors import ConfigError
+from atlasnn.nn import inverse_softplus, make_model
+from atlasnn.solutions import PiecewiseSolution, WindowRecord
+from atlasnn.solver._base import AbstractSolver, register_solver
+from atlasnn.solver._features import RandomFeatures, collocation_nodes, window_scaling
+from atlasnn.solver._program import MarchState, compiled_march
+from atlasnn.systems import HamiltonianSystem
+
+__all__ = ["Collocation", "require_float64"]
+
+
+def require_float64() -> None:
+    """Refuse, in one line, a device on which JAX cannot compute in float64."""
+    with jax.enable_x64(True):
+        if jnp.zeros(1, jnp.float64).dtype != jnp.float64:
+            raise ConfigError(f"the collocation solver needs float64, which the {jax.default_backend()} device "
+                              "does not offer; run on the CPU (JAX_PLATFORMS=cpu) or use solver=AdamMarch()")
+
+
+def _positive_int(name: str, value: Any, low: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise ConfigError(f"collocation {name} must be an integer >= {low}, got {value!r}")
+    return int(value)
+
+
+def _positive(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)) or not np.isfinite(value) or value <= 0:
+        raise ConfigError(f"collocation {name} must be a finite number > 0, got {value!r}")
+    return float(value)
+
+
+@register_solver
+@dataclass(frozen=True)
+class Collocation(AbstractSolver):
+    """Windows of ẑ_k(s) = z_k + f(s) W_k φ(s/h), W_k found by float64 Gauss–Newton on collocation
+    points, each accepted when its estimated local error meets atol + rtol·|z| (docs/SOLVER.md).
+
+    Attributes:
+        features: M, the random tanh features per window (unknowns: 2d·M per window).
+        points: P collocation nodes per window (P ≥ M: the residual's 2d·P equations must be able
+            to determine the 2d·M unknowns); default M + 4.
+        scale: the features' slopes are uniform in ±scale on the normalised window time.
+        scaling: the time scaling f: ``"linear"`` (f = s, default), ``"tanh"`` or ``"rational_exp"``.
+        shape: γ̂ of a tanh/rational-exp scaling (m·h or α·h).
+        nodes: ``"chebyshev"`` (Chebyshev–Lobatto) or ``"gauss"`` (Gauss–Legendre).
+        check: RK4 steps per window of the error estimate (default 2P).
+        seed: the draw of the random features.
+        order: the exponent q of the length controller (h ← h·0.8·ε^(−1/q)).
+        growth: the most a window may grow over the last one.
+        first_window: the first window's length (default 1/‖A(z0)‖, A the vector field's Jacobian).
+        max_newton: Gauss–Newton iterations per window at most; ``newton_tol``: its step tolerance.
+        max_rejects: rejected tries in a row before the march gives up.
+        chunk: windows per call of the compiled program (progress is reported between calls).
+    """
+
+    name: ClassVar[str] = "collocation"
+
+    features: int = 20
+    points: int | None = None
+    scale: float = 2.0
+    scaling: str = "linear"
+    shape: float = 1.0
+    nodes: str = "chebyshev"
+    check: int | None = None
+    seed: int = 0
+    order: float = 8.0
+    growth: float = 2.0
+    first_window: float | None = None
+    max_newton: int = 12
+    newton_tol: float = 1e-13
+    max_rejects: int = 30
+    chunk: int = 64
+
+    def __post_init__(self) -> None:
+        m = _positive_int("features", self.features)
+        p = m + 4 if self.points is None else _positive_int("points", self.points)
+        if p < m:
+            raise ConfigError(f"collocation points ({p}) must be at least the features ({m}): fewer points cannot "
+                              f"determine {m} output weights per component; raise points or lower features")
+        object.__setattr__(self, "points", p)
+        object.__setattr__(self, "check", 2 * p if self.check is None else _positive_int("check", self.check, 2))
+        for name in ("scale", "shape", "order", "newton_tol"):
+            _positive(name, getattr(self, name))
+        if _positive("growth", self.growth) <= 1.0:
+            raise ConfigError(f"collocation growth must be > 1, got {self.growth!r}")
+        if self.first_window is not None:
+            _positive("first_window", self.first_window)
+        window_scaling(self.scaling)
+        collocation_nodes(2, self.nodes)
+        for name in ("max_newton", "max_rejects", "chunk"):
+            _positive_int(name, getattr(self, name))
+        _positive_int("seed", self.seed, 0)
+
+    # ------------------------------------------------------------------ solving
+    def solve(self, system: HamiltonianSystem, z0: np.ndarray, t0: float, T: float, *, rtol: float, atol: float,
+              progress: Callable[[float], None] | None = None) -> PiecewiseSolution:
+        require_float64()
+        program = compiled_march(system, self.scaling, chunk=self.chunk, max_newton=self.max_newton,
+                                 newton_tol=self.newton_tol, order=self.order, growth=self.growth,
+                                 max_rejects=self.max_rejects)
+        feats = RandomFeatures.draw(self.features, self.scale, self.seed)
+        nodes = collocation_nodes(self.points, self.nodes)
+        check = np.linspace(0.0, 1.0, 2 * self.check + 1)
+        rows, compile_time, started = [], 0.0, time.perf_counter()
+        with jax.enable_x64(True):
+            f64 = lambda x: jnp.asarray(x, jnp.float64)  # noqa: E731
+            args = ((f64(feats.a), f64(feats.b)), f64(nodes), f64(check), f64(self.shape))
+            state = MarchState(f64(t0), f64(z0), f64(self.first_window or 0.0), jnp.zeros_like(f64(z0)),
+                               jnp.asarray(0), jnp.asarray(0), jnp.asarray(0))
+            T_, rtol_, atol_ = f64(T), f64(rtol), f64(atol)
+            while True:
+                tic = time.perf_counter()
+                out = jax.device_get(program(*args, state, T_, rtol_, atol_))
+                if not rows:  # the first call compiles (or loads from the cache) and runs
+                    compile_time = time.perf_counter() - tic
+                state = jax.tree_util.tree_map(jnp.asarray, out.state)
+                k = int(out.count)
+                rows.append(jax.tree_util.tree_map(lambda x, k=k: np.asarray(x)[:k], out[1:-1]))
+                if progress is not None:
+                    progress(min(1.0, (float(out.state.t) - t0) / (T - t0)))
+                if float(out.state.t) >= T or int(out.state.failed):
+                    break
+        wall = time.perf_counter() - started
+        start, length, z_start, weights, est_max, ratio = (np.concatenate(c) for c in zip(*rows))
+        end = state.t
+        if int(state.failed) or start.size == 0:
+            raise ConfigError(
+                f"the collocation march stopped at t = {float(end):.6g} of [{t0:.6g}, {T:.6g}]: windows shrank below "
+                f"round-off or failed {self.max_rejects} times in a row (rtol={rtol:g}, atol={atol:g}); loosen the "
+                f"tolerance or raise features")
+        info = {"solver": self.name, "settings": self.settings(), "rtol": float(rtol), "atol": float(atol),
+                "windows": int(start.size), "rejected": int(state.rejected), "newton_iterations": int(state.newton),
+                "running_estimate_max": float(est_max.max()), "running_estimate_end": np.asarray(state.delta).tolist(),
+                "solve_time": wall, "first_call_time": compile_time}
+        return self._solution(system, z0, feats, start, length, z_start, weights, est_max, ratio, info)
+
+    def _solution(self, system, z0, feats, start, length, z_start, weights, est_max, ratio, info) -> PiecewiseSolution:
+        """The windows as a PiecewiseSolution of float64 trial solutions (one-hidden-layer tanh
+        networks whose first layer is the features scaled to each window)."""
+        n = start.size
+        scaling = window_scaling(self.scaling)
+        with jax.enable_x64(True):
+            skeleton = make_model(np.zeros(system.state_dim), scaling=self.scaling, width=self.features, depth=1,
+                                  activation="tanh")
+            host = self._stacked(skeleton, feats, length, z_start, weights, scaling)  # NumPy leaves
+            stacked = jax.tree_util.tree_map(jnp.asarray, host)
+        models = [jax.tree_util.tree_map(lambda x, k=k: x[k], host) for k in range(n)]
+        edges = np.append(start, start[-1] + length[-1])
+        records = [WindowRecord(k, float(start[k]), float(edges[k + 1]), z_start[k].tolist(),
+                                {g: float(v) for g, v in scaling.gamma(length[k], self.shape).items()},
+                                0, "gauss-newton", float("nan"), float("nan"), loss=float(ratio[k]))
+                   for k in range(n)]
+        info["window_estimate_max"] = est_max.tolist()
+        return PiecewiseSolution(models, system, edges, records, info, outside="warn", stacked=stacked)
+
+    def _stacked(self, skeleton, feats, length, z_start, weights, scaling):
+        n = length.size
+        f64 = lambda x: np.asarray(x, np.float64)  # noqa: E731
+        first = f64(feats.a[None, :, None] / length[:, None, None])
+        leaves = {
+            "w0": first, "b0": f64(np.broadcast_to(feats.b, (n, feats.count))), "w1": f64(weights),
+            "b1": np.zeros((n, z_start.shape[1]), np.float64), "z0": f64(z_start),
+        }
+        stacked = jax.tree_util.tree_map(lambda x: np.broadcast_to(np.asarray(x), (n,) + x.shape)
+                                         if eqx.is_array(x) else x, skeleton)
+        stacked = eqx.tree_at(lambda m: (m.net.weights[0], m.net.biases[0], m.net.weights[1], m.net.biases[1], m.z0),
+                              stacked, (leaves["w0"], leaves["b0"], leaves["w1"], leaves["b1"], leaves["z0"]))
+        gamma = [scaling.gamma(h, self.shape) for h in length]
+        if gamma and gamma[0]:
+            raw = {g: f64([inverse_softplus(x[g]) for x in gamma]) for g in gamma[0]}
+            stacked = eqx.tree_at(lambda m: tuple(getattr(m.scaling, f"raw_{g}") for g in raw), stacked,
+                                  tuple(raw.values()))
+        return stacked
+
+    def settings(self) -> dict[str, Any]:
+        """The settings as a JSON-able dict (what a record keeps)."""
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}

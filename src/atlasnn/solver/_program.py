@@ -1,0 +1,194 @@
+"""The collocation march as one compiled program: windows in a ``lax.while_loop``, each solved by
+Gauss–Newton in float64, accepted or rejected by its estimated error, as an adaptive ODE solver
+treats a step.
+
+One window (local time s ∈ [0, h], normalised τ = s/h; see :mod:`._features`):
+
+* basis at the P collocation nodes: values B_v = f(s) φ(τ) and rates B_r = ḟ(s) φ(τ) + f(s) φ'(τ)/h,
+  so ẑ_i = z_k + W B_v,i and dẑ_i/ds = W B_r,i. With B_r = Q R (thin QR) and V = W Rᵀ the rates are
+  V Qᵀ with orthonormal Q, which keeps Gauss–Newton's normal equations well conditioned (their
+  matrix is I − h(X + Xᵀ) + O(h²) with X of the size of the window's Lipschitz constant);
+* the residual E_i = V Q_i − F(z_k + V C_i) (C = B_v R⁻¹, F = J∇H) is driven to zero by Gauss–Newton
+  steps (J has blocks Q_ij I − C_ij A(ẑ_i), A = DF), from the constant-rate guess V Qᵀ = F(z_k) 1ᵀ,
+  until the step stops shrinking or falls below round-off;
+* its error: δ' = A(ẑ)δ + r along the window (r the residual), integrated by RK4 on a check grid
+  finer than the nodes, twice at once: from δ = 0 (the window's local error, which decides
+  acceptance against atol + rtol·|z|) and from the δ carried over from the previous window (the
+  running a-posteriori estimate of the global error, the linearised estimate of
+  :mod:`atlasnn.solutions._estimate` computed on the fly);
+* the next length: h · clip(0.8 ε^(−1/q), 0.2, growth) with ε the local error over its tolerance
+  (shrunk to at most half on a rejection).
+
+The program marches at most ``chunk`` accepted windows per call and returns; the caller calls it
+again from where it stopped, so one program serves every interval length, and progress can be
+shown between calls. Its arguments that vary (features, nodes, z, t, T, tolerances) are traced:
+a new seed, state or interval reuses the compiled program.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from atlasnn.precision import trace_settings
+from atlasnn.solver._features import window_scaling
+
+__all__ = ["MarchState", "ChunkResult", "compiled_march"]
+
+
+class MarchState(NamedTuple):
+    """Where a march stands between calls (float64 arrays)."""
+
+    t: jax.Array
+    z: jax.Array
+    h: jax.Array
+    delta: jax.Array  # the running estimate of z − ẑ at t
+    rejected: jax.Array
+    newton: jax.Array  # Gauss–Newton iterations, all windows tried
+    failed: jax.Array  # 1 once the window length fell below its floor
+
+
+class ChunkResult(NamedTuple):
+    """Up to ``chunk`` accepted windows: their starts, lengths, start states, output weights W
+    (2d × M), max ‖δ‖∞ of the running estimate in each, its local error over tolerance; and the
+    state after them."""
+
+    count: jax.Array
+    start: jax.Array
+    length: jax.Array
+    z_start: jax.Array
+    weights: jax.Array
+    est_max: jax.Array
+    local_ratio: jax.Array
+    state: MarchState
+
+
+def _basis(features, tau, h, shape, scaling):
+    """(values B_v, rates d/ds B_v) of f(s)φ(τ) at normalised times τ: each (len(τ), M)."""
+    a, b = features
+    s = h * tau
+    phi = jnp.tanh(tau[:, None] * a + b)
+    dphi = (1.0 - phi ** 2) * a
+    f = scaling.value(s, h, shape)[:, None]
+    df = scaling.rate(s, h, shape)[:, None]
+    return f * phi, df * phi + f * dphi / h
+
+
+def _window(system, scaling, settings, features, nodes, check, z, h, delta, shape):
+    """Solve one window from state z over length h; returns (W, ẑ(h), carried δ, max‖δ‖∞ carried,
+    local error over tolerance unscaled (max |δ_loc| per component), Newton iterations)."""
+    n = z.shape[0]
+    bv, br = _basis(features, nodes, h, shape, scaling)
+    q, r = jnp.linalg.qr(br)
+    rinv = jax.scipy.linalg.solve_triangular(r, jnp.eye(r.shape[0], dtype=r.dtype), lower=False)
+    c = bv @ rinv
+    eye = jnp.eye(n, dtype=z.dtype)
+    field = system.vector_field
+    jac = system.jacobian
+    v = field(z[None])[0][:, None] * jnp.sum(q, axis=0)[None, :]
+
+    def step(carry):
+        v, it, dn, prev = carry
+        zz = z + c @ v.T
+        e = q @ v.T - field(zz)
+        a = jac(zz)
+        jm = (jnp.einsum("ab,ij->iabj", eye, q) - jnp.einsum("iab,ij->iabj", a, c)).reshape(e.size, v.size)
+        d = jnp.linalg.solve(jm.T @ jm, -(jm.T @ e.reshape(-1)))
+        return v + d.reshape(v.shape), it + 1, jnp.max(jnp.abs(d)), dn
+
+    def going(carry):
+        v, it, dn, prev = carry
+        floor = settings["newton_tol"] * (1.0 + jnp.max(jnp.abs(v)))
+        stalled = (it >= 3) & (dn > 0.5 * prev)
+        return (it < settings["max_newton"]) & (dn > floor) & ~stalled & ((it == 0) | jnp.isfinite(dn))
+
+    inf = jnp.asarray(jnp.inf, z.dtype)
+    v, iters, _, _ = lax.while_loop(going, step, (v, 0, inf, inf))
+
+    # the error along the window: RK4 on δ' = Aδ + r over the check grid (2K + 1 points)
+    cv, cr = _basis(features, check, h, shape, scaling)
+    zc = z + (cv @ rinv) @ v.T
+    res = (cr @ rinv) @ v.T - field(zc)
+    ac = jac(zc)
+    ds = h / ((check.shape[0] - 1) // 2)
+
+    def rk4(dd, i):
+        j = 2 * i
+        g = lambda k, x: ac[k] @ x + res[k][:, None]  # noqa: E731
+        k1 = g(j, dd)
+        k2 = g(j + 1, dd + 0.5 * ds * k1)
+        k3 = g(j + 1, dd + 0.5 * ds * k2)
+        k4 = g(j + 2, dd + ds * k3)
+        dd = dd + ds / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        return dd, jnp.abs(dd)
+
+    d0 = jnp.stack([delta, jnp.zeros_like(delta)], axis=1)
+    dd, path = lax.scan(rk4, d0, jnp.arange((check.shape[0] - 1) // 2))
+    w = (rinv @ v.T).T
+    return w, zc[-1], dd[:, 0], jnp.max(path[:, :, 0]), jnp.max(path[:, :, 1], axis=0), iters
+
+
+def _first_length(system, z, span):
+    """A first window length from the vector field's Jacobian at z: 1/‖A‖ (at most the interval)."""
+    a = system.jacobian(z[None])[0]
+    return jnp.minimum(span, 1.0 / jnp.maximum(jnp.linalg.norm(a, 2), 1e-300))
+
+
+@functools.lru_cache(maxsize=32)
+def _cached(system, scaling_name, chunk, max_newton, newton_tol, order, growth, max_rejects, settings_key):
+    scaling = window_scaling(scaling_name)
+    settings = {"max_newton": max_newton, "newton_tol": newton_tol}
+
+    def run(features, nodes, check, shape, state: MarchState, T, rtol, atol):
+        n = state.z.shape[0]
+        m = features[0].shape[0]
+        dt = state.z.dtype
+        buf = (jnp.zeros(chunk, dt), jnp.zeros(chunk, dt), jnp.zeros((chunk, n), dt), jnp.zeros((chunk, n, m), dt),
+               jnp.zeros(chunk, dt), jnp.zeros(chunk, dt))
+        span = T - state.t
+        h0 = jnp.where(state.h > 0, state.h, _first_length(system, state.z, span))
+        floor = 1e-12 * jnp.maximum(jnp.abs(T), 1.0)
+
+        def going(c):
+            k, st, streak, _ = c
+            return (st.t < T) & (k < chunk) & (st.failed == 0)
+
+        def body(c):
+            k, st, streak, buf = c
+            last = st.t + st.h >= T - floor
+            h = jnp.where(last, T - st.t, st.h)
+            w, z1, d1, est, loc, it = _window(system, scaling, settings, features, nodes, check, st.z, h,
+                                               st.delta, shape)
+            tol = atol + rtol * jnp.maximum(jnp.abs(st.z), jnp.abs(z1))
+            ratio = jnp.max(loc / tol)
+            ok = jnp.isfinite(ratio) & (ratio <= 1.0) & jnp.all(jnp.isfinite(z1))
+            fac = jnp.clip(0.8 * ratio ** (-1.0 / order), 0.2, growth)
+            fac = jnp.where(jnp.isfinite(fac), fac, 0.2)
+            fac = jnp.where(ok, fac, jnp.minimum(fac, 0.5))
+            h_next = jnp.where(ok & last, st.h, h * fac)  # the clipped last window does not set the length
+            streak = jnp.where(ok, 0, streak + 1)
+            failed = ((h_next < floor) | (streak > max_rejects)).astype(st.failed.dtype)
+            rows = (st.t, h, st.z, w, est, ratio)
+            buf = tuple(jnp.where(ok, b.at[k].set(x), b) for b, x in zip(buf, rows))
+            new = MarchState(jnp.where(ok, jnp.where(last, T, st.t + h), st.t), jnp.where(ok, z1, st.z), h_next,
+                             jnp.where(ok, d1, st.delta), st.rejected + (~ok).astype(st.rejected.dtype),
+                             st.newton + it, jnp.where(ok, 0, failed))
+            return k + ok.astype(k.dtype), new, streak, buf
+
+        start = (jnp.asarray(0), state._replace(h=h0), jnp.asarray(0), buf)
+        k, st, _, buf = lax.while_loop(going, body, start)
+        return ChunkResult(k, *buf, st)
+
+    return jax.jit(run)
+
+
+def compiled_march(system: Any, scaling: str, *, chunk: int, max_newton: int, newton_tol: float, order: float,
+                   growth: float, max_rejects: int):
+    """The compiled march for a system and these settings (one program per shape; cached, keyed
+    also by the trace settings so that a program traced under others is never reused)."""
+    return _cached(system, scaling, int(chunk), int(max_newton), float(newton_tol), float(order), float(growth),
+                   int(max_rejects), trace_settings())

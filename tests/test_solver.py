@@ -1,0 +1,180 @@
+"""The float64 collocation solver (atlasnn.solve): exactness at t0, linear and closed-form orbits to
+round-off level, convergence as features grow, the error estimate against the true error, bad
+input refused in one line, and the solution's save/load round trip."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from atlasnn import AtlasError, solve
+from atlasnn.checkpoint import load_piecewise, save_piecewise
+from atlasnn.evaluation import reference_solution
+from atlasnn.solver import SOLVERS, AdamMarch, Collocation, solver_from_name
+from atlasnn.systems import HamiltonianSystem, expression_system, henon_heiles
+
+
+def _kepler_circular():
+    return expression_system("(p1**2 + p2**2)/2 - 1/sqrt(q1**2 + q2**2)", ["q1", "q2"], ["p1", "p2"],
+                             z0=[1.0, 0.0, 0.0, 1.0], separable=True, name="kepler-circular")
+
+
+def _linear():
+    # H = p²/2 + 4q²/2 + q p/2: a linear, non-separable flow with a closed form via the matrix exponential
+    return HamiltonianSystem(lambda q, p: (p[0] ** 2 + 4.0 * q[0] ** 2 + q[0] * p[0]) / 2.0, 1, name="linear",
+                             z0=np.array([1.0, -0.5]))
+
+
+def test_exact_at_t0_and_continuous_at_window_edges(ho):
+    sol = solve(ho, [1.0, 0.0], (0.0, 6.0))
+    assert np.array_equal(sol(0.0), np.array([1.0, 0.0]))
+    assert sol.n_windows > 1
+    inner = sol.edges[1:-1]
+    left, right = sol(inner - 1e-13), sol(inner)
+    assert np.max(np.abs(left - right)) < 1e-11
+
+
+def test_harmonic_oscillator_to_round_off(ho):
+    T = 20.0
+    sol = solve(ho, [1.0, 0.0], (0.0, T), rtol=1e-13, atol=1e-14)
+    t = np.linspace(0.0, T, 777)
+    exact = np.stack([np.cos(t), -np.sin(t)], axis=1)
+    assert np.max(np.abs(sol(t) - exact)) < 1e-12
+    dexact = np.stack([-np.sin(t), -np.cos(t)], axis=1)
+    assert np.max(np.abs(sol.derivative(t) - dexact)) < 1e-11
+
+
+def test_linear_non_separable_system_matches_the_matrix_exponential():
+    from scipy.linalg import expm
+
+    system = _linear()
+    sol = solve(system, None, (0.0, 5.0), rtol=1e-13, atol=1e-14)
+    A = np.array([[0.5, 1.0], [-4.0, -0.5]])  # dq/dt = ∂H/∂p = p + q/2, dp/dt = −∂H/∂q = −4q − p/2
+    t = np.linspace(0.0, 5.0, 101)
+    exact = np.stack([expm(A * s) @ system.z0 for s in t])
+    assert np.max(np.abs(sol(t) - exact)) < 1e-12
+
+
+def test_circular_kepler_orbit_to_1e12():
+    system = _kepler_circular()
+    T = 4 * np.pi
+    sol = solve(system, None, (0.0, T), rtol=1e-13, atol=1e-14)
+    t = np.linspace(0.0, T, 501)
+    exact = np.stack([np.cos(t), np.sin(t), -np.sin(t), np.cos(t)], axis=1)
+    assert np.max(np.abs(sol(t) - exact)) < 1e-12
+
+
+def test_error_falls_as_features_grow(ho):
+    """Fixed window (no control: one window of the whole interval, tolerance wide open): the
+    error of the basis itself falls by orders of magnitude from 6 to 18 features."""
+    t = np.linspace(0.0, 3.0, 301)
+    exact = np.stack([np.cos(t), -np.sin(t)], axis=1)
+    errors = []
+    for m in (6, 10, 14, 18):
+        solver = Collocation(features=m, first_window=3.0, growth=1.01)
+        sol = solve(ho, [1.0, 0.0], (0.0, 3.0), solver=solver, rtol=1.0, atol=1.0)
+        assert sol.n_windows == 1
+        errors.append(np.max(np.abs(sol(t) - exact)))
+    assert all(b < a for a, b in zip(errors, errors[1:])), errors
+    assert errors[-1] < 1e-3 * errors[0], errors
+
+
+def test_tolerance_controls_the_error_and_the_estimate_tracks_it():
+    system = henon_heiles()
+    z0 = [0.3, -0.3, 0.3, 0.15]
+    T = 6 * np.pi
+    t = np.linspace(0.0, T, 600)
+    ref = reference_solution(system, z0, t, rtol=1e-13, atol=1e-13)
+    scale = np.ptp(ref, axis=0).max()
+    errs = []
+    for rtol in (1e-7, 1e-10):
+        sol = solve(system, z0, (0.0, T), rtol=rtol, atol=rtol / 100)
+        err = np.max(np.abs(sol(t) - ref))
+        errs.append(err)
+        # the running (in-program) estimate and the a-posteriori estimate against the true error
+        for est in (sol.info["running_estimate_max"], sol.estimate(z0=z0).max_abs):
+            assert err / 3 <= est <= 3 * err, (rtol, err, est)
+        assert np.max(np.abs(sol.error_estimate(t) - (ref - sol(t)))) < 0.5 * err
+    assert errs[1] < 1e-9 * scale
+    assert errs[1] < 1e-2 * errs[0]
+
+
+def test_every_seed_meets_the_target_on_henon_heiles():
+    system = henon_heiles()
+    z0 = [0.3, -0.3, 0.3, 0.15]
+    T = 24 * np.pi
+    t = np.linspace(0.0, T, 2000)
+    ref = reference_solution(system, z0, t, rtol=1e-13, atol=1e-13)
+    scale = np.ptp(ref, axis=0).max()
+    for seed in range(3):
+        sol = solve(system, z0, (0.0, T), solver=Collocation(seed=seed))
+        assert np.max(np.abs(sol(t) - ref)) < 1e-9 * scale, seed
+
+
+def test_scalings_tanh_and_rational_exp_solve_too(ho):
+    t = np.linspace(0.0, 8.0, 200)
+    exact = np.stack([np.cos(t), -np.sin(t)], axis=1)
+    for name in ("tanh", "rational_exp"):
+        sol = solve(ho, [1.0, 0.0], (0.0, 8.0), solver=Collocation(scaling=name))
+        assert sol.scaling_name == name
+        assert np.max(np.abs(sol(t) - exact)) < 1e-9, name
+        assert sol.gammas[0] and all(v > 0 for v in sol.gammas[0].values())
+
+
+def test_save_and_load_keep_float64_bit_for_bit(ho, tmp_path):
+    sol = solve(ho, [1.0, 0.0], (0.0, 6.0), solver=Collocation(scaling="tanh"))
+    path = tmp_path / "sol.npz"
+    save_piecewise(path, sol)
+    back = load_piecewise(path, ho)
+    t = np.linspace(0.0, 6.0, 97)
+    assert np.array_equal(back(t), sol(t))
+    assert back(t).dtype == np.float64
+
+
+@pytest.mark.parametrize("kwargs, needle", [
+    ({"rtol": 0.0}, "rtol must be a finite number > 0"),
+    ({"atol": -1e-9}, "atol must be a finite number > 0"),
+    ({"rtol": 1e-18}, "below what float64 can reach"),
+    ({"interval": (1.0, 1.0)}, "t0 < T"),
+    ({"z0": [1.0, 2.0, 3.0]}, "z0 must have 2 components"),
+    ({"solver": "collocation"}, "solver must be a solver object"),
+])
+def test_bad_input_is_one_line(ho, kwargs, needle):
+    args = {"z0": [1.0, 0.0], "interval": (0.0, 1.0), **kwargs}
+    z0, interval = args.pop("z0"), args.pop("interval")
+    with pytest.raises(AtlasError, match=needle) as info:
+        solve(ho, z0, interval, **args)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("settings, needle", [
+    ({"features": 30, "points": 20}, "points \\(20\\) must be at least the features \\(30\\)"),
+    ({"scaling": "sigmoid"}, "collocation scaling must be one of"),
+    ({"growth": 1.0}, "growth must be > 1"),
+    ({"features": 0}, "features must be an integer >= 1"),
+])
+def test_bad_solver_settings_are_one_line(settings, needle):
+    with pytest.raises(AtlasError, match=needle):
+        Collocation(**settings)
+
+
+def test_solvers_registry_names_both():
+    assert {"collocation", "adam-march"} <= set(SOLVERS)
+    assert isinstance(solver_from_name("collocation", features=12), Collocation)
+    with pytest.raises(AtlasError, match="unknown solver"):
+        solver_from_name("rk4")
+    assert AdamMarch.name == "adam-march"
+
+
+def test_a_march_that_cannot_meet_its_tolerance_says_so(ho):
+    """Two features cannot reach 1e-14 on any window: the march gives up in one line."""
+    with pytest.raises(AtlasError, match="collocation march stopped at t ="):
+        solve(ho, [1.0, 0.0], (0.0, 1.0), solver=Collocation(features=2, max_rejects=5), rtol=1e-14, atol=1e-14)
+
+
+def test_the_solution_is_float64_even_with_float32_default(ho):
+    assert jnp.zeros(1).dtype == jnp.float32
+    sol = solve(ho, [1.0, 0.0], (0.0, 2.0))
+    assert sol(np.array([0.5])).dtype == np.float64
+    assert abs(sol(0.5)[0] - np.cos(0.5)) < 1e-12
