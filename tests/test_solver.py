@@ -178,3 +178,16 @@ def test_the_solution_is_float64_even_with_float32_default(ho):
     sol = solve(ho, [1.0, 0.0], (0.0, 2.0))
     assert sol(np.array([0.5])).dtype == np.float64
     assert abs(sol(0.5)[0] - np.cos(0.5)) < 1e-12
+
+
+def test_cli_solve_prints_the_estimate_and_the_true_error(tmp_path, capsys):
+    from atlasnn.cli import main
+
+    out = tmp_path / "hh.npz"
+    assert main(["solve", "--system", "henon_heiles", "--T", "6*pi", "--check", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "estimated max error" in text and "true max error" in text and out.exists()
+    ratio = float(text.split("estimate / true = ")[1].split()[0])
+    assert 1 / 3 <= ratio <= 3
+    assert main(["solve", "--system", "henon_heiles", "--out", str(out)]) == 2  # never overwrites
+    assert "the file exists" in capsys.readouterr().err

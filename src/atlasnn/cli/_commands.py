@@ -356,6 +356,41 @@ def cmd_integrate(args) -> int:
     return 0
 
 
+def cmd_solve(args) -> int:
+    import numpy as np
+
+    from atlasnn.evaluation import reference_solution
+    from atlasnn.solver import DEFAULT_ATOL, DEFAULT_RTOL, Collocation, solve
+
+    args.steps = 1  # the problem's reading shares integrate's; steps are not used here
+    system, z0, t0, T, _ = _integrate_problem(args)
+    rtol = DEFAULT_RTOL if args.rtol is None else args.rtol
+    atol = DEFAULT_ATOL if args.atol is None else args.atol
+    solver = Collocation(features=args.features, seed=args.seed)
+    if args.out is not None and Path(args.out).exists():
+        raise AtlasError(f"--out {args.out}: the file exists; choose another path or remove it")
+    sol = solve(system, z0, (t0, T), solver=solver, rtol=rtol, atol=atol)
+    info = sol.info
+    print(f"{system.name}: [{t0:g}, {T:.6g}] in {sol.n_windows} windows ({info['rejected']} rejected, "
+          f"{info['newton_iterations']} Gauss-Newton iterations), {info['solve_time'] * 1e3:.1f} ms "
+          f"(first call, with compilation or cache load: {info['first_call_time']:.2f} s)")
+    est = sol.estimate(z0=z0)
+    trust = "" if est.trusted else f" (quantitative only up to t = {est.trusted_until:.4g}: past it the error is large)"
+    print(f"estimated max error: {est.max_abs:.3e} = {est.relative_max:.3e} of the state's range{trust}")
+    if args.check:
+        t = np.linspace(t0, T, 2000)
+        ref = reference_solution(system, z0, t, rtol=1e-13, atol=1e-13)
+        err = float(np.abs(sol(t) - ref).max())
+        print(f"true max error (DOP853 1e-13, 2000 times): {err:.3e} = {err / np.ptp(ref, axis=0).max():.3e} of the "
+              f"range; estimate / true = {est.max_abs / err:.2f}" if err > 0 else "true max error: 0")
+    if args.out is not None:
+        from atlasnn.checkpoint import save_piecewise
+
+        save_piecewise(args.out, sol, extra={"interval": [t0, T]})
+        print(f"wrote {args.out}")
+    return 0
+
+
 def _init_params(items: list[str]) -> dict[str, float]:
     """``["lam=0.5", "k=2"]`` as ``{"lam": 0.5, "k": 2.0}``; a malformed item is one line."""
     out: dict[str, float] = {}

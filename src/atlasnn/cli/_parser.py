@@ -14,6 +14,7 @@ from atlasnn.cli._commands import (
     cmd_report,
     cmd_reproduce,
     cmd_run,
+    cmd_solve,
     cmd_suite,
     cmd_sweep,
     cmd_systems,
@@ -120,6 +121,21 @@ def build_parser() -> argparse.ArgumentParser:
                    "default 4*pi, or the config's T")
     s.add_argument("--steps", type=int, default=None, help="integrator steps (default 199, or the config's K - 1)")
     s.set_defaults(func=cmd_integrate)
+
+    s = sub.add_parser("solve", help="solve one trajectory with the float64 collocation solver (a built-in "
+                                     "system or the system of a config); print its error estimate")
+    s.add_argument("config_pos", nargs="?", metavar="CONFIG", help="a TOML experiment file: its system, z0 and "
+                   "interval (the target's for a transfer experiment)")
+    s.add_argument("--config", default=None, metavar="FILE", help="the same as CONFIG")
+    s.add_argument("--system", default=None, help="a built-in system (default nonlinear_oscillator)")
+    s.add_argument("--T", default=None, help="end time: a number or a multiple of pi (default 4*pi, or the config's T)")
+    s.add_argument("--rtol", type=float, default=None, help="each window's relative tolerance (default 1e-12)")
+    s.add_argument("--atol", type=float, default=None, help="each window's absolute tolerance (default 1e-14)")
+    s.add_argument("--features", type=int, default=20, help="random features per window (default 20)")
+    s.add_argument("--seed", type=int, default=0, help="the draw of the random features (default 0)")
+    s.add_argument("--check", action="store_true", help="also compare with DOP853 at 1e-13 (the true error)")
+    s.add_argument("--out", default=None, metavar="FILE.npz", help="save the solution (load_piecewise reads it)")
+    s.set_defaults(func=cmd_solve)
 
     s = sub.add_parser("init", help="write a commented experiment template for your own system")
     s.add_argument("path", metavar="NAME.toml", help="the file to write (refused if it exists, unless --force)")

@@ -14,8 +14,8 @@ from atlasnn.systems import HamiltonianSystem
 __all__ = ["solve", "DEFAULT_RTOL", "DEFAULT_ATOL", "TIGHTEST_TOLERANCE"]
 
 #: the default tolerances of a window's local error: atol + rtol·|z| per component
-DEFAULT_RTOL = 1e-11
-DEFAULT_ATOL = 1e-13
+DEFAULT_RTOL = 1e-12
+DEFAULT_ATOL = 1e-14
 #: tolerances below this are beyond float64's reach for a window's error (round-off ~1e-16 per
 #: operation, amplified by the collocation's conditioning)
 TIGHTEST_TOLERANCE = 1e-15
