@@ -123,7 +123,7 @@ def diffrax_points(system, z0, interval, t, ref, scale):
                 sol = diffrax.diffeqsolve(diffrax.ODETerm(field), solver, interval[0], interval[1], None, y0,
                                           saveat=diffrax.SaveAt(ts=ts), max_steps=2_000_000,
                                           stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-                                          dt0=None)
+                                          )
                 return sol.ys
             y0 = jnp.asarray(z0)
             tic = time.perf_counter()

@@ -21,6 +21,7 @@ LAYERS = [
     {"atlasnn.systems", "atlasnn.nn"},
     {"atlasnn.solutions"},
     {"atlasnn.training"},
+    {"atlasnn.solver"},
     {"atlasnn.checkpoint"},
     {"atlasnn.evaluation"},
     {"atlasnn.inverse"},
