@@ -33,7 +33,7 @@ _FACE = {
     "solutions": ("Solution", "PiecewiseSolution", "BundleSolution"),
     "training": ("TrainConfig", "train", "train_batch", "transfer", "polish", "PolishConfig", "MarchConfig",
                  "march", "march_batch", "DEFAULT_NETWORK", "DEFAULT_WINDOW_TRAIN", "train_bundle", "BundleTrainConfig"),
-    "solver": ("solve", "Collocation", "AdamMarch"),
+    "solver": ("solve", "solve_batch", "Collocation", "AdamMarch"),
     "checkpoint": ("save_checkpoint", "load_checkpoint", "save_piecewise", "load_piecewise", "save_bundle",
                    "load_bundle"),
     "evaluation": ("reference_solution", "integrate", "error_table", "judge_training", "Metric", "register_metric",

@@ -367,8 +367,8 @@ def cmd_solve(args) -> int:
     rtol = DEFAULT_RTOL if args.rtol is None else args.rtol
     atol = DEFAULT_ATOL if args.atol is None else args.atol
     solver = Collocation(features=args.features, seed=args.seed)
-    if args.out is not None and Path(args.out).exists():
-        raise AtlasError(f"--out {args.out}: the file exists; choose another path or remove it")
+    if args.save is not None and Path(args.save).exists():
+        raise AtlasError(f"--save {args.save}: the file exists; choose another path or remove it")
     sol = solve(system, z0, (t0, T), solver=solver, rtol=rtol, atol=atol)
     info = sol.info
     print(f"{system.name}: [{t0:g}, {T:.6g}] in {sol.n_windows} windows ({info['rejected']} rejected, "
@@ -383,11 +383,11 @@ def cmd_solve(args) -> int:
         err = float(np.abs(sol(t) - ref).max())
         print(f"true max error (DOP853 1e-13, 2000 times): {err:.3e} = {err / np.ptp(ref, axis=0).max():.3e} of the "
               f"range; estimate / true = {est.max_abs / err:.2f}" if err > 0 else "true max error: 0")
-    if args.out is not None:
+    if args.save is not None:
         from atlasnn.checkpoint import save_piecewise
 
-        save_piecewise(args.out, sol, extra={"interval": [t0, T]})
-        print(f"wrote {args.out}")
+        save_piecewise(args.save, sol, extra={"interval": [t0, T]})
+        print(f"wrote {args.save}")
     return 0
 
 

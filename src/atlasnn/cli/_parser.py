@@ -134,7 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--features", type=int, default=20, help="random features per window (default 20)")
     s.add_argument("--seed", type=int, default=0, help="the draw of the random features (default 0)")
     s.add_argument("--check", action="store_true", help="also compare with DOP853 at 1e-13 (the true error)")
-    s.add_argument("--out", default=None, metavar="FILE.npz", help="save the solution (load_piecewise reads it)")
+    s.add_argument("--save", default=None, metavar="FILE.npz", help="save the solution (load_piecewise reads it)")
     s.set_defaults(func=cmd_solve)
 
     s = sub.add_parser("init", help="write a commented experiment template for your own system")

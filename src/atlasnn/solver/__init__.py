@@ -10,11 +10,12 @@ one :func:`register_solver` entry.
 from atlasnn.solver._base import SOLVERS, AbstractSolver, register_solver, solver_from_name
 from atlasnn.solver._collocation import Collocation, require_float64
 from atlasnn.solver._features import WINDOW_SCALINGS, RandomFeatures, collocation_nodes
-from atlasnn.solver._solve import DEFAULT_ATOL, DEFAULT_RTOL, TIGHTEST_TOLERANCE, solve
+from atlasnn.solver._solve import DEFAULT_ATOL, DEFAULT_RTOL, TIGHTEST_TOLERANCE, solve, solve_batch
 from atlasnn.solver._trained import AdamMarch
 
 __all__ = [
     "solve",
+    "solve_batch",
     "AbstractSolver",
     "Collocation",
     "AdamMarch",

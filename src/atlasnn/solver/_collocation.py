@@ -68,6 +68,9 @@ class Collocation(AbstractSolver):
         growth: the most a window may grow over the last one.
         first_window: the first window's length (default 1/‖A(z0)‖, A the vector field's Jacobian).
         max_newton: Gauss–Newton iterations per window at most; ``newton_tol``: its step tolerance.
+        fresh_jacobians: iterations that compute a new Jacobian; later ones keep the last one and
+            its factorisation (a simplified Newton).
+        unroll: RK4 steps of the error estimate per loop iteration of the compiled program.
         max_rejects: rejected tries in a row before the march gives up.
         chunk: windows per call of the compiled program (progress is reported between calls).
     """
@@ -87,6 +90,8 @@ class Collocation(AbstractSolver):
     first_window: float | None = None
     max_newton: int = 12
     newton_tol: float = 1e-13
+    fresh_jacobians: int = 12
+    unroll: int = 1
     max_rejects: int = 30
     chunk: int = 64
 
@@ -106,52 +111,78 @@ class Collocation(AbstractSolver):
             _positive("first_window", self.first_window)
         window_scaling(self.scaling)
         collocation_nodes(2, self.nodes)
-        for name in ("max_newton", "max_rejects", "chunk"):
+        for name in ("max_newton", "max_rejects", "chunk", "fresh_jacobians", "unroll"):
             _positive_int(name, getattr(self, name))
         _positive_int("seed", self.seed, 0)
 
     # ------------------------------------------------------------------ solving
     def solve(self, system: HamiltonianSystem, z0: np.ndarray, t0: float, T: float, *, rtol: float, atol: float,
               progress: Callable[[float], None] | None = None) -> PiecewiseSolution:
+        return self.solve_batch(system, np.asarray(z0)[None], t0, T, rtol=rtol, atol=atol, progress=progress)[0]
+
+    def solve_batch(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float, *, rtol: float,
+                    atol: float, seeds: Any = None,
+                    progress: Callable[[float], None] | None = None) -> list[PiecewiseSolution]:
+        """One solution per row of ``z0s`` (shape (B, 2d)), all marched by one compiled program;
+        member b uses the features of ``seeds[b]`` (default: this solver's seed for every member)."""
         require_float64()
+        z0s = np.atleast_2d(np.asarray(z0s, np.float64))
+        seeds = [self.seed] * len(z0s) if seeds is None else [int(s) for s in seeds]
+        if len(seeds) != len(z0s):
+            raise ConfigError(f"solve_batch needs one seed per initial state, got {len(seeds)} and {len(z0s)}")
         program = compiled_march(system, self.scaling, chunk=self.chunk, max_newton=self.max_newton,
-                                 newton_tol=self.newton_tol, order=self.order, growth=self.growth,
-                                 max_rejects=self.max_rejects)
-        feats = RandomFeatures.draw(self.features, self.scale, self.seed)
+                                 newton_tol=self.newton_tol, fresh=self.fresh_jacobians, unroll=self.unroll,
+                                 order=self.order, growth=self.growth, max_rejects=self.max_rejects)
+        feats = [RandomFeatures.draw(self.features, self.scale, s) for s in seeds]
+        started = time.perf_counter()
+        rows, state, first_call = self._march(program, feats, z0s, t0, T, rtol, atol, progress)
+        wall = time.perf_counter() - started
+        out = []
+        for b, z0 in enumerate(z0s):
+            start, length, z_start, weights, est_max, ratio = (np.concatenate([r[i][b] for r in rows]) for i in range(6))
+            end, failed = float(state.t[b]), int(state.failed[b])
+            if failed or start.size == 0 or end < T:
+                raise ConfigError(
+                    f"the collocation march{'' if len(z0s) == 1 else f' of member {b}'} stopped at t = {end:.6g} of "
+                    f"[{t0:.6g}, {T:.6g}]: windows shrank below round-off or failed {self.max_rejects} times in a row "
+                    f"(rtol={rtol:g}, atol={atol:g}); loosen the tolerance or raise features")
+            info = {"solver": self.name, "settings": {**self.settings(), "seed": seeds[b]}, "rtol": float(rtol),
+                    "atol": float(atol), "windows": int(start.size), "rejected": int(state.rejected[b]),
+                    "newton_iterations": int(state.newton[b]), "running_estimate_max": float(est_max.max()),
+                    "running_estimate_end": np.asarray(state.delta[b]).tolist(), "solve_time": wall,
+                    "first_call_time": first_call, "batch": len(z0s)}
+            out.append(self._solution(system, z0, feats[b], start, length, z_start, weights, est_max, ratio, info))
+        return out
+
+    def _march(self, program, feats, z0s, t0, T, rtol, atol, progress):
+        """Call the compiled program until every member reaches T or fails: the rows of accepted
+        windows per call (each (B, ...) cut to the member's count), the final state, the first
+        call's time (compilation or cache load included)."""
+        b = len(z0s)
         nodes = collocation_nodes(self.points, self.nodes)
         check = np.linspace(0.0, 1.0, 2 * self.check + 1)
-        rows, compile_time, started = [], 0.0, time.perf_counter()
+        rows, first_call = [], 0.0
         with jax.enable_x64(True):
             f64 = lambda x: jnp.asarray(x, jnp.float64)  # noqa: E731
-            args = ((f64(feats.a), f64(feats.b)), f64(nodes), f64(check), f64(self.shape))
-            state = MarchState(f64(t0), f64(z0), f64(self.first_window or 0.0), jnp.zeros_like(f64(z0)),
-                               jnp.asarray(0), jnp.asarray(0), jnp.asarray(0))
+            args = ((f64([f.a for f in feats]), f64([f.b for f in feats])), f64(nodes), f64(check), f64(self.shape))
+            zeros = jnp.zeros(b, jnp.int64)
+            state = MarchState(jnp.full(b, float(t0)), f64(z0s), jnp.full(b, float(self.first_window or 0.0)),
+                               jnp.zeros_like(f64(z0s)), zeros, zeros, zeros)
             T_, rtol_, atol_ = f64(T), f64(rtol), f64(atol)
             while True:
                 tic = time.perf_counter()
                 out = jax.device_get(program(*args, state, T_, rtol_, atol_))
                 if not rows:  # the first call compiles (or loads from the cache) and runs
-                    compile_time = time.perf_counter() - tic
+                    first_call = time.perf_counter() - tic
                 state = jax.tree_util.tree_map(jnp.asarray, out.state)
-                k = int(out.count)
-                rows.append(jax.tree_util.tree_map(lambda x, k=k: np.asarray(x)[:k], out[1:-1]))
+                counts = np.asarray(out.count)
+                rows.append([[np.asarray(x)[m, :counts[m]] for m in range(b)] for x in out[1:-1]])
+                t_now, failed = np.asarray(out.state.t), np.asarray(out.state.failed)
                 if progress is not None:
-                    progress(min(1.0, (float(out.state.t) - t0) / (T - t0)))
-                if float(out.state.t) >= T or int(out.state.failed):
+                    progress(min(1.0, float(t_now.min() - t0) / (T - t0)))
+                if np.all((t_now >= T) | (failed != 0)):
                     break
-        wall = time.perf_counter() - started
-        start, length, z_start, weights, est_max, ratio = (np.concatenate(c) for c in zip(*rows))
-        end = state.t
-        if int(state.failed) or start.size == 0:
-            raise ConfigError(
-                f"the collocation march stopped at t = {float(end):.6g} of [{t0:.6g}, {T:.6g}]: windows shrank below "
-                f"round-off or failed {self.max_rejects} times in a row (rtol={rtol:g}, atol={atol:g}); loosen the "
-                f"tolerance or raise features")
-        info = {"solver": self.name, "settings": self.settings(), "rtol": float(rtol), "atol": float(atol),
-                "windows": int(start.size), "rejected": int(state.rejected), "newton_iterations": int(state.newton),
-                "running_estimate_max": float(est_max.max()), "running_estimate_end": np.asarray(state.delta).tolist(),
-                "solve_time": wall, "first_call_time": compile_time}
-        return self._solution(system, z0, feats, start, length, z_start, weights, est_max, ratio, info)
+        return rows, jax.device_get(state), first_call
 
     def _solution(self, system, z0, feats, start, length, z_start, weights, est_max, ratio, info) -> PiecewiseSolution:
         """The windows as a PiecewiseSolution of float64 trial solutions (one-hidden-layer tanh

@@ -91,23 +91,31 @@ def _window(system, scaling, settings, features, nodes, check, z, h, delta, shap
     jac = system.jacobian
     v = field(z[None])[0][:, None] * jnp.sum(q, axis=0)[None, :]
 
+    def normal_matrix(zz):
+        a = jac(zz)
+        jm = (jnp.einsum("ab,ij->iabj", eye, q) - jnp.einsum("iab,ij->iabj", a, c)).reshape(-1, v.size)
+        return jm, jnp.linalg.cholesky(jm.T @ jm)
+
     def step(carry):
-        v, it, dn, prev = carry
+        v, it, dn, prev, jm, chol = carry
         zz = z + c @ v.T
         e = q @ v.T - field(zz)
-        a = jac(zz)
-        jm = (jnp.einsum("ab,ij->iabj", eye, q) - jnp.einsum("iab,ij->iabj", a, c)).reshape(e.size, v.size)
-        d = jnp.linalg.solve(jm.T @ jm, -(jm.T @ e.reshape(-1)))
-        return v + d.reshape(v.shape), it + 1, jnp.max(jnp.abs(d)), dn
+        # a fresh Jacobian for the first iterations, then the last one kept (simplified Newton:
+        # one factorisation serves the rest)
+        jm, chol = lax.cond(it < settings["fresh"], normal_matrix, lambda _: (jm, chol), zz)
+        d = jax.scipy.linalg.cho_solve((chol, True), -(jm.T @ e.reshape(-1)))
+        return v + d.reshape(v.shape), it + 1, jnp.max(jnp.abs(d)), dn, jm, chol
 
     def going(carry):
-        v, it, dn, prev = carry
+        v, it, dn, prev = carry[:4]
         floor = settings["newton_tol"] * (1.0 + jnp.max(jnp.abs(v)))
-        stalled = (it >= 3) & (dn > 0.5 * prev)
+        stalled = (it >= 3) & (dn > 0.5 * prev) & (dn < 1e-9 * (1.0 + jnp.max(jnp.abs(v))))
         return (it < settings["max_newton"]) & (dn > floor) & ~stalled & ((it == 0) | jnp.isfinite(dn))
 
     inf = jnp.asarray(jnp.inf, z.dtype)
-    v, iters, _, _ = lax.while_loop(going, step, (v, 0, inf, inf))
+    size = q.shape[0] * n, v.size
+    start = (v, 0, inf, inf, jnp.zeros(size, z.dtype), jnp.eye(size[1], dtype=z.dtype))
+    v, iters = lax.while_loop(going, step, start)[:2]
 
     # the error along the window: RK4 on δ' = Aδ + r over the check grid (2K + 1 points)
     cv, cr = _basis(features, check, h, shape, scaling)
@@ -127,7 +135,7 @@ def _window(system, scaling, settings, features, nodes, check, z, h, delta, shap
         return dd, jnp.abs(dd)
 
     d0 = jnp.stack([delta, jnp.zeros_like(delta)], axis=1)
-    dd, path = lax.scan(rk4, d0, jnp.arange((check.shape[0] - 1) // 2))
+    dd, path = lax.scan(rk4, d0, jnp.arange((check.shape[0] - 1) // 2), unroll=settings["unroll"])
     w = (rinv @ v.T).T
     return w, zc[-1], dd[:, 0], jnp.max(path[:, :, 0]), jnp.max(path[:, :, 1], axis=0), iters
 
@@ -139,9 +147,10 @@ def _first_length(system, z, span):
 
 
 @functools.lru_cache(maxsize=32)
-def _cached(system, scaling_name, chunk, max_newton, newton_tol, order, growth, max_rejects, settings_key):
+def _cached(system, scaling_name, chunk, max_newton, newton_tol, fresh, unroll, order, growth, max_rejects,
+            settings_key):
     scaling = window_scaling(scaling_name)
-    settings = {"max_newton": max_newton, "newton_tol": newton_tol}
+    settings = {"max_newton": max_newton, "newton_tol": newton_tol, "fresh": fresh, "unroll": unroll}
 
     def run(features, nodes, check, shape, state: MarchState, T, rtol, atol):
         n = state.z.shape[0]
@@ -183,12 +192,15 @@ def _cached(system, scaling_name, chunk, max_newton, newton_tol, order, growth, 
         k, st, _, buf = lax.while_loop(going, body, start)
         return ChunkResult(k, *buf, st)
 
-    return jax.jit(run)
+    # members (seeds and initial states) on a leading axis: one program marches them all, each with
+    # windows of its own (the loop runs until the last member is done)
+    return jax.jit(jax.vmap(run, in_axes=(0, None, None, None, 0, None, None, None)))
 
 
-def compiled_march(system: Any, scaling: str, *, chunk: int, max_newton: int, newton_tol: float, order: float,
-                   growth: float, max_rejects: int):
-    """The compiled march for a system and these settings (one program per shape; cached, keyed
-    also by the trace settings so that a program traced under others is never reused)."""
-    return _cached(system, scaling, int(chunk), int(max_newton), float(newton_tol), float(order), float(growth),
-                   int(max_rejects), trace_settings())
+def compiled_march(system: Any, scaling: str, *, chunk: int, max_newton: int, newton_tol: float, fresh: int,
+                   unroll: int, order: float, growth: float, max_rejects: int):
+    """The compiled march for a system and these settings, over a batch of members (features and
+    state with a leading axis); one program per shape, cached, keyed also by the trace settings so
+    that a program traced under others is never reused."""
+    return _cached(system, scaling, int(chunk), int(max_newton), float(newton_tol), int(fresh), int(unroll),
+                   float(order), float(growth), int(max_rejects), trace_settings())
