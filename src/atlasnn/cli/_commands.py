@@ -362,7 +362,11 @@ def cmd_solve(args) -> int:
     from atlasnn.evaluation import reference_solution
     from atlasnn.solver import DEFAULT_ATOL, DEFAULT_RTOL, Collocation, solve
 
+    from atlasnn.experiments.config import builtin_config_path, builtin_experiments
+
     args.steps = 1  # the problem's reading shares integrate's; steps are not used here
+    if args.config_pos in builtin_experiments() and not Path(args.config_pos).exists():
+        args.config_pos = str(builtin_config_path(args.config_pos))  # a built-in experiment by name
     system, z0, t0, T, _ = _integrate_problem(args)
     rtol = DEFAULT_RTOL if args.rtol is None else args.rtol
     atol = DEFAULT_ATOL if args.atol is None else args.atol

@@ -124,8 +124,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("solve", help="solve one trajectory with the float64 collocation solver (a built-in "
                                      "system or the system of a config); print its error estimate")
-    s.add_argument("config_pos", nargs="?", metavar="CONFIG", help="a TOML experiment file: its system, z0 and "
-                   "interval (the target's for a transfer experiment)")
+    s.add_argument("config_pos", nargs="?", metavar="CONFIG", help="a TOML experiment file or a built-in experiment's "
+                   "name (kepler-e09): its system, z0 and interval (the target's for a transfer experiment)")
     s.add_argument("--config", default=None, metavar="FILE", help="the same as CONFIG")
     s.add_argument("--system", default=None, help="a built-in system (default nonlinear_oscillator)")
     s.add_argument("--T", default=None, help="end time: a number or a multiple of pi (default 4*pi, or the config's T)")
