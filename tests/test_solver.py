@@ -209,3 +209,18 @@ def test_a_batch_of_initial_states_and_seeds_in_one_program(ho):
         assert sol.info["settings"]["seed"] == seed and sol.info["batch"] == 3
     alone = solve(ho, z0s[1], (0.0, 8.0), solver=Collocation(seed=1), rtol=1e-12, atol=1e-14)
     assert np.max(np.abs(alone(t) - sols[1](t))) < 1e-11  # as accurate as when solved alone
+
+
+def test_error_estimate_outside_the_interval_is_nan_and_warned(ho):
+    """Past T there is no estimate: NaN and the extrapolation warning (it used to return the end
+    value silently)."""
+    from atlasnn.solutions import ExtrapolationError, ExtrapolationWarning
+
+    sol = solve(ho, [1.0, 0.0], (0.0, 4.0))
+    with pytest.warns(ExtrapolationWarning):
+        est = sol.error_estimate(np.array([1.0, 4.0, 6.0]))
+    assert np.all(np.isfinite(est[:2])) and np.all(np.isnan(est[2]))
+    sol.outside = "raise"
+    with pytest.raises(ExtrapolationError):
+        sol.error_estimate(-1.0)
+

@@ -49,9 +49,10 @@ def quiet_interrupts(unraisable) -> None:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    if not getattr(args, "command", None):
-        parser.print_help()
-        return 0
+    if not getattr(args, "command", None):  # no command is a usage error (exit 2), as argparse's own
+        parser.print_help(sys.stderr)
+        print("atlasnn: error: name a command (atlasnn --help lists them)", file=sys.stderr)
+        return 2
     # SIGTERM (kill, a batch system's time limit) is handled like Ctrl-C: the training state is
     # saved and the run can be resumed
     old_unraisable, sys.unraisablehook = sys.unraisablehook, quiet_interrupts

@@ -28,7 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("systems", help="list the built-in Hamiltonian systems")
     s.set_defaults(func=cmd_systems)
-    s = sub.add_parser("experiments", help="list the paper's experiments")
+    s = sub.add_parser("experiments", help="list the built-in experiments (the paper's, the long-time ones, the hard suite)")
     s.set_defaults(func=cmd_experiments)
 
     def add_run_options(s):

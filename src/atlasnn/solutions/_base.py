@@ -4,14 +4,48 @@ a-posteriori error estimate (computed once per solution and kept)."""
 from __future__ import annotations
 
 import abc
+import warnings
 from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
 
+from atlasnn.errors import AtlasError
 from atlasnn.solutions._estimate import ErrorEstimate, estimate_error
 
-__all__ = ["AbstractSolution"]
+__all__ = ["AbstractSolution", "INTERVAL_SLACK", "ExtrapolationWarning", "ExtrapolationError", "check_inside"]
+
+
+#: Relative slack at the interval's ends (times within it count as inside).
+INTERVAL_SLACK = 1e-9
+
+
+class ExtrapolationWarning(UserWarning):
+    """A Solution was evaluated outside the interval it was trained on."""
+
+
+class ExtrapolationError(AtlasError, ValueError):
+    """A Solution with ``outside="raise"`` was evaluated outside its training interval."""
+
+
+def check_inside(owner: Any, interval: tuple[float, float] | None, arr: np.ndarray) -> None:
+    """The extrapolation rule (module docstring) for the times ``arr`` (finite) of a solution
+    ``owner`` with attributes ``outside`` and ``_warned`` (a Solution or a PiecewiseSolution)."""
+    if interval is None or owner.outside == "allow" or arr.size == 0:
+        return
+    t0, T = interval
+    slack = INTERVAL_SLACK * (T - t0)
+    lo, hi = float(arr.min()), float(arr.max())
+    if lo >= t0 - slack and hi <= T + slack:
+        return
+    kind = type(owner).__name__
+    msg = (f"evaluating the solution at times in [{lo:.6g}, {hi:.6g}], outside its training interval "
+           f"[{t0:.6g}, {T:.6g}]: values there are an extrapolation")
+    if owner.outside == "raise":
+        raise ExtrapolationError(msg + f" ({kind}(..., outside='allow') permits it)")
+    if not owner._warned:
+        owner._warned = True
+        warnings.warn(msg + f" (warned once per {kind})", ExtrapolationWarning, stacklevel=5)
 
 
 class AbstractSolution(abc.ABC):
@@ -60,8 +94,17 @@ class AbstractSolution(abc.ABC):
         return cache[key]
 
     def error_estimate(self, t) -> np.ndarray:
-        """The estimated error z(t) − ẑ(t) at any times of the interval: shape t.shape + (2d,)."""
-        return self.estimate().at(t)
+        """The estimated error z(t) − ẑ(t) at times of the interval: shape t.shape + (2d,). There is
+        no estimate outside the interval: those rows are NaN, and the solution's ``outside`` rule
+        warns (once) or raises, as evaluating there does."""
+        pieces = self.pieces()
+        t0, T = pieces[0][1], pieces[-1][1] + pieces[-1][2]
+        arr = np.asarray(t, dtype=np.float64)
+        check_inside(self, (t0, T), arr.reshape(-1))
+        out = self.estimate().at(arr)
+        slack = INTERVAL_SLACK * (T - t0)
+        out[(arr < t0 - slack) | (arr > T + slack)] = np.nan
+        return out
 
     def _exact_z0(self, z0: Any) -> np.ndarray | None:
         if z0 is not None:

@@ -15,15 +15,20 @@ as inside, so float rounding of a grid's end points does not trigger it.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from atlasnn.errors import AtlasError, ConfigError
+from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
-from atlasnn.solutions._base import AbstractSolution
+from atlasnn.solutions._base import (
+    INTERVAL_SLACK,
+    AbstractSolution,
+    ExtrapolationError,
+    ExtrapolationWarning,
+    check_inside,
+)
 from atlasnn.solutions._evaluate import value_and_rate_padded
 from atlasnn.systems import HamiltonianSystem
 
@@ -42,38 +47,6 @@ def check_state_size(model: TrialSolution, system: HamiltonianSystem, what: str 
     if size != system.state_dim:
         raise ConfigError(f"{what} has {size} state components but the system {system.name!r} has "
                           f"{system.state_dim} (2d, d = {system.dim}); train a model for this system")
-
-
-#: Relative slack at the interval's ends (times within it count as inside).
-INTERVAL_SLACK = 1e-9
-
-
-class ExtrapolationWarning(UserWarning):
-    """A Solution was evaluated outside the interval it was trained on."""
-
-
-class ExtrapolationError(AtlasError, ValueError):
-    """A Solution with ``outside="raise"`` was evaluated outside its training interval."""
-
-
-def check_inside(owner: Any, interval: tuple[float, float] | None, arr: np.ndarray) -> None:
-    """The extrapolation rule (module docstring) for the times ``arr`` (finite) of a solution
-    ``owner`` with attributes ``outside`` and ``_warned`` (a Solution or a PiecewiseSolution)."""
-    if interval is None or owner.outside == "allow" or arr.size == 0:
-        return
-    t0, T = interval
-    slack = INTERVAL_SLACK * (T - t0)
-    lo, hi = float(arr.min()), float(arr.max())
-    if lo >= t0 - slack and hi <= T + slack:
-        return
-    kind = type(owner).__name__
-    msg = (f"evaluating the solution at times in [{lo:.6g}, {hi:.6g}], outside its training interval "
-           f"[{t0:.6g}, {T:.6g}]: values there are an extrapolation")
-    if owner.outside == "raise":
-        raise ExtrapolationError(msg + f" ({kind}(..., outside='allow') permits it)")
-    if not owner._warned:
-        owner._warned = True
-        warnings.warn(msg + f" (warned once per {kind})", ExtrapolationWarning, stacklevel=5)
 
 
 @dataclass(eq=False)

@@ -86,25 +86,28 @@ def _window(system, scaling, settings, features, nodes, check, z, h, delta, shap
     q, r = jnp.linalg.qr(br)
     rinv = jax.scipy.linalg.solve_triangular(r, jnp.eye(r.shape[0], dtype=r.dtype), lower=False)
     c = bv @ rinv
-    eye = jnp.eye(n, dtype=z.dtype)
     field = system.vector_field
     jac = system.jacobian
     v = field(z[None])[0][:, None] * jnp.sum(q, axis=0)[None, :]
 
     def normal_matrix(zz):
+        # JᵀJ of J[(i,a),(b,j)] = δ_ab Q_ij − A_i[a,b] C_ij from its Kronecker structure (QᵀQ = I):
+        # JᵀJ = I − X − Xᵀ + Y, X[b,j,c,k] = Σ_i Q_ij A_i[b,c] C_ik, Y = Σ_i C_ij (A_iᵀA_i)[b,c] C_ik
         a = jac(zz)
-        jm = (jnp.einsum("ab,ij->iabj", eye, q) - jnp.einsum("iab,ij->iabj", a, c)).reshape(-1, v.size)
-        return jm, jnp.linalg.cholesky(jm.T @ jm)
+        x = jnp.einsum("ij,ibc,ik->bjck", q, a, c).reshape(v.size, v.size)
+        y = jnp.einsum("ij,ibc,ik->bjck", c, jnp.einsum("iab,iac->ibc", a, a), c).reshape(v.size, v.size)
+        return a, jnp.linalg.cholesky(jnp.eye(v.size, dtype=z.dtype) - x - x.T + y)
 
     def step(carry):
-        v, it, dn, prev, jm, chol = carry
+        v, it, dn, prev, a, chol = carry
         zz = z + c @ v.T
         e = q @ v.T - field(zz)
         # a fresh Jacobian for the first iterations, then the last one kept (simplified Newton:
         # one factorisation serves the rest)
-        jm, chol = lax.cond(it < settings["fresh"], normal_matrix, lambda _: (jm, chol), zz)
-        d = jax.scipy.linalg.cho_solve((chol, True), -(jm.T @ e.reshape(-1)))
-        return v + d.reshape(v.shape), it + 1, jnp.max(jnp.abs(d)), dn, jm, chol
+        a, chol = lax.cond(it < settings["fresh"], normal_matrix, lambda _: (a, chol), zz)
+        rhs = (q.T @ e).T - jnp.einsum("ij,iab,ia->bj", c, a, e)  # Jᵀe, (b, j)
+        d = jax.scipy.linalg.cho_solve((chol, True), -rhs.reshape(-1))
+        return v + d.reshape(v.shape), it + 1, jnp.max(jnp.abs(d)), dn, a, chol
 
     def going(carry):
         v, it, dn, prev = carry[:4]
@@ -113,8 +116,7 @@ def _window(system, scaling, settings, features, nodes, check, z, h, delta, shap
         return (it < settings["max_newton"]) & (dn > floor) & ~stalled & ((it == 0) | jnp.isfinite(dn))
 
     inf = jnp.asarray(jnp.inf, z.dtype)
-    size = q.shape[0] * n, v.size
-    start = (v, 0, inf, inf, jnp.zeros(size, z.dtype), jnp.eye(size[1], dtype=z.dtype))
+    start = (v, 0, inf, inf, jnp.zeros((q.shape[0], n, n), z.dtype), jnp.eye(v.size, dtype=z.dtype))
     v, iters = lax.while_loop(going, step, start)[:2]
 
     # the error along the window: RK4 on δ' = Aδ + r over the check grid (2K + 1 points)

@@ -11,7 +11,7 @@ rules that relate several keys, each a small named function below (T > t0, sigma
 sigma_per_T, z0 against the coordinates, collocation times distinct in float32, H finite at z0,
 separability). ``atlasnn config`` prints the reference generated from the same declarations.
 
-Adding a key: one ``Key(...)`` line in its table in ``config_schema.SCHEMA`` (see that module's
+Adding a key: one ``Key(...)`` line in its table in ``_schema.SCHEMA`` (see that module's
 docstring); a key of [train], [evaluation] or [system] then is a field of TrainSettings /
 EvaluationConfig / SystemConfig (generated from the schema), a top-level, [network] or
 [transfer] key also needs a field in ExperimentConfig, and a rule relating it to other keys goes
@@ -100,7 +100,7 @@ class _TrainMethods:
 
 
 def _settings_class(name: str, table: str, base: type, doc: str) -> type:
-    """A frozen dataclass whose fields are the keys of ``table`` (declared in config_schema),
+    """A frozen dataclass whose fields are the keys of ``table`` (declared in _schema),
     with the methods of ``base``."""
     cls = dataclasses.make_dataclass(name, settings_fields(table), bases=(base,), frozen=True,
                                      namespace={"__doc__": doc})

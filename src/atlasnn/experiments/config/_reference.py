@@ -111,7 +111,7 @@ INTRO = (
 
 def reference_text(width: int = 100) -> str:
     """The plain-text reference (``atlasnn config``)."""
-    lines = ["atlasnn config reference (generated from src/atlasnn/experiments/config_schema.py; "
+    lines = ["atlasnn config reference (generated from src/atlasnn/experiments/config/_schema.py; "
              "`atlasnn config --markdown` prints it as Markdown)", ""]
     lines += textwrap.wrap(INTRO, width)
     for s in sections():
@@ -134,7 +134,7 @@ def reference_markdown() -> str:
     lines = [
         "# Config reference",
         "",
-        f"<!-- Generated from src/atlasnn/experiments/config_schema.py by `{GENERATED_BY}`. Do not edit:",
+        f"<!-- Generated from src/atlasnn/experiments/config/_schema.py by `{GENERATED_BY}`. Do not edit:",
         "     tests/test_config_reference.py checks that this file equals the command's output. -->",
         "",
         INTRO.replace("src/atlasnn/experiments/configs/", "`src/atlasnn/experiments/configs/`"),
