@@ -54,14 +54,14 @@ def other_problems():
             "morse-chain": (morse, np.asarray(morse.z0), (0.0, 30.0))}
 
 
-def run_one(name, system, z0, interval, seed, rtol, atol, n_eval=2000):
+def run_one(name, system, z0, interval, seed, rtol, atol, n_eval=2000, settings=None):
     t = np.linspace(*interval, n_eval)
     ref = reference_solution(system, z0, t, rtol=1e-13, atol=1e-13)
     scale = float(np.ptp(ref, axis=0).max())
     row = {"problem": name, "seed": seed, "interval": list(interval), "range": scale, "rtol": rtol, "atol": atol}
     tic = time.perf_counter()
     try:
-        sol = solve(system, z0, interval, solver=Collocation(seed=seed), rtol=rtol, atol=atol)
+        sol = solve(system, z0, interval, solver=Collocation(seed=seed, **(settings or {})), rtol=rtol, atol=atol)
     except Exception as exc:  # a failed march is a result to record, not a crash
         row.update(status="failed", message=str(exc), seconds=time.perf_counter() - tic)
         return row
@@ -88,6 +88,7 @@ def main(argv=None):
     ap.add_argument("--rtol", type=float, default=DEFAULT_RTOL)
     ap.add_argument("--atol", type=float, default=DEFAULT_ATOL)
     ap.add_argument("--only", nargs="*", default=None)
+    ap.add_argument("--settings", default="{}", help="Collocation settings as JSON, e.g. '{\"scale\": 4}'")
     args = ap.parse_args(argv)
     problems = {n: builtin_problem(n) for n in HARD + LONG}
     problems.update(other_problems())
@@ -96,7 +97,7 @@ def main(argv=None):
         if args.only and name not in args.only:
             continue
         for seed in range(args.seeds):
-            row = run_one(name, system, z0, interval, seed, args.rtol, args.atol)
+            row = run_one(name, system, z0, interval, seed, args.rtol, args.atol, settings=json.loads(args.settings))
             rows.append(row)
             if row["status"] == "ok":
                 print(f"{name:22s} seed {seed}: err {row['error_rel']:.2e} of range, estimate x{row['effectivity']:.2f}"

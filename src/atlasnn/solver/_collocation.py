@@ -21,7 +21,7 @@ from atlasnn.errors import ConfigError
 from atlasnn.nn import inverse_softplus, make_model
 from atlasnn.solutions import PiecewiseSolution, WindowRecord
 from atlasnn.solver._base import AbstractSolver, register_solver
-from atlasnn.solver._features import RandomFeatures, collocation_nodes, window_scaling
+from atlasnn.solver._features import RandomFeatures, check_grid, collocation_nodes, window_scaling
 from atlasnn.solver._program import MarchState, compiled_march
 from atlasnn.systems import HamiltonianSystem
 
@@ -62,9 +62,12 @@ class Collocation(AbstractSolver):
         scaling: the time scaling f: ``"linear"`` (f = s, default), ``"tanh"`` or ``"rational_exp"``.
         shape: γ̂ of a tanh/rational-exp scaling (m·h or α·h).
         nodes: ``"chebyshev"`` (Chebyshev–Lobatto) or ``"gauss"`` (Gauss–Legendre).
-        check: RK4 steps per window of the error estimate (default 2P).
+        check: RK4 steps per window of the error estimate (default 2P); ``check_grid``: their
+            spacing, ``"uniform"`` or ``"chebyshev"`` (finer near the window's ends).
         seed: the draw of the random features.
         order: the exponent q of the length controller (h ← h·0.8·ε^(−1/q)).
+        safety: the local error estimate is multiplied by this before it is compared with the
+            tolerance (it reads a median 2–3× low: docs/SOLVER.md).
         growth: the most a window may grow over the last one.
         first_window: the first window's length (default 1/‖A(z0)‖, A the vector field's Jacobian).
         max_newton: Gauss–Newton iterations per window at most; ``newton_tol``: its step tolerance.
@@ -84,8 +87,10 @@ class Collocation(AbstractSolver):
     shape: float = 1.0
     nodes: str = "chebyshev"
     check: int | None = None
+    check_grid: str = "uniform"
     seed: int = 0
     order: float = 8.0
+    safety: float = 1.0
     growth: float = 2.0
     first_window: float | None = None
     max_newton: int = 12
@@ -103,7 +108,7 @@ class Collocation(AbstractSolver):
                               f"determine {m} output weights per component; raise points or lower features")
         object.__setattr__(self, "points", p)
         object.__setattr__(self, "check", 2 * p if self.check is None else _positive_int("check", self.check, 2))
-        for name in ("scale", "shape", "order", "newton_tol"):
+        for name in ("scale", "shape", "order", "newton_tol", "safety"):
             _positive(name, getattr(self, name))
         if _positive("growth", self.growth) <= 1.0:
             raise ConfigError(f"collocation growth must be > 1, got {self.growth!r}")
@@ -111,6 +116,7 @@ class Collocation(AbstractSolver):
             _positive("first_window", self.first_window)
         window_scaling(self.scaling)
         collocation_nodes(2, self.nodes)
+        check_grid(3, self.check_grid)
         for name in ("max_newton", "max_rejects", "chunk", "fresh_jacobians", "unroll"):
             _positive_int(name, getattr(self, name))
         _positive_int("seed", self.seed, 0)
@@ -132,7 +138,8 @@ class Collocation(AbstractSolver):
             raise ConfigError(f"solve_batch needs one seed per initial state, got {len(seeds)} and {len(z0s)}")
         program = compiled_march(system, self.scaling, chunk=self.chunk, max_newton=self.max_newton,
                                  newton_tol=self.newton_tol, fresh=self.fresh_jacobians, unroll=self.unroll,
-                                 order=self.order, growth=self.growth, max_rejects=self.max_rejects)
+                                 order=self.order, growth=self.growth, max_rejects=self.max_rejects,
+                                 safety=self.safety)
         feats = [RandomFeatures.draw(self.features, self.scale, s) for s in seeds]
         started = time.perf_counter()
         rows, state, first_call = self._march(program, feats, z0s, t0, T, rtol, atol, progress)
@@ -160,11 +167,12 @@ class Collocation(AbstractSolver):
         call's time (compilation or cache load included)."""
         b = len(z0s)
         nodes = collocation_nodes(self.points, self.nodes)
-        check = np.linspace(0.0, 1.0, 2 * self.check + 1)
+        check = check_grid(2 * self.check + 1, self.check_grid)
         rows, first_call = [], 0.0
         with jax.enable_x64(True):
             f64 = lambda x: jnp.asarray(x, jnp.float64)  # noqa: E731
-            args = ((f64([f.a for f in feats]), f64([f.b for f in feats])), f64(nodes), f64(check), f64(self.shape))
+            args = ((f64([f.a for f in feats]), f64([f.b for f in feats])), f64(nodes), tuple(map(f64, check)),
+                    f64(self.shape))
             zeros = jnp.zeros(b, jnp.int64)
             state = MarchState(jnp.full(b, float(t0)), f64(z0s), jnp.full(b, float(self.first_window or 0.0)),
                                jnp.zeros_like(f64(z0s)), zeros, zeros, zeros)

@@ -26,7 +26,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 
-__all__ = ["RandomFeatures", "collocation_nodes", "WINDOW_SCALINGS", "window_scaling"]
+__all__ = ["RandomFeatures", "collocation_nodes", "check_grid", "WINDOW_SCALINGS", "window_scaling"]
 
 
 def collocation_nodes(points: int, kind: str = "chebyshev") -> np.ndarray:
@@ -40,6 +40,17 @@ def collocation_nodes(points: int, kind: str = "chebyshev") -> np.ndarray:
         x, _ = np.polynomial.legendre.leggauss(points)
         return 0.5 * (x + 1.0)
     raise ConfigError(f"collocation nodes must be 'chebyshev' or 'gauss', got {kind!r}")
+
+
+def check_grid(points: int, kind: str = "uniform") -> tuple[np.ndarray, np.ndarray]:
+    """The grid on which a window's error is integrated: τ(u) and τ'(u) at ``points`` equally
+    spaced u in [0, 1]; ``"uniform"`` (τ = u) or ``"chebyshev"`` (τ = (1 − cos πu)/2)."""
+    u = np.linspace(0.0, 1.0, points)
+    if kind == "uniform":
+        return u, np.ones_like(u)
+    if kind == "chebyshev":
+        return 0.5 * (1.0 - np.cos(np.pi * u)), 0.5 * np.pi * np.sin(np.pi * u)
+    raise ConfigError(f"collocation check_grid must be 'uniform' or 'chebyshev', got {kind!r}")
 
 
 @dataclass(frozen=True)

@@ -119,25 +119,29 @@ def _window(system, scaling, settings, features, nodes, check, z, h, delta, shap
     start = (v, 0, inf, inf, jnp.zeros((q.shape[0], n, n), z.dtype), jnp.eye(v.size, dtype=z.dtype))
     v, iters = lax.while_loop(going, step, start)[:2]
 
-    # the error along the window: RK4 on δ' = Aδ + r over the check grid (2K + 1 points)
-    cv, cr = _basis(features, check, h, shape, scaling)
+    # the error along the window: RK4 on δ' = Aδ + r over the check grid: 2K + 1 points τ(u) at
+    # u = 0, 1/2K, …, 1 with their rates τ'(u) (uniform: τ = u; Chebyshev: finer near the ends,
+    # where the residual of a Chebyshev collocation oscillates fastest), K steps in u
+    tau_c, speed = check
+    cv, cr = _basis(features, tau_c, h, shape, scaling)
     zc = z + (cv @ rinv) @ v.T
     res = (cr @ rinv) @ v.T - field(zc)
     ac = jac(zc)
-    ds = h / ((check.shape[0] - 1) // 2)
+    steps = (tau_c.shape[0] - 1) // 2
+    du = 1.0 / steps
 
     def rk4(dd, i):
         j = 2 * i
-        g = lambda k, x: ac[k] @ x + res[k][:, None]  # noqa: E731
+        g = lambda k, x: (h * speed[k]) * (ac[k] @ x + res[k][:, None])  # noqa: E731
         k1 = g(j, dd)
-        k2 = g(j + 1, dd + 0.5 * ds * k1)
-        k3 = g(j + 1, dd + 0.5 * ds * k2)
-        k4 = g(j + 2, dd + ds * k3)
-        dd = dd + ds / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        k2 = g(j + 1, dd + 0.5 * du * k1)
+        k3 = g(j + 1, dd + 0.5 * du * k2)
+        k4 = g(j + 2, dd + du * k3)
+        dd = dd + du / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
         return dd, jnp.abs(dd)
 
     d0 = jnp.stack([delta, jnp.zeros_like(delta)], axis=1)
-    dd, path = lax.scan(rk4, d0, jnp.arange((check.shape[0] - 1) // 2), unroll=settings["unroll"])
+    dd, path = lax.scan(rk4, d0, jnp.arange(steps), unroll=settings["unroll"])
     w = (rinv @ v.T).T
     return w, zc[-1], dd[:, 0], jnp.max(path[:, :, 0]), jnp.max(path[:, :, 1], axis=0), iters
 
@@ -149,7 +153,7 @@ def _first_length(system, z, span):
 
 
 @functools.lru_cache(maxsize=32)
-def _cached(system, scaling_name, chunk, max_newton, newton_tol, fresh, unroll, order, growth, max_rejects,
+def _cached(system, scaling_name, chunk, max_newton, newton_tol, fresh, unroll, order, growth, max_rejects, safety,
             settings_key):
     scaling = window_scaling(scaling_name)
     settings = {"max_newton": max_newton, "newton_tol": newton_tol, "fresh": fresh, "unroll": unroll}
@@ -175,7 +179,7 @@ def _cached(system, scaling_name, chunk, max_newton, newton_tol, fresh, unroll, 
             w, z1, d1, est, loc, it = _window(system, scaling, settings, features, nodes, check, st.z, h,
                                                st.delta, shape)
             tol = atol + rtol * jnp.maximum(jnp.abs(st.z), jnp.abs(z1))
-            ratio = jnp.max(loc / tol)
+            ratio = safety * jnp.max(loc / tol)
             ok = jnp.isfinite(ratio) & (ratio <= 1.0) & jnp.all(jnp.isfinite(z1))
             fac = jnp.clip(0.8 * ratio ** (-1.0 / order), 0.2, growth)
             fac = jnp.where(jnp.isfinite(fac), fac, 0.2)
@@ -200,9 +204,9 @@ def _cached(system, scaling_name, chunk, max_newton, newton_tol, fresh, unroll, 
 
 
 def compiled_march(system: Any, scaling: str, *, chunk: int, max_newton: int, newton_tol: float, fresh: int,
-                   unroll: int, order: float, growth: float, max_rejects: int):
+                   unroll: int, order: float, growth: float, max_rejects: int, safety: float):
     """The compiled march for a system and these settings, over a batch of members (features and
     state with a leading axis); one program per shape, cached, keyed also by the trace settings so
     that a program traced under others is never reused."""
     return _cached(system, scaling, int(chunk), int(max_newton), float(newton_tol), int(fresh), int(unroll),
-                   float(order), float(growth), int(max_rejects), trace_settings())
+                   float(order), float(growth), int(max_rejects), float(safety), trace_settings())
