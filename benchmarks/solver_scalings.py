@@ -23,7 +23,7 @@ from benchmarks.common import machine_info
 from benchmarks.solver_suite import builtin_problem
 
 VARIANTS = [("linear", 1.0, 20), ("tanh", 0.5, 20), ("tanh", 1.0, 20), ("tanh", 2.0, 20),
-            ("rational_exp", 1.0, 20), ("rational_exp", 2.0, 20), ("linear", 1.0, 12), ("linear", 1.0, 28)]
+            ("rational_exp", 1.0, 20), ("rational_exp", 2.0, 20), ("linear", 1.0, 16), ("linear", 1.0, 28)]
 
 
 def main(argv=None):

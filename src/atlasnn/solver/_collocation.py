@@ -90,7 +90,7 @@ class Collocation(AbstractSolver):
     check_grid: str = "uniform"
     seed: int = 0
     order: float = 8.0
-    safety: float = 1.0
+    safety: float = 3.0
     growth: float = 2.0
     first_window: float | None = None
     max_newton: int = 12
@@ -139,7 +139,7 @@ class Collocation(AbstractSolver):
         program = compiled_march(system, self.scaling, chunk=self.chunk, max_newton=self.max_newton,
                                  newton_tol=self.newton_tol, fresh=self.fresh_jacobians, unroll=self.unroll,
                                  order=self.order, growth=self.growth, max_rejects=self.max_rejects,
-                                 safety=self.safety)
+                                 safety=self.safety, members=len(z0s))
         feats = [RandomFeatures.draw(self.features, self.scale, s) for s in seeds]
         started = time.perf_counter()
         rows, state, first_call = self._march(program, feats, z0s, t0, T, rtol, atol, progress)

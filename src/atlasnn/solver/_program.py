@@ -199,14 +199,22 @@ def _cached(system, scaling_name, chunk, max_newton, newton_tol, fresh, unroll, 
         return ChunkResult(k, *buf, st)
 
     # members (seeds and initial states) on a leading axis: one program marches them all, each with
-    # windows of its own (the loop runs until the last member is done)
-    return jax.jit(jax.vmap(run, in_axes=(0, None, None, None, 0, None, None, None)))
+    # windows of its own (the loop runs until the last member is done); one member alone runs the
+    # plain loop (the batched program costs twice the compilation for nothing)
+    batched = jax.vmap(run, in_axes=(0, None, None, None, 0, None, None, None))
+
+    def alone(features, nodes, check, shape, state, T, rtol, atol):
+        one = jax.tree_util.tree_map(lambda x: x[0], (features, state))
+        out = run(one[0], nodes, check, shape, one[1], T, rtol, atol)
+        return jax.tree_util.tree_map(lambda x: x[None], out)
+
+    return jax.jit(batched), jax.jit(alone)
 
 
 def compiled_march(system: Any, scaling: str, *, chunk: int, max_newton: int, newton_tol: float, fresh: int,
-                   unroll: int, order: float, growth: float, max_rejects: int, safety: float):
-    """The compiled march for a system and these settings, over a batch of members (features and
-    state with a leading axis); one program per shape, cached, keyed also by the trace settings so
-    that a program traced under others is never reused."""
+                   unroll: int, order: float, growth: float, max_rejects: int, safety: float, members: int):
+    """The compiled march for a system and these settings, over ``members`` members (features and
+    state with a leading axis, also for one); one program per shape, cached, keyed also by the
+    trace settings so that a program traced under others is never reused."""
     return _cached(system, scaling, int(chunk), int(max_newton), float(newton_tol), int(fresh), int(unroll),
-                   float(order), float(growth), int(max_rejects), float(safety), trace_settings())
+                   float(order), float(growth), int(max_rejects), float(safety), trace_settings())[int(members == 1)]
