@@ -136,11 +136,45 @@ def diffrax_points(system, z0, interval, t, ref, scale):
     return rows
 
 
+STYLE = {"collocation": ("tab:blue", "o"), "dop853": ("tab:orange", "s"), "yoshida4": ("tab:green", "^"),
+         "diffrax-dopri8": ("tab:red", "D"), "diffrax-tsit5": ("tab:purple", "v")}
+
+
+def figure(results: dict, path: str) -> None:
+    """Error against time, one panel per problem, one line per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(results["problems"])
+    fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 3.6), squeeze=False)
+    for ax, name in zip(axes[0], names):
+        rows = results["problems"][name]["rows"]
+        for method, (color, marker) in STYLE.items():
+            pts = sorted((r["seconds"] * 1e3, r["error_rel"]) for r in rows if r["method"] == method)
+            if pts:
+                ax.loglog(*zip(*pts), marker=marker, color=color, label=method)
+        ax.set_title(name)
+        ax.set_xlabel("time after compilation (ms, one core)")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0][0].set_ylabel("max error / state range (2 000 times)")
+    axes[0][0].legend(fontsize=8)
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="docs/benchmarks/solver_workprecision.json")
     ap.add_argument("--problems", nargs="*", default=LONG + HARD)
+    ap.add_argument("--figure", default="docs/figures/solver/workprecision.png")
+    ap.add_argument("--figure-only", action="store_true", help="redraw the figure from --out")
     args = ap.parse_args(argv)
+    if args.figure_only:
+        figure(json.loads(Path(args.out).read_text()), args.figure)
+        return
     results = {"command": "python -m benchmarks.solver_workprecision " + " ".join(argv or []),
                "machine": machine_info(), "problems": {}}
     for name in args.problems:
@@ -157,7 +191,8 @@ def main(argv=None):
             print(f"{name:22s} {r['method']:15s} {r.get('tol', r.get('steps'))!s:>8}: error {r['error_rel']:.2e}"
                   f" in {r['seconds'] * 1e3:8.2f} ms", flush=True)
         Path(args.out).write_text(json.dumps(results, indent=1))
-    print(f"wrote {args.out}")
+    figure(results, args.figure)
+    print(f"wrote {args.out} and {args.figure}")
 
 
 if __name__ == "__main__":

@@ -49,3 +49,12 @@ def test_an_unwritable_directory_is_skipped(tmp_path):
     blocker.write_text("not a directory")
     out = _run(str(blocker / "cache"))  # cannot be created: the run goes on without a cache
     assert out.stdout.strip() in ("", "None")
+
+
+def test_the_cache_is_locked_so_two_processes_can_share_it(tmp_path):
+    """With a size limit JAX takes a file lock around every read and write of the cache (without
+    it a reader could load a half-written entry: two segmentation faults here); the lock file is
+    the proof that the locked path is taken."""
+    folder = tmp_path / "jax-cache"
+    _run(str(folder))
+    assert (folder / ".lockfile").exists()

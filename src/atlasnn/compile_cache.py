@@ -7,6 +7,12 @@ directory that cannot be created or written is skipped silently (a read-only hom
 run); JAX's own errors while reading or writing an entry are not raised (it compiles instead).
 Every program is cached, however quick it was to compile (the training chunks compile in 1–3 s,
 the estimate's and the reference's in tens of milliseconds).
+
+Two processes sharing the cache (``--jobs 2``, a benchmark beside a run) must not read an entry
+while the other is writing it: without a size limit JAX writes entries without a lock, and reading
+a half-written executable crashed the reader (a segmentation fault, seen here twice). A size limit
+(:data:`CACHE_MAX_BYTES`) makes JAX take a file lock (the ``filelock`` package) around every read
+and write, and evicts the least recently used entries past it.
 """
 
 from __future__ import annotations
@@ -16,9 +22,11 @@ from pathlib import Path
 
 import jax
 
-__all__ = ["cache_dir", "enable_compile_cache", "CACHE_ENV"]
+__all__ = ["cache_dir", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES"]
 
 CACHE_ENV = "ATLASNN_CACHE_DIR"
+#: the cache's size limit (least recently used entries go past it); with it, JAX locks the cache
+CACHE_MAX_BYTES = 4 << 30
 _OFF = ("", "0", "off", "none", "false")
 
 
@@ -47,4 +55,9 @@ def enable_compile_cache() -> Path | None:
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     jax.config.update("jax_raise_persistent_cache_errors", False)
+    try:
+        import filelock  # noqa: F401  (JAX needs it for the lock that a size limit brings)
+    except ImportError:  # pragma: no cover - a dependency; without it the cache stays unlocked
+        return folder
+    jax.config.update("jax_compilation_cache_max_size", CACHE_MAX_BYTES)
     return folder

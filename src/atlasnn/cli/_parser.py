@@ -111,24 +111,24 @@ def build_parser() -> argparse.ArgumentParser:
     add_figures_option(s)
     s.set_defaults(func=cmd_report)
 
+    def add_problem_options(s, config_help: str):
+        """CONFIG / --config / --system / --T: the problem of ``integrate`` and ``solve``."""
+        s.add_argument("config_pos", nargs="?", metavar="CONFIG", help=config_help + ": its system, z0 and "
+                       "interval (the target's for a transfer experiment)")
+        s.add_argument("--config", default=None, metavar="FILE", help="the same as CONFIG")
+        s.add_argument("--system", default=None, help="a built-in system (default nonlinear_oscillator)")
+        s.add_argument("--T", default=None, help="end time: a number (6.0, 100) or a multiple of pi (20*pi); "
+                       "default 4*pi, or the config's T")
+
     s = sub.add_parser("integrate", help="reference solution vs symplectic integrators (a built-in system or "
                                          "the system of a config)")
-    s.add_argument("config_pos", nargs="?", metavar="CONFIG", help="a TOML experiment file: its system, z0 and "
-                   "interval (the target's for a transfer experiment)")
-    s.add_argument("--config", default=None, metavar="FILE", help="the same as CONFIG")
-    s.add_argument("--system", default=None, help="a built-in system (default nonlinear_oscillator)")
-    s.add_argument("--T", default=None, help="end time: a number (6.0, 100) or a multiple of pi (20*pi); "
-                   "default 4*pi, or the config's T")
+    add_problem_options(s, "a TOML experiment file")
     s.add_argument("--steps", type=int, default=None, help="integrator steps (default 199, or the config's K - 1)")
     s.set_defaults(func=cmd_integrate)
 
     s = sub.add_parser("solve", help="solve one trajectory with the float64 collocation solver (a built-in "
                                      "system or the system of a config); print its error estimate")
-    s.add_argument("config_pos", nargs="?", metavar="CONFIG", help="a TOML experiment file or a built-in experiment's "
-                   "name (kepler-e09): its system, z0 and interval (the target's for a transfer experiment)")
-    s.add_argument("--config", default=None, metavar="FILE", help="the same as CONFIG")
-    s.add_argument("--system", default=None, help="a built-in system (default nonlinear_oscillator)")
-    s.add_argument("--T", default=None, help="end time: a number or a multiple of pi (default 4*pi, or the config's T)")
+    add_problem_options(s, "a TOML experiment file or a built-in experiment's name (kepler-e09)")
     s.add_argument("--rtol", type=float, default=None, help="each window's relative tolerance (default 1e-12)")
     s.add_argument("--atol", type=float, default=None, help="each window's absolute tolerance (default 1e-14)")
     s.add_argument("--features", type=int, default=20, help="random features per window (default 20)")

@@ -50,11 +50,11 @@ COND_LIMIT = 1e12
 
 # ----------------------------------------------------------------------- synthetic data
 def synthetic_observations(system: HamiltonianSystem, z0: Any, times: Any, names: Sequence[str], noise: float,
-                           seed: int, *, t0: float | None = None) -> Observations:
+                           seed: int, *, t0: float = 0.0) -> Observations:
     """Noisy samples of some state components along the reference trajectory.
 
     The trajectory is the reference solution (DOP853, rtol = atol = 1e-12) from ``z0`` at ``t0``
-    (default ``times[0]``) with the system's own parameter values. To component c is added
+    (default 0, where the fits start by default) with the system's own parameter values. To component c is added
     Gaussian noise of standard deviation ``noise × RMS_c``, where RMS_c = sqrt(mean of z_c(t_i)²)
     over the sampled times: ``noise=0.01`` is "1 % noise", ``noise=0`` gives exact samples. The
     noise is drawn from ``numpy.random.default_rng(seed)``, so equal seeds give equal data.
@@ -70,7 +70,7 @@ def synthetic_observations(system: HamiltonianSystem, z0: Any, times: Any, names
     if not isinstance(system, HamiltonianSystem):
         raise ConfigError(f"system must be a HamiltonianSystem, got {type(system).__name__}")
     t = _times(times, "times")
-    start = float(t[0]) if t0 is None else _finite(t0, "t0")
+    start = _finite(t0, "t0")
     if start > t[0]:
         raise ConfigError(f"t0={start!r} lies after the first time {float(t[0])!r}")
     level = _finite(noise, "noise")

@@ -1,0 +1,60 @@
+"""What a first `atlasnn.solve` costs in a fresh process: with the compilation cache off (cold) and
+with it warm, Hénon–Heiles [0, 24π] at rtol 1e-10. Each run is its own Python process; it reports
+the import, the first solve (of which the first call of the compiled program: compilation or cache
+load, tracing, and the march itself), the first evaluation at 2 000 times and a second solve with
+its evaluation (the warm cost).
+
+    python -m benchmarks.solver_first_run --out docs/benchmarks/solver_first_run.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+CHILD = r"""
+import json, time
+t0 = time.perf_counter()
+import numpy as np
+from atlasnn import solve
+from atlasnn.systems import henon_heiles
+t1 = time.perf_counter()
+s, z0, T = henon_heiles(), [0.3, -0.3, 0.3, 0.15], 24 * np.pi
+t = np.linspace(0.0, T, 2000)
+sol = solve(s, z0, (0.0, T), rtol=1e-10, atol=1e-12)
+t2 = time.perf_counter()
+sol(t)
+t3 = time.perf_counter()
+sol(t) if False else solve(s, z0, (0.0, T), rtol=1e-10, atol=1e-12)(t)
+t4 = time.perf_counter()
+print(json.dumps({"import": t1 - t0, "first_solve": t2 - t1, "first_program_call": sol.info["first_call_time"],
+                  "first_evaluation": t3 - t2, "second_solve_and_evaluation": t4 - t3}))
+"""
+
+
+def run(cache: str) -> dict:
+    env = dict(os.environ)
+    if cache == "off":
+        env["ATLASNN_CACHE_DIR"] = "off"
+    out = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="docs/benchmarks/solver_first_run.json")
+    args = ap.parse_args(argv)
+    rows = {"cold (cache off)": [run("off") for _ in range(2)], "warm cache": [run("on") for _ in range(3)]}
+    for k, v in rows.items():
+        for r in v:
+            print(k, {a: round(b, 3) for a, b in r.items()})
+    Path(args.out).write_text(json.dumps({"command": "python -m benchmarks.solver_first_run", "runs": rows},
+                                         indent=1))
+
+
+if __name__ == "__main__":
+    main()
