@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import pytest
 
+from atlasnn.compile_cache import clear_programs
 from atlasnn.systems import harmonic_oscillator
 
 
@@ -15,3 +16,12 @@ from atlasnn.systems import harmonic_oscillator
 def ho():
     """H = p²/2 + x²/2 with z0 = (1, 0); exact solution x = cos t, p = −sin t."""
     return harmonic_oscillator()
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _drop_compiled_programs():
+    """After each test file, drop the compiled programs it made (atlasnn.compile_cache.clear_programs):
+    one process compiling every program of the suite ran out of memory maps (vm.max_map_count) and
+    crashed inside XLA near the end of the suite."""
+    yield
+    clear_programs()

@@ -58,3 +58,18 @@ def test_the_cache_is_locked_so_two_processes_can_share_it(tmp_path):
     folder = tmp_path / "jax-cache"
     _run(str(folder))
     assert (folder / ".lockfile").exists()
+
+
+def test_clear_programs_drops_the_compiled_programs_held_in_memory(ho):
+    """A long process must be able to let go of its compiled programs (each holds memory maps)."""
+    import numpy as np
+
+    from atlasnn import solve
+    from atlasnn.compile_cache import clear_programs
+    from atlasnn.solver import _program
+
+    solve(ho, [1.0, 0.0], (0.0, 1.0))
+    assert _program._cached.cache_info().currsize >= 1
+    clear_programs()
+    assert _program._cached.cache_info().currsize == 0
+    assert np.isfinite(solve(ho, [1.0, 0.0], (0.0, 1.0))(0.5)).all()  # and compiles again when needed

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import jax
 
-__all__ = ["cache_dir", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES"]
+__all__ = ["cache_dir", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES", "program_cache", "clear_programs"]
 
 CACHE_ENV = "ATLASNN_CACHE_DIR"
 #: the cache's size limit (least recently used entries go past it); with it, JAX locks the cache
@@ -61,3 +61,30 @@ def enable_compile_cache() -> Path | None:
         return folder
     jax.config.update("jax_compilation_cache_max_size", CACHE_MAX_BYTES)
     return folder
+
+
+# ---------------------------------------------------------------- compiled programs in memory
+#: every in-memory cache of compiled programs atlasnn keeps (dicts, or functions wrapped by
+#: functools.lru_cache): what :func:`clear_programs` empties
+_PROGRAM_CACHES: list = []
+
+
+def program_cache(cache):
+    """Register an in-memory cache of compiled programs (a dict, or a function wrapped by
+    ``functools.lru_cache``) so that :func:`clear_programs` can empty it; returns it unchanged."""
+    _PROGRAM_CACHES.append(cache)
+    return cache
+
+
+def clear_programs() -> None:
+    """Drop every compiled program this process holds (atlasnn's caches and JAX's own): each
+    program keeps its machine code mapped in memory, and a process that compiles thousands of them
+    (a long session, a test suite) can run out of memory maps (Linux's vm.max_map_count, 65 530
+    by default) and crash inside XLA. The persistent cache on disk is kept, so what is needed again
+    loads from there."""
+    for cache in _PROGRAM_CACHES:
+        if isinstance(cache, dict):
+            cache.clear()
+        else:
+            cache.cache_clear()
+    jax.clear_caches()

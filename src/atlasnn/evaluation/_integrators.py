@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from atlasnn.compile_cache import program_cache
 from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.systems import HamiltonianSystem
 
@@ -92,6 +93,7 @@ _METHOD_LABELS = {
 INTEGRATOR_ORDERS = {"symplectic_euler": 1, "stormer_verlet": 2, "yoshida4": 4}
 
 
+@program_cache
 @functools.lru_cache(maxsize=64)
 def _compiled_stepper(system: HamiltonianSystem, method: str, n_steps: int):
     """A jitted ``(z0, dt) -> trajectory`` for this system, method and step count."""
@@ -222,6 +224,7 @@ def integrate(method: str, system: HamiltonianSystem, z0: Any, t0: float, T: flo
 
 
 # ------------------------------------------------------------------------ reference solution
+@program_cache
 @functools.lru_cache(maxsize=64)
 def _jitted_vector_field(system: HamiltonianSystem):
     return jax.jit(system.vector_field)

@@ -36,6 +36,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import least_squares
 
+from atlasnn.compile_cache import program_cache
 from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.evaluation._integrators import reference_solution
 from atlasnn.observations import Observations, Unknown, check_unknowns
@@ -53,11 +54,10 @@ def synthetic_observations(system: HamiltonianSystem, z0: Any, times: Any, names
                            seed: int, *, t0: float = 0.0) -> Observations:
     """Noisy samples of some state components along the reference trajectory.
 
-    The trajectory is the reference solution (DOP853, rtol = atol = 1e-12) from ``z0`` at ``t0``
-    (default 0, where the fits start by default) with the system's own parameter values. To component c is added
-    Gaussian noise of standard deviation ``noise × RMS_c``, where RMS_c = sqrt(mean of z_c(t_i)²)
-    over the sampled times: ``noise=0.01`` is "1 % noise", ``noise=0`` gives exact samples. The
-    noise is drawn from ``numpy.random.default_rng(seed)``, so equal seeds give equal data.
+    The reference solution (DOP853, rtol = atol = 1e-12) from ``z0`` at ``t0`` (default 0, where the
+    fits start) with the system's own parameters, plus to component c Gaussian noise of standard
+    deviation ``noise × RMS_c`` (RMS_c = sqrt(mean of z_c(t_i)²) over the times: ``noise=0.01`` is
+    "1 % noise"), drawn from ``numpy.random.default_rng(seed)``.
 
     Args:
         system: the Hamiltonian system (its parameters are the truth).
@@ -65,7 +65,7 @@ def synthetic_observations(system: HamiltonianSystem, z0: Any, times: Any, names
         times: strictly increasing, finite 1-D times (at least 2), all ≥ t0.
         names: the observed state components, e.g. ``["x"]``.
         noise: the relative noise level, finite and ≥ 0.
-        seed: the seed of the noise generator.
+        seed: the seed of the noise generator (equal seeds give equal data).
     """
     if not isinstance(system, HamiltonianSystem):
         raise ConfigError(f"system must be a HamiltonianSystem, got {type(system).__name__}")
@@ -81,8 +81,7 @@ def synthetic_observations(system: HamiltonianSystem, z0: Any, times: Any, names
     probe = Observations(t=t, values=np.zeros((t.size, len(names))), names=tuple(names), source="synthetic")
     idx = probe.indices(system.state_names)
     grid = t if start == t[0] else np.concatenate([[start], t])
-    Z = reference_solution(system, z0, grid)[grid.size - t.size:]
-    clean = Z[:, idx]
+    clean = reference_solution(system, z0, grid)[grid.size - t.size:, idx]
     rms = np.sqrt(np.mean(clean**2, axis=0))
     rng = np.random.default_rng(int(seed))
     values = clean + level * rms * rng.standard_normal(clean.shape)
@@ -116,6 +115,7 @@ def _times(times: Any, what: str) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ compiled right-hand sides
+@program_cache
 @functools.lru_cache(maxsize=32)
 def _compiled(system: HamiltonianSystem):
     """(f, g): jitted f(z, θ) = J∇H(z; θ) and g(y, θ, D) = d/dt [z, S] for the variational system."""

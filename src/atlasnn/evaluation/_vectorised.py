@@ -32,6 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from atlasnn.compile_cache import program_cache
 from atlasnn.errors import ConfigError
 from atlasnn.systems import BundleBox, HamiltonianSystem
 
@@ -72,6 +73,7 @@ def _member_h(system: HamiltonianSystem):
     return lambda q, p, th: jnp.asarray(fn(q, p)).reshape(())
 
 
+@program_cache
 @functools.lru_cache(maxsize=32)
 def _kernel(system: HamiltonianSystem, scheme: str):
     """A jitted ``(q0, p0 (n_blocks, B, d), θ (n_blocks, B, P), h (T,), n (T,)) -> z (n_blocks·B, T, 2d)``:

@@ -29,10 +29,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from atlasnn.compile_cache import program_cache
+
 __all__ = ["residual_and_jacobian", "propagate", "segments", "steps_for", "residual_bandwidth", "segment_bandwidths",
            "dense_grid", "MAX_STEPS_PER_WINDOW", "ESTIMATE_MEMORY_BYTES", "max_total_steps"]
 
 
+@program_cache
 @functools.lru_cache(maxsize=64)
 def _compiled_field(system: Any):
     """jit-compiled z ↦ (f(z), Df(z)) for a batch z of shape (N, 2d), traced in float64."""

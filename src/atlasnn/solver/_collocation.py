@@ -204,6 +204,8 @@ class Collocation(AbstractSolver):
             stacked = jax.tree_util.tree_map(jnp.asarray, host)
         models = [jax.tree_util.tree_map(lambda x, k=k: x[k], host) for k in range(n)]
         edges = np.append(start, start[-1] + length[-1])
+        # a window's record: no Adam run (0 epochs, stop reason "gauss-newton"); its ``loss`` is the
+        # local error estimate over the tolerance (safety factor included), ≤ 1 for every window kept
         records = [WindowRecord(k, float(start[k]), float(edges[k + 1]), z_start[k].tolist(),
                                 {g: float(v) for g, v in scaling.gamma(length[k], self.shape).items()},
                                 0, "gauss-newton", float("nan"), float("nan"), loss=float(ratio[k]))

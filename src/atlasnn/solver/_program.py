@@ -34,6 +34,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from atlasnn.compile_cache import program_cache
 from atlasnn.precision import trace_settings
 from atlasnn.solver._features import window_scaling
 
@@ -152,6 +153,7 @@ def _first_length(system, z, span):
     return jnp.minimum(span, 1.0 / jnp.maximum(jnp.linalg.norm(a, 2), 1e-300))
 
 
+@program_cache
 @functools.lru_cache(maxsize=32)
 def _cached(system, scaling_name, chunk, max_newton, newton_tol, fresh, unroll, order, growth, max_rejects, safety,
             settings_key):

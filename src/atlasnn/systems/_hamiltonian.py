@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from atlasnn.compile_cache import program_cache
 from atlasnn.errors import SystemError_
 
 HamiltonianFn = Callable[[jax.Array, jax.Array], jax.Array]
@@ -225,6 +226,7 @@ class HamiltonianSystem:
         }
 
 
+@program_cache
 @functools.lru_cache(maxsize=64)
 def _compiled_energy(system: HamiltonianSystem) -> Callable[[jax.Array], jax.Array]:
     """``system.energy`` as one compiled program per shape: run op by op, a 32-dimensional H of a

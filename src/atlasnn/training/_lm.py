@@ -48,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
+from atlasnn.compile_cache import program_cache
 from atlasnn.precision import trace_settings
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
@@ -347,7 +348,7 @@ def _functions(config: LMConfig, system, unravel, unravel_jac, rest, t, e0, lam,
     return res, lambda x: inner(x.astype(jac_dtype))
 
 
-_COMPILED: dict[Any, Any] = {}
+_COMPILED: dict[Any, Any] = program_cache({})
 
 
 def _compiled_loop(config: LMConfig, system, unravel, unravel_jac, jac_dtype, args, batched: bool):
@@ -443,6 +444,7 @@ class LMOutcome(NamedTuple):
     accepted: int
 
 
+@program_cache
 @functools.lru_cache(maxsize=8)
 def _minimise_program(res: Callable, jac: Callable, config: LMConfig) -> Callable:
     """The jitted loop of :func:`lm_minimise` for one problem, kept so that calls with new ``args``

@@ -43,6 +43,7 @@ import numpy as np
 import optax
 from jax.flatten_util import ravel_pytree
 
+from atlasnn.compile_cache import program_cache
 from atlasnn.precision import trace_settings
 from atlasnn.training._collocation import check_interval, uniform_grid
 from atlasnn.errors import ConfigError
@@ -226,7 +227,7 @@ def polish_steps(carry: PolishCarry, rest, unravel, system: HamiltonianSystem, d
     return jax.lax.scan(step, carry, None, length=n_steps)
 
 
-_CACHE: dict[Any, Any] = {}
+_CACHE: dict[Any, Any] = program_cache({})
 
 
 def _compiled_steps(args: tuple, unravel, system: HamiltonianSystem, config: PolishConfig):

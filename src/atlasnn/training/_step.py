@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
+from atlasnn.compile_cache import program_cache
 from atlasnn.precision import trace_settings
 from atlasnn.training._collocation import jittered, uniform_grid, with_release_fixed_point
 from atlasnn.training._loss import causal_physics_loss, physics_loss
@@ -193,7 +194,7 @@ def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, mo
     return params, opt_state, track, {"loss": loss, "residual": res, "energy": en, "gamma": gamma}
 
 
-_CHUNK_CACHE: dict[Any, Any] = {}
+_CHUNK_CACHE: dict[Any, Any] = program_cache({})
 
 
 def compiled_chunk(args: tuple, system: HamiltonianSystem, mode: Mode, batched: bool = False):
