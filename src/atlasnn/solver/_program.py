@@ -82,13 +82,20 @@ def _basis(features, tau, h, shape, scaling):
 def _window(system, scaling, settings, features, nodes, check, z, h, delta, shape):
     """Solve one window from state z over length h; returns (W, ẑ(h), carried δ, max‖δ‖∞ carried,
     local error over tolerance unscaled (max |δ_loc| per component), Newton iterations)."""
-    n = z.shape[0]
     bv, br = _basis(features, nodes, h, shape, scaling)
     q, r = jnp.linalg.qr(br)
     rinv = jax.scipy.linalg.solve_triangular(r, jnp.eye(r.shape[0], dtype=r.dtype), lower=False)
-    c = bv @ rinv
-    field = system.vector_field
-    jac = system.jacobian
+    v, iters = _gauss_newton(system, settings, q, bv @ rinv, z)
+    zc, dd, path = _window_error(system, scaling, settings, features, check, rinv, v, z, h, delta, shape)
+    w = (rinv @ v.T).T
+    return w, zc[-1], dd[:, 0], jnp.max(path[:, :, 0]), jnp.max(path[:, :, 1], axis=0), iters
+
+
+def _gauss_newton(system, settings, q, c, z):
+    """The window's unknowns V (2d × M) with rates V Qᵀ and values z + V Cᵀ at the nodes, from the
+    constant-rate guess, by Gauss–Newton on the residual; returns (V, iterations)."""
+    n = z.shape[0]
+    field, jac = system.vector_field, system.jacobian
     v = field(z[None])[0][:, None] * jnp.sum(q, axis=0)[None, :]
 
     def normal_matrix(zz):
@@ -118,16 +125,19 @@ def _window(system, scaling, settings, features, nodes, check, z, h, delta, shap
 
     inf = jnp.asarray(jnp.inf, z.dtype)
     start = (v, 0, inf, inf, jnp.zeros((q.shape[0], n, n), z.dtype), jnp.eye(v.size, dtype=z.dtype))
-    v, iters = lax.while_loop(going, step, start)[:2]
+    return lax.while_loop(going, step, start)[:2]
 
-    # the error along the window: RK4 on δ' = Aδ + r over the check grid: 2K + 1 points τ(u) at
-    # u = 0, 1/2K, …, 1 with their rates τ'(u) (uniform: τ = u; Chebyshev: finer near the ends,
-    # where the residual of a Chebyshev collocation oscillates fastest), K steps in u
+
+def _window_error(system, scaling, settings, features, check, rinv, v, z, h, delta, shape):
+    """The error along the window: RK4 on δ' = Aδ + r over the check grid — 2K + 1 points τ(u) at
+    u = 0, 1/2K, …, 1 with their rates τ'(u) (uniform: τ = u; Chebyshev: finer near the ends), K
+    steps in u — for δ carried in and for δ = 0 at once; returns (ẑ on the grid, δ at the end
+    (2d, 2), |δ| along the grid (K, 2d, 2))."""
     tau_c, speed = check
     cv, cr = _basis(features, tau_c, h, shape, scaling)
     zc = z + (cv @ rinv) @ v.T
-    res = (cr @ rinv) @ v.T - field(zc)
-    ac = jac(zc)
+    res = (cr @ rinv) @ v.T - system.vector_field(zc)
+    ac = system.jacobian(zc)
     steps = (tau_c.shape[0] - 1) // 2
     du = 1.0 / steps
 
@@ -143,8 +153,7 @@ def _window(system, scaling, settings, features, nodes, check, z, h, delta, shap
 
     d0 = jnp.stack([delta, jnp.zeros_like(delta)], axis=1)
     dd, path = lax.scan(rk4, d0, jnp.arange(steps), unroll=settings["unroll"])
-    w = (rinv @ v.T).T
-    return w, zc[-1], dd[:, 0], jnp.max(path[:, :, 0]), jnp.max(path[:, :, 1], axis=0), iters
+    return zc, dd, path
 
 
 def _first_length(system, z, span):
