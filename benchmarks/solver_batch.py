@@ -23,6 +23,7 @@ from atlasnn.evaluation import reference_solution
 from atlasnn.systems import henon_heiles
 
 from benchmarks.common import machine_info
+from benchmarks.solver_workprecision import timed
 
 
 def members(count: int, seed: int = 0) -> np.ndarray:
@@ -33,15 +34,6 @@ def members(count: int, seed: int = 0) -> np.ndarray:
         if float(system.energy64(z)) < 0.12:
             out.append(z)
     return np.array(out)
-
-
-def best(fn, repeats=2):
-    times, out = [], None
-    for _ in range(repeats):
-        tic = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - tic)
-    return out, min(times)
 
 
 def main(argv=None):
@@ -62,9 +54,9 @@ def main(argv=None):
             return max(float(np.abs(z - r).max()) / s for z, r, s in zip(zs, refs, scale))
 
         solve_batch(system, z0s, (0.0, T), rtol=1e-10, atol=1e-12)
-        sols, batched = best(lambda: [s(t) for s in solve_batch(system, z0s, (0.0, T), rtol=1e-10, atol=1e-12)])
+        sols, batched, _ = timed(lambda: [s(t) for s in solve_batch(system, z0s, (0.0, T), rtol=1e-10, atol=1e-12)], 2)
         solve(system, z0s[0], (0.0, T), rtol=1e-10, atol=1e-12)
-        alone, one_by_one = best(lambda: [solve(system, z, (0.0, T), rtol=1e-10, atol=1e-12)(t) for z in z0s])
+        alone, one_by_one, _ = timed(lambda: [solve(system, z, (0.0, T), rtol=1e-10, atol=1e-12)(t) for z in z0s], 2)
         row = {"members": b, "batched_seconds": batched, "one_by_one_seconds": one_by_one,
                "batched_worst_error": worst(sols), "one_by_one_worst_error": worst(alone)}
         try:
@@ -83,7 +75,7 @@ def main(argv=None):
 
                 y = jnp.asarray(z0s)
                 jax.block_until_ready(run(y))
-                zs, dsec = best(lambda: np.asarray(run(y)))
+                zs, dsec, _ = timed(lambda: np.asarray(run(y)), 2)
             row.update(diffrax_dopri8_seconds=dsec, diffrax_worst_error=worst(list(zs)))
         except ImportError:
             pass

@@ -57,7 +57,8 @@ def _numpy_rhs(name, system):
     return reference_rhs(system), "jax-jit"
 
 
-def _best(fn, repeats=3):
+def timed(fn, repeats=3):
+    """(the last result, the fastest time, the median time) of ``repeats`` calls of ``fn``."""
     times, out = [], None
     for _ in range(repeats):
         tic = time.perf_counter()
@@ -72,7 +73,7 @@ def collocation_points(system, z0, interval, t, ref, scale):
         tic = time.perf_counter()
         sol = solve(system, z0, interval, rtol=tol, atol=tol / 100)
         first = time.perf_counter() - tic
-        (sol, z), best, med = _best(lambda: (lambda s: (s, s(t)))(solve(system, z0, interval, rtol=tol,
+        (sol, z), best, med = timed(lambda: (lambda s: (s, s(t)))(solve(system, z0, interval, rtol=tol,
                                                                         atol=tol / 100)))
         rows.append({"method": "collocation", "tol": tol, "seconds": best, "median_seconds": med,
                      "first_call_seconds": first, "error_rel": float(np.abs(z - ref).max() / scale),
@@ -86,7 +87,7 @@ def dop853_points(name, system, z0, interval, t, ref, scale):
     for tol in TOLS:
         run = lambda: solve_ivp(rhs, interval, z0, method="DOP853", t_eval=t, rtol=tol, atol=tol / 100)  # noqa: E731
         with jax.enable_x64(True):
-            out, best, med = _best(run)
+            out, best, med = timed(run)
         rows.append({"method": "dop853", "rhs": kind, "tol": tol, "seconds": best, "median_seconds": med,
                      "error_rel": float(np.abs(out.y.T - ref).max() / scale), "evaluations": int(out.nfev)})
     return rows
@@ -101,7 +102,7 @@ def yoshida_points(system, z0, interval, t, ref, scale):
         tic = time.perf_counter()
         yoshida4(system, z0, *interval, n)
         first = time.perf_counter() - tic
-        (_, z), best, med = _best(lambda: yoshida4(system, z0, *interval, n))
+        (_, z), best, med = timed(lambda: yoshida4(system, z0, *interval, n))
         rows.append({"method": "yoshida4", "steps": n, "seconds": best, "median_seconds": med,
                      "first_call_seconds": first, "error_rel": float(np.abs(z[::per] - ref).max() / scale)})
     return rows
@@ -130,7 +131,7 @@ def diffrax_points(system, z0, interval, t, ref, scale):
             jax.block_until_ready(run(y0, 1e-8, 1e-10))
             compile_s = time.perf_counter() - tic
             for tol in TOLS:
-                z, best, med = _best(lambda: np.asarray(run(y0, tol, tol / 100)))
+                z, best, med = timed(lambda: np.asarray(run(y0, tol, tol / 100)))
                 rows.append({"method": label, "tol": tol, "seconds": best, "median_seconds": med,
                              "compile_seconds": compile_s, "error_rel": float(np.abs(z - ref).max() / scale)})
     return rows

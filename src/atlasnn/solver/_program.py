@@ -176,7 +176,8 @@ def _cached(system, scaling_name, chunk, max_newton, newton_tol, fresh, unroll, 
         buf = (jnp.zeros(chunk, dt), jnp.zeros(chunk, dt), jnp.zeros((chunk, n), dt), jnp.zeros((chunk, n, m), dt),
                jnp.zeros(chunk, dt), jnp.zeros(chunk, dt))
         span = T - state.t
-        h0 = jnp.where(state.h > 0, state.h, _first_length(system, state.z, span))
+        # the first length from the Jacobian only on the first call (later calls carry theirs)
+        h0 = lax.cond(state.h > 0, lambda: state.h, lambda: _first_length(system, state.z, span))
         floor = 1e-12 * jnp.maximum(jnp.abs(T), 1.0)
 
         def going(c):
