@@ -3,7 +3,7 @@ PY ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: quick test reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc bench clean-venv
+.PHONY: quick test reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc solve-runs bench clean-venv
 
 $(BIN)/atlasnn: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -58,6 +58,14 @@ suite: $(BIN)/atlasnn
 
 suite-doc: $(BIN)/atlasnn
 	$(BIN)/python scripts/suite_doc.py runs/suite-hard
+
+# The float64 collocation solver (docs/SOLVER.md) on every hard problem and both long experiments,
+# five seeds each, nothing trained (--profile solve); records and summary into docs/runs/suite-solve/.
+solve-runs: $(BIN)/atlasnn
+	$(BIN)/atlasnn suite hard --profile solve --out runs/suite-solve --no-progress
+	for e in henon-heiles-long oscillator-long; do \
+	  $(BIN)/atlasnn reproduce $$e --profile solve --out runs/suite-solve/$$e/solve --overwrite --no-progress || exit 1; done
+	$(BIN)/python scripts/solve_doc.py runs/suite-solve docs/runs/suite-solve
 
 bench: $(BIN)/atlasnn
 	$(BIN)/pip install -q 'torch==2.13.0'

@@ -1,5 +1,6 @@
-"""What a first `atlasnn.solve` costs in a fresh process: with the compilation cache off (cold) and
-with it warm, Hénon–Heiles [0, 24π] at rtol 1e-10. Each run is its own Python process; it reports
+"""What a first `atlasnn.solve` costs in a fresh process: with the compilation cache off (cold), with
+an empty one (the first run ever: it also exports the program to disk) and with it warm,
+Hénon–Heiles [0, 24π] at rtol 1e-10. Each run is its own Python process; it reports
 the import, the first solve (of which the first call of the compiled program: compilation or cache
 load, tracing, and the march itself), the first evaluation at 2 000 times and a second solve with
 its evaluation (the warm cost).
@@ -14,6 +15,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 CHILD = r"""
@@ -37,9 +39,9 @@ print(json.dumps({"import": t1 - t0, "first_solve": t2 - t1, "first_program_call
 
 
 def run(cache: str) -> dict:
+    """One fresh process with the cache in ``cache`` (a directory, or "off")."""
     env = dict(os.environ)
-    if cache == "off":
-        env["ATLASNN_CACHE_DIR"] = "off"
+    env["ATLASNN_CACHE_DIR"] = cache
     out = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -48,8 +50,11 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="docs/benchmarks/solver_first_run.json")
     args = ap.parse_args(argv)
-    run("on")  # fills the cache (not recorded)
-    rows = {"cold (cache off)": [run("off") for _ in range(2)], "warm cache": [run("on") for _ in range(3)]}
+    with tempfile.TemporaryDirectory() as warm:
+        run(warm)  # fills this cache (not recorded)
+        rows = {"cold (cache off)": [run("off") for _ in range(2)],
+                "first ever (empty cache: compiles, exports and stores)": [run(tempfile.mkdtemp()) for _ in range(2)],
+                "warm cache": [run(warm) for _ in range(3)]}
     for k, v in rows.items():
         for r in v:
             print(k, {a: round(b, 3) for a, b in r.items()})

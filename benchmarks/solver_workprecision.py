@@ -31,7 +31,6 @@ from scipy.integrate import solve_ivp
 
 from atlasnn import solve
 from atlasnn.evaluation import reference_solution, yoshida4
-from atlasnn.solver import Collocation
 
 from benchmarks.common import machine_info
 from benchmarks.solver_suite import HARD, LONG, builtin_problem

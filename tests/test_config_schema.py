@@ -146,7 +146,16 @@ MESSAGES = [
     ('short', lambda d: d.update(system=EXPR | {'hamiltonian': '__import__("os").system("x")'}),
      'system: attribute access \'.system\' is not allowed in an expression (at column 1: \'__import__("os").system\')'),
     ('short', lambda d: d.update(models=[]),
-     "models = []: give at least one model (an empty list needs a short experiment with a [march] table)"),
+     "models = []: give at least one model (an empty list needs a short experiment with a [march] table, "
+     "or a [solve] table)"),
+    ('short', lambda d: d.update(schemes=['solve']),
+     "schemes = ['solve']: solve needs a [solve] table"),
+    ('short', lambda d: d.update(schemes=['leapfrog']),
+     "schemes[0] = 'leapfrog': must be one of ['baseline', 'short', 'transfer', 'march', 'solve']"),
+    ('short', lambda d: d.update(solve={'rtol': 0.0}),
+     'solve.rtol = 0.0: must be >= 1e-15'),
+    ('short', lambda d: d.update(solve={'features': 30, 'points': 20}),
+     'solve.points = 20: must be at least solve.features (30): fewer points cannot determine the output weights'),
     ('short', lambda d: d.update(models='hnn'),
      "models = 'hnn': expected a list drawn from ['atlas_exp', 'atlas_tanh', 'hnn']"),
     ('short', lambda d: d.update(models=['hnn', 'hnn']),
@@ -331,3 +340,12 @@ def test_python_api_accepts_both_names(paper, api):
     m2 = make_model([1.0, 0.0], scaling=api, gamma=gamma, width=4, seed=3)
     t = np.linspace(0.0, 2.0, 7)
     np.testing.assert_array_equal(np.asarray(m1(t)), np.asarray(m2(t)))
+
+
+def test_an_unnamed_expression_system_takes_the_configs_name_in_its_messages():
+    data = {"name": "my-well", "models": ["hnn"], "interval": {"T": 1.0},
+            "system": {"hamiltonian": "p**2/2 + q**4/4", "coordinates": ["q"], "momenta": ["p"]}}
+    with pytest.raises(ConfigError, match="system 'my-well' has no default initial state"):
+        parse_config(data, source="w.toml")
+    data["system"]["z0"] = [1.0, 0.0]
+    assert parse_config(data, source="w.toml").system.build().name == "my-well"

@@ -52,7 +52,7 @@ def test_csv_two_components_in_any_order(tmp_path):
     ("t,x\n1,2\n\n2,abc\n", ["line 4", "column 'x'", "'abc'", "not a number"]),
     ("t\n1\n2\n", ["no observed component"]),
     ("\n\n", ["empty"]),
-    ("t,x\n0,1\n1,nan\n2,inf\n3,1\n", ["row 1", "non-finite", "2 of 4 rows"]),
+    ("t,x\n0,1\n1,nan\n2,inf\n3,1\n", ["line 3", "column 'x'", "'nan' is not finite"]),
     ("t,x\n0,1\n", ["at least 2 rows", "got 1"]),
 ])
 def test_csv_errors_name_the_problem(tmp_path, text, needles):

@@ -81,7 +81,7 @@ def test_a_config_gives_system_z0_interval_and_steps(tmp_path, capsys):
     path.write_text(SEPARABLE, encoding="utf-8")
     status, out, err = integrate([path], capsys)
     assert status == 0, err
-    assert out.startswith(f"custom: z0 = [1.0, 0.0], [1, {2 * math.pi:.4f}], 50 steps")
+    assert out.startswith(f"pend: z0 = [1.0, 0.0], [1, {2 * math.pi:.4f}], 50 steps")  # the config's name, not "custom"
     assert "L2(q)" in out and "yoshida4" in out
     status, _, err = integrate([path, "--system", "henon_heiles"], capsys)
     assert status == 2 and "give one" in err

@@ -25,10 +25,31 @@ def test_every_member_runs_in_both_profiles_and_finished_runs_are_kept(tmp_path,
     members = suite_members("hard")
     assert "fixed" in SUITE_PROFILES and len(members) == 7
     run_suite("hard", tmp_path, log=lambda *a: None)
-    assert [(n, d) for n, _, d in started] == [(m, p) for m in members for p in ("default", "fixed")]
+    assert [(n, d) for n, _, d in started] == [(m, p) for m in members for p in ("default", "fixed", "solve")]
     assert {p for n, p, d in started if d == "fixed"} == {"fixed"}
     # a second call keeps what is complete and resumes what is not
     (tmp_path / members[0] / "fixed" / "meta.json").write_text(json.dumps({"status": "interrupted", "run_id": "r1"}))
     started.clear()
     run_suite("hard", tmp_path, log=lambda *a: None)
     assert started == [] and resumed == [members[0]]
+
+
+def test_profiles_pick_a_subset_and_an_unknown_one_is_refused(tmp_path, monkeypatch):
+    import pytest
+
+    from atlasnn.errors import ConfigError
+
+    started = []
+
+    def fake_run(cfg, run_dir, **kw):
+        started.append((cfg.name, run_dir.name, cfg.schemes))
+        run_dir.mkdir(parents=True)
+        (run_dir / "meta.json").write_text(json.dumps({"status": "complete"}))
+
+    monkeypatch.setattr(_suite, "run_experiment", fake_run)
+    monkeypatch.setattr(_suite, "suite_summary", lambda dirs: {"problems": []})
+    monkeypatch.setattr(_suite, "suite_markdown", lambda summary: "")
+    run_suite("hard", tmp_path, profiles=["solve"], only=["kepler-e09", "toda-3"], log=lambda *a: None)
+    assert started == [("kepler-e09", "solve", ("solve",)), ("toda-3", "solve", ("solve",))]
+    with pytest.raises(ConfigError, match="--profile adaptive: not a profile of the suite"):
+        run_suite("hard", tmp_path, profiles=["adaptive"], log=lambda *a: None)

@@ -103,12 +103,13 @@ class Observations:
         bad_t = ~np.isfinite(t)
         if bad_t.any():
             i = int(np.argmax(bad_t))
-            raise ConfigError(f"{where}: time in row {i} is {float(t[i])!r}, not finite ({int(bad_t.sum())} rows bad)")
+            raise ConfigError(f"{where}: time in row {i} (counting from 0) is {float(t[i])!r}, not finite "
+                              f"({int(bad_t.sum())} rows bad)")
         bad_v = ~np.all(np.isfinite(v), axis=1)
         if bad_v.any():
             i = int(np.argmax(bad_v))
             j = int(np.argmax(~np.isfinite(v[i])))
-            raise ConfigError(f"{where}: row {i} has a non-finite value {names[j]}={float(v[i, j])!r} "
+            raise ConfigError(f"{where}: row {i} (counting from 0) has a non-finite value {names[j]}={float(v[i, j])!r} "
                               f"({int(bad_v.sum())} of {t.shape[0]} rows bad)")
         order = np.argsort(t, kind="stable")
         object.__setattr__(self, "t", _frozen(t[order]))
@@ -220,6 +221,8 @@ def _read_csv(p: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
                 row.append(float(cell))
             except ValueError:
                 raise ConfigError(f"{p}: line {line}, column {name!r}: {cell.strip()!r} is not a number") from None
+            if not math.isfinite(row[-1]):  # named by its line, as every other error of the file
+                raise ConfigError(f"{p}: line {line}, column {name!r}: {cell.strip()!r} is not finite")
         rows.append(row)
     if names is None:
         raise ConfigError(f"{p}: the file is empty (no header row)")

@@ -101,6 +101,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seeds", type=int, default=None, metavar="K", help="seeds 0..K-1 (default: each config's)")
     s.add_argument("--jobs", type=int, default=1, metavar="J", help="independent trainings in J processes")
     s.add_argument("--only", action="append", default=[], metavar="EXPERIMENT", help="run only these members")
+    s.add_argument("--profile", action="append", default=[], metavar="NAME", dest="profiles",
+                   help="run only these profiles (default, fixed, solve: the collocation solver alone)")
     s.add_argument("--quick", action="store_true", help="the configs' quick variants")
     s.add_argument("--out", default=None, metavar="DIR", help="suite directory (default runs/suite-NAME[-quick])")
     s.add_argument("--no-progress", action="store_true", help="no progress bars")

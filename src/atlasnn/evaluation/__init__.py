@@ -53,13 +53,12 @@ from atlasnn.evaluation._quality import (
 from atlasnn.evaluation._record import TABLE_ROLES, MarchSummary, TrainingRecord
 from atlasnn.evaluation._members import reference_members
 from atlasnn.evaluation._vectorised import MemberRun, verlet_members, yoshida4_members
+from atlasnn.evaluation._fit_result import MISFIT_LIMIT, FitResult, distrust, flag_misfit, gauss_newton_covariance
 from atlasnn.evaluation._shooting import (
-    MISFIT_LIMIT,
-    FitResult,
+    check_shooting_inputs,
     fit_shooting,
-    flag_misfit,
-    gauss_newton_covariance,
     predict_fit,
+    shooting_misfit,
     synthetic_observations,
 )
 from atlasnn.evaluation._workprecision import SYMPLECTIC, WorkPoint
@@ -115,6 +114,9 @@ __all__ = [
     "SYMPLECTIC",
     "synthetic_observations",
     "FitResult",
+    "distrust",
+    "shooting_misfit",
+    "check_shooting_inputs",
     "fit_shooting",
     "reference_members",
     "gauss_newton_covariance",

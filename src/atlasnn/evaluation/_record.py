@@ -17,7 +17,7 @@ from typing import Any, Mapping
 __all__ = ["TrainingRecord", "MarchSummary", "TABLE_ROLES"]
 
 #: the roles whose records fill a table column (a transfer source's does not)
-TABLE_ROLES = ("short", "target", "march")
+TABLE_ROLES = ("short", "target", "march", "solve")
 
 
 @dataclass
@@ -36,7 +36,7 @@ class MarchSummary:
 @dataclass
 class TrainingRecord:
     """One training of a run (see the module docstring). ``role`` is ``"short"``, ``"source"``,
-    ``"target"`` or ``"march"``; ``metrics`` maps a metric to its per-state values (and
+    ``"target"``, ``"march"`` or ``"solve"`` (the collocation solver); ``metrics`` maps a metric to its per-state values (and
     ``whole``, ``energy_drift``); ``quality`` is the verdict as JSON. A value an older or partial
     record lacks is None."""
 

@@ -24,7 +24,6 @@ user's unknowns are reported, with standard errors from the full Gauss–Newton 
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 import time
@@ -38,15 +37,12 @@ from scipy.optimize import least_squares
 
 from atlasnn.compile_cache import program_cache
 from atlasnn.errors import AtlasError, ConfigError
+from atlasnn.evaluation._fit_result import FitResult, flag_misfit, gauss_newton_covariance
 from atlasnn.evaluation._integrators import reference_solution
 from atlasnn.observations import Observations, Unknown, check_unknowns
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["synthetic_observations", "FitResult", "fit_shooting", "predict_fit", "gauss_newton_covariance", "COND_LIMIT",
-           "flag_misfit", "MISFIT_LIMIT"]
-
-#: above this condition number of the (column-scaled) Gauss–Newton matrix an unknown is unidentifiable
-COND_LIMIT = 1e12
+__all__ = ["synthetic_observations", "fit_shooting", "predict_fit", "shooting_misfit", "check_shooting_inputs"]
 
 
 # ----------------------------------------------------------------------- synthetic data
@@ -173,52 +169,6 @@ def _solve(system, z_init, theta, t0, times, rtol, atol, S_init=None, dtheta=Non
     return Y[:, :n], S, nfev
 
 
-# --------------------------------------------------------------------------------- result
-@dataclasses.dataclass
-class FitResult:
-    """The outcome of :func:`fit_shooting`.
-
-    ``std`` are Gauss–Newton standard errors at the optimum: sqrt of the diagonal of
-    s²(JᵀJ)⁻¹ with s² = RSS/(n_data − n_unknowns) (``noise_estimate`` is s). An unknown that the
-    data cannot determine (it lies in a direction where the column-scaled JᵀJ has condition
-    number above :data:`COND_LIMIT`) gets std = inf, ``identifiable`` is False and ``notes``
-    names it.
-    """
-
-    names: tuple[str, ...]
-    estimate: np.ndarray
-    std: np.ndarray
-    covariance: np.ndarray
-    noise_estimate: float
-    residual_rms: float
-    wall_time: float
-    n_rhs: int
-    n_solves: int
-    method: str
-    success: bool
-    message: str
-    identifiable: bool
-    notes: list[str] = dataclasses.field(default_factory=list)
-    t0: float = 0.0
-    n_data: int = 0
-    segments: int = 1
-    cond: float = 1.0
-
-    def value(self, name: str) -> float:
-        """The estimate of the unknown ``name``."""
-        if name not in self.names:
-            raise ConfigError(f"the fit has no unknown {name!r}; its unknowns are {list(self.names)}")
-        return float(self.estimate[self.names.index(name)])
-
-    def as_dict(self) -> dict[str, Any]:
-        """A JSON-able summary of every field (non-finite numbers stay floats: ``inf``/``nan``)."""
-        out: dict[str, Any] = {}
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            out[f.name] = v.tolist() if isinstance(v, np.ndarray) else list(v) if isinstance(v, (tuple, list)) else v
-        return out
-
-
 # -------------------------------------------------------------------------------- problem
 class _Problem:
     """Residuals and their Jacobian for single (one segment) or multiple shooting."""
@@ -303,46 +253,6 @@ class _Problem:
         return r, J
 
 
-def gauss_newton_covariance(J: np.ndarray, rss: float, dof: int):
-    """(covariance, cond, indices of unidentifiable columns) from Gauss–Newton at the optimum."""
-    s2 = rss / dof
-    norms = np.linalg.norm(J, axis=0)
-    dead = norms <= 1e-14 * max(float(norms.max()), np.finfo(float).tiny)  # no effect on any residual
-    scale = np.where(dead, 1.0, norms)
-    A = (J / scale).T @ (J / scale)
-    lam, V = np.linalg.eigh(A)
-    top = max(float(lam[-1]), np.finfo(float).tiny)
-    cond = float(top / lam[0]) if lam[0] > 0 else math.inf
-    weak = set(np.flatnonzero(dead).tolist())
-    if cond > COND_LIMIT:
-        for k in np.flatnonzero(lam < top / COND_LIMIT):
-            weak |= set(np.flatnonzero(np.abs(V[:, k]) > 0.1).tolist())
-    inv = np.linalg.pinv(A, rcond=1.0 / COND_LIMIT, hermitian=True)
-    cov = s2 * inv / np.outer(scale, scale)
-    for j in weak:
-        cov[j, :] = cov[:, j] = np.nan
-        cov[j, j] = np.inf
-    return cov, cond, sorted(weak)
-
-
-#: a fit whose residual RMS exceeds this fraction of the data's RMS does not explain the data
-MISFIT_LIMIT = 0.1
-
-
-def flag_misfit(fit: FitResult, observations: Observations) -> FitResult:
-    """Mark a fit whose residual RMS exceeds MISFIT_LIMIT × the data's RMS (``success`` False, a
-    note): its σ are then the curvature of a wrong valley (a Toda pair's c from a guess of 0.5:
-    0.336 ± 0.014, truth 0.8, residual 75 % of the data's RMS; from 0.7: 0.8004, residual 1 %)."""
-    scale = float(np.sqrt(np.mean(observations.values ** 2)))
-    ratio = fit.residual_rms / scale if scale > 0 else 0.0
-    if ratio > MISFIT_LIMIT:
-        fit.success = False
-        fit.notes.append(f"the fit does not explain the data: residual RMS {fit.residual_rms:.3g} is {ratio:.0%} of "
-                         "the data's RMS (a local minimum from this guess, or the wrong model): try other guesses, "
-                         "segments > 1 (multiple shooting) or a shorter record")
-    return fit
-
-
 # ------------------------------------------------------------------------------------ fit
 def fit_shooting(system: HamiltonianSystem, observations: Observations, unknowns: Sequence[Unknown],
                  z0: Any = None, *, t0: float = 0.0, segments: int = 1, rtol: float = 1e-10,
@@ -374,10 +284,7 @@ def fit_shooting(system: HamiltonianSystem, observations: Observations, unknowns
     start = time.perf_counter()
     _check_options(system, observations, t0, rtol, atol, continuity_weight, segments, max_nfev)
     t0 = float(t0)
-    observations.indices(system.state_names)
-    observations.check_interval(t0, float(observations.t[-1]))
-    unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values)
-    _check_segments(observations, int(segments), t0)
+    unknowns = check_shooting_inputs(system, observations, unknowns, t0=t0, segments=segments)
     prob = _Problem(system, observations, unknowns, system.initial_state(z0).copy(), t0, int(segments),
                     float(rtol), float(atol), float(continuity_weight))
     try:
@@ -399,6 +306,32 @@ def fit_shooting(system: HamiltonianSystem, observations: Observations, unknowns
         success=bool(res.success), message=" ".join(str(res.message).split()), identifiable=not weak,
         notes=notes, t0=t0, n_data=n_data, segments=int(segments), cond=cond,
     ), observations)
+
+
+def check_shooting_inputs(system: HamiltonianSystem, observations: Observations, unknowns: Sequence[Unknown], *,
+                          t0: float = 0.0, segments: int = 1) -> tuple[Unknown, ...]:
+    """Refuse, as one line, what no shooting fit of these inputs could run with: observed names or
+    unknowns the system lacks, observations before t0, more unknowns than data, more segments than
+    the observation times allow. Returns the unknowns as a tuple."""
+    observations.indices(system.state_names)
+    observations.check_interval(float(t0), float(observations.t[-1]))
+    unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values)
+    _check_segments(observations, int(segments), float(t0))
+    return unknowns
+
+
+def shooting_misfit(system: HamiltonianSystem, observations: Observations, unknowns: Sequence[Unknown],
+                    values: Any, z0: Any = None, *, t0: float = 0.0, rtol: float = 1e-10, atol: float = 1e-10) -> float:
+    """Σ (model(t_i) − obs_i)² with the unknowns set to ``values`` (one DOP853 solve from t0, as
+    single shooting sees it); inf when the orbit cannot be integrated to the last observation."""
+    unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values)
+    prob = _Problem(system, observations, unknowns, system.initial_state(z0).copy(), float(t0), 1, rtol, atol, 1.0)
+    try:
+        Z = prob.trajectory(np.asarray(values, np.float64), observations.t)
+    except _SolveFailed:
+        return math.inf
+    r = Z[:, prob.idx] - observations.values
+    return float(r.ravel() @ r.ravel()) if np.all(np.isfinite(r)) else math.inf
 
 
 def _check_options(system, observations, t0, rtol, atol, continuity_weight, segments, max_nfev) -> None:

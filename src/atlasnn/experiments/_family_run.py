@@ -19,11 +19,18 @@ from typing import Any, Callable
 import numpy as np
 
 from atlasnn.checkpoint import save_bundle
-from atlasnn.evaluation import fit_shooting, predict_fit, reference_members, synthetic_observations
+from atlasnn.errors import AtlasError
+from atlasnn.evaluation import (
+    check_shooting_inputs,
+    fit_shooting,
+    predict_fit,
+    reference_members,
+    synthetic_observations,
+)
 from atlasnn.experiments._store import check_run_dir
 from atlasnn.experiments.config._family import FamilyConfig
 from atlasnn.fileio import write_json, write_text
-from atlasnn.inverse import bundle_box_for, fit_joint, fit_with_bundle
+from atlasnn.inverse import auto_starts, bundle_box_for, fit_joint, fit_multistart, fit_with_bundle, judge_fit
 from atlasnn.observations import Observations, load_observations
 from atlasnn.report import plot_bundle_errors, plot_bundle_map, plot_estimates, plot_fit_trajectory
 from atlasnn.training import BundleTrainConfig, train_bundle
@@ -40,10 +47,13 @@ def run_family(cfg: FamilyConfig, out: str | Path, *, overwrite: bool = False, l
     """Run a bundle or inverse experiment into ``out``; returns the results dict."""
     out = Path(out)
     check_run_dir(out, overwrite)
+    system = cfg.system.build()
+    if cfg.kind == "inverse":  # bad input is refused before anything is written or run
+        obs, t0 = _observations(cfg, system, cfg.seeds[0])
+        check_shooting_inputs(system, obs, cfg.unknowns, t0=t0, segments=cfg.fit.segments)
     out.mkdir(parents=True, exist_ok=True)
     if config_text is not None:
         write_text(out / "config.toml", config_text)
-    system = cfg.system.build()
     runner = _run_bundle if cfg.kind == "bundle" else _run_inverse
     results = runner(cfg, system, out, log)
     results.update({"kind": cfg.kind, "name": cfg.name, "description": cfg.description, "quick": cfg.quick,
@@ -151,61 +161,125 @@ def _truth(cfg: FamilyConfig, system) -> dict[str, float] | None:
 def _fit_once(method: str, cfg: FamilyConfig, system, obs, t0: float, seed: int):
     fit = cfg.fit
     if method == "shooting":
-        return fit_shooting(system, obs, cfg.unknowns, t0=t0, segments=fit.segments), 0.0
+        if fit.starts == 1:
+            return judge_fit(fit_shooting(system, obs, cfg.unknowns, t0=t0, segments=fit.segments), cfg.unknowns), 0.0
+        return fit_multistart(system, obs, cfg.unknowns, t0=t0, segments=fit.segments, starts=fit.starts,
+                              seed=seed), 0.0
     if method == "joint":
-        return fit_joint(system, obs, cfg.unknowns, t0=t0, config=fit.joint, seed=seed), 0.0
+        return judge_fit(fit_joint(system, obs, cfg.unknowns, t0=t0, config=fit.joint, seed=seed), cfg.unknowns), 0.0
     box = bundle_box_for(system, cfg.unknowns, None, float(obs.t[-1]), t0)
     trained = train_bundle(system, box, BundleTrainConfig(windows=fit.bundle_windows, epochs=fit.bundle_epochs,
                                                           lm_steps=fit.bundle_lm_steps,
                                                           lm_points=fit.bundle_lm_points),
                            width=fit.bundle_width, seed=seed)
-    return fit_with_bundle(trained.solution, obs, cfg.unknowns), trained.train_time + trained.compile_time
+    result = judge_fit(fit_with_bundle(trained.solution, obs, cfg.unknowns), cfg.unknowns)
+    return result, trained.train_time + trained.compile_time
+
+
+def _record(result, method: str, seed: int, training: float, truth: dict | None) -> dict[str, Any]:
+    rec = {**result.as_dict(), "fit_method": result.method, "seed": seed, "method": method,
+           "training_seconds": training, "total_seconds": result.wall_time + training}
+    if truth is not None:
+        err = np.asarray([result.value(n) - truth[n] for n in result.names])
+        sigma = np.where(np.isfinite(result.std), result.std, np.inf)
+        rec["error"] = err.tolist()
+        rec["rel_error"] = (err / np.maximum(np.abs([truth[n] for n in result.names]), 1e-300)).tolist()
+        rec["covered_2sigma"] = bool(np.all(np.abs(err) <= 2 * sigma))
+        rec["confident_wrong"] = bool(result.trusted and np.any(np.abs(err) > 4 * sigma))
+    return rec
+
+
+def _fit_line(seed: int, method: str, result, rec: dict) -> str:
+    line = f"  seed {seed} {method}: " + ", ".join(f"{n} = {v:.6g} ± {s:.2g}" for n, v, s in
+                                                   zip(result.names, result.estimate, result.std))
+    line += f" in {rec['total_seconds']:.2f} s"
+    if "error" in rec:
+        line += f" (error {', '.join(f'{e:.2g}' for e in rec['error'])})"
+    return line + ("" if result.trusted else f" — UNTRUSTED: {result.notes[-1]}")
+
+
+def _fit_seed(cfg: FamilyConfig, system, obs, t0: float, seed: int, truth, log) -> tuple[list[dict], dict]:
+    """Every method on one seed's data: records (a method that fails is a record saying so, and the
+    others go on) and the fits; the network fits are cross-checked against the shooting's best."""
+    fits, records = {}, []
+    starts = auto_starts(len(cfg.unknowns)) if cfg.fit.starts == "auto" else cfg.fit.starts
+    what = {"shooting": "shooting" + ("" if starts == 1 else f" from {starts} starts over the bounds"),
+            "joint": f"joint network, {cfg.fit.joint.epochs} Adam epochs + {cfg.fit.joint.lm_steps} LM steps",
+            "bundle": f"bundle training, {cfg.fit.bundle_epochs} epochs, then least squares"}
+    for method in cfg.fit.methods:
+        log(f"  seed {seed} {method}: fitting ({what[method]})…")
+        try:
+            fits[method] = _fit_once(method, cfg, system, obs, t0, seed)
+        except AtlasError as exc:
+            records.append({"seed": seed, "method": method, "failed": str(exc), "trusted": False,
+                            "names": [u.name for u in cfg.unknowns]})
+            log(f"  seed {seed} {method}: FAILED — {exc}")
+    best = fits.get("shooting", (None,))[0]
+    for method, (result, training) in fits.items():
+        if best is not None and method != "shooting" and best.trusted:
+            judge_fit(result, cfg.unknowns, system=system, observations=obs, better=best)
+        rec = _record(result, method, seed, training, truth)
+        records.append(rec)
+        log(_fit_line(seed, method, result, rec))
+    return records, {m: r for m, (r, _) in fits.items()}
 
 
 def _run_inverse(cfg: FamilyConfig, system, out: Path, log) -> dict[str, Any]:
     truth = _truth(cfg, system)
-    records, seeds, curves = [], {}, {}
+    records, seeds, curves, notes = [], {}, {}, []
     first_obs = None
     for seed in cfg.seeds:
         obs, t0 = _observations(cfg, system, seed)
         first_obs = first_obs or (obs, t0)
         seeds[str(seed)] = {"observations": obs.describe()}
-        for method in cfg.fit.methods:
-            result, training = _fit_once(method, cfg, system, obs, t0, seed)
-            rec = {**result.as_dict(), "fit_method": result.method, "seed": seed, "method": method,
-                   "training_seconds": training, "total_seconds": result.wall_time + training}
-            if truth is not None:
-                err = np.asarray([result.value(n) - truth[n] for n in result.names])
-                rec["error"] = err.tolist()
-                rec["rel_error"] = (err / np.maximum(np.abs([truth[n] for n in result.names]), 1e-300)).tolist()
-                rec["covered_2sigma"] = bool(np.all(np.abs(err) <= 2 * np.asarray(result.std)))
-            records.append(rec)
-            if seed == cfg.seeds[0]:
-                curves[method] = result
-            log(f"  seed {seed} {method}: " + ", ".join(f"{n} = {v:.6g} ± {s:.2g}" for n, v, s in
-                                                        zip(result.names, result.estimate, result.std))
-                + f" in {rec['total_seconds']:.2f} s" + ("" if truth is None else
-                                                         f" (error {', '.join(f'{e:.2g}' for e in rec['error'])})"))
-    figs = []
+        recs, fits = _fit_seed(cfg, system, obs, t0, seed, truth, log)
+        records += recs
+        if seed == cfg.seeds[0]:
+            curves = fits
+    figs = _inverse_figures(cfg, system, out, records, truth, first_obs, curves, notes)
+    for note in notes:
+        log(f"  note: {note}")
+    done = [r for r in records if "failed" not in r]
+    return {"truth": truth, "unknowns": [u.__dict__ for u in cfg.unknowns], "records": records, "seeds": seeds,
+            "methods": list(cfg.fit.methods), "figures": [str(p.relative_to(out)) for p in figs], "notes": notes,
+            "overall": _inverse_overall(done, list(cfg.fit.methods))}
+
+
+def _inverse_figures(cfg, system, out: Path, records, truth, first_obs, curves, notes: list[str]) -> list[Path]:
+    """The estimates per unknown and the first seed's fitted trajectories; a figure that cannot be
+    drawn (e.g. an orbit that cannot be integrated at a wrong estimate) is a note, not a failure."""
+    figs: list[Path] = []
+    done = [r for r in records if "failed" not in r]
     for j, u in enumerate(cfg.unknowns):
-        rows = [{"seed": r["seed"], "method": r["method"], "estimate": r["estimate"][j], "std": r["std"][j]}
-                for r in records]
-        figs += plot_estimates(rows, u.name, None if truth is None else truth[u.name],
-                               out / "figures" / f"estimates_{u.name.replace('.', '_')}")
+        rows = [{"seed": r["seed"], "method": r["method"], "estimate": r["estimate"][j], "std": r["std"][j],
+                 "trusted": r.get("trusted", True)} for r in done]
+        try:
+            figs += plot_estimates(rows, u.name, None if truth is None else truth[u.name],
+                                   out / "figures" / f"estimates_{u.name.replace('.', '_')}")
+        except Exception as exc:  # noqa: BLE001 - the fits are kept whatever a figure does
+            notes.append(f"figure estimates_{u.name} not drawn: {exc}")
     obs, t0 = first_obs
     t = np.linspace(t0, float(obs.t[-1]), 400)
     cols = obs.indices(system.state_names)
-    traj = {m: predict_fit(system, r, None, t)[:, cols] for m, r in curves.items()}
-    figs += plot_fit_trajectory(obs.t, obs.values, obs.names, t, traj, out / "figures" / "fit_trajectory")
-    return {"truth": truth, "unknowns": [u.__dict__ for u in cfg.unknowns], "records": records, "seeds": seeds,
-            "methods": list(cfg.fit.methods), "figures": [str(p.relative_to(out)) for p in figs],
-            "overall": _inverse_overall(records, list(cfg.fit.methods))}
+    traj = {}
+    for m, r in curves.items():
+        try:
+            traj[m] = predict_fit(system, r, None, t)[:, cols]
+        except AtlasError as exc:
+            notes.append(f"the {m} fit's trajectory is not drawn: {exc}")
+    try:
+        figs += plot_fit_trajectory(obs.t, obs.values, obs.names, t, traj, out / "figures" / "fit_trajectory")
+    except Exception as exc:  # noqa: BLE001
+        notes.append(f"figure fit_trajectory not drawn: {exc}")
+    return figs
 
 
 def _inverse_overall(records, methods) -> dict[str, Any]:
     out = {}
     for m in methods:
         rs = [r for r in records if r["method"] == m]
+        if not rs:  # the method failed on every seed: its records say why
+            continue
         est = np.asarray([r["estimate"] for r in rs], float)
         row = {"seconds_median": float(np.median([r["total_seconds"] for r in rs])),
                "seconds_max": float(max(r["total_seconds"] for r in rs)),
@@ -227,7 +301,7 @@ def rewrite_family_summary(out: str | Path) -> Path:
     out = Path(out)
     results = json.loads((out / "results.json").read_text())
     if results.get("kind") == "inverse":
-        results["overall"] = _inverse_overall(results["records"], results["methods"])
+        results["overall"] = _inverse_overall([r for r in results["records"] if "failed" not in r], results["methods"])
         write_json(out / "results.json", results)
     write_text(out / "summary.md", _summary(results))
     return out / "summary.md"
@@ -250,13 +324,24 @@ def _summary(results: dict[str, Any]) -> str:
                   "at 1e-12)."]
     else:
         names = [u["name"] for u in results["unknowns"]]
-        head = "| seed | method | " + " | ".join(f"{n} ± σ" for n in names) + " | rel. error | within 2σ | s |"
-        lines += [head, "|" + "---|" * (5 + len(names))]
+        head = "| seed | method | " + " | ".join(f"{n} ± σ" for n in names) + " | rel. error | within 2σ | trusted | s |"
+        lines += [head, "|" + "---|" * (6 + len(names))]
         for r in results["records"]:
+            if "failed" in r:
+                lines.append(f"| {r['seed']} | {r['method']} | " + " | ".join("—" for _ in names)
+                             + " | — | — | **failed** | — |")
+                continue
             est = " | ".join(f"{e:.6g} ± {s:.2g}" for e, s in zip(r["estimate"], r["std"]))
             rel = ", ".join(f"{abs(e):.2g}" for e in r.get("rel_error", [math.nan]))
+            trusted = "yes" if r.get("trusted", True) else "**no**"
             lines.append(f"| {r['seed']} | {r['method']} | {est} | {rel} | {r.get('covered_2sigma', 'n/a')} | "
-                         f"{r['total_seconds']:.2f} |")
+                         f"{trusted} | {r['total_seconds']:.2f} |")
+        warned = [r for r in results["records"] if "failed" in r or not r.get("trusted", True)]
+        if warned:
+            lines += ["", "Not to be trusted (the estimate or its σ), and why:", ""]
+            for r in warned:
+                why = r["failed"] if "failed" in r else "; ".join(r.get("notes") or ["(no reason recorded)"])
+                lines.append(f"- seed {r['seed']} {r['method']}: {why}")
         lines += ["", "| method | mean estimate | sd over seeds | median σ (Gauss–Newton) | within 2σ | median s |",
                   "|---|---|---|---|---|---|"]
         for m, o in results["overall"].items():
@@ -264,4 +349,6 @@ def _summary(results: dict[str, Any]) -> str:
             lines.append(f"| {m} | {', '.join(f'{x:.6g}' for x in o['estimate_mean'])} | "
                          f"{fmt(o['estimate_sd_over_seeds'])} | {fmt(o['std_median'])} | "
                          f"{o.get('covered_2sigma', 'n/a')}/{o.get('n', '?')} | {o['seconds_median']:.2f} |")
+    if results.get("notes"):
+        lines += ["", "Notes:", ""] + [f"- {n}" for n in results["notes"]]
     return "\n".join(lines) + "\n"

@@ -31,7 +31,7 @@ import jax
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.experiments._schemes import SCHEMES
+from atlasnn.experiments._schemes import SCHEMES, active_schemes
 from atlasnn.experiments._tasks import Task
 from atlasnn.experiments.config import ExperimentConfig, Stage
 from atlasnn.limits import check_integration_memory
@@ -67,7 +67,7 @@ def _makespan(size: int, n_seeds: int, columns: int, jobs: int) -> float:
 
 def columns_of(cfg: ExperimentConfig) -> list[tuple[str, str]]:
     """(scheme, model) of every trained column, in table order."""
-    return [(s.name, m) for s in SCHEMES.values() for m in s.models(cfg)]
+    return [(s.name, m) for s in active_schemes(cfg) for m in s.models(cfg)]
 
 
 def epoch_work(cfg: ExperimentConfig, role: str) -> float:

@@ -155,7 +155,11 @@ def _as_record(record: Mapping | TrainingRecord) -> TrainingRecord:
 
 def _log_done(log, i: int, n: int, output: dict, cfg: ExperimentConfig | None = None) -> None:
     for r in map(TrainingRecord.from_dict, output["records"]):
-        if r.role != "source":
+        if r.role == "solve":
+            log(f"  [{i}/{n}] {r.label} seed {r.seed}: {r.march.n_windows} windows ({r.extra.get('rejected', 0)} "
+                f"rejected), worst window error {r.returned_loss:.2f} of its tolerance, {r.wall_time:.2f} s "
+                f"(compilation or cache load included)" + (f", {r.status}" if r.status else ""))
+        elif r.role != "source":
             log(f"  [{i}/{n}] {r.label} seed {r.seed}: {r.epochs} epochs ({r.stop_reason}), "
                 f"loss {r.returned_loss:.3e}, {r.wall_time:.1f} s" + (f", {r.status}" if r.status else ""))
         for line in (divergence_advice(cfg, r) if cfg is not None else None, quality_warning(r)):

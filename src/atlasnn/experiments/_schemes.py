@@ -3,7 +3,8 @@
 A scheme turns the models of a config into table columns and trains one task of them (a batch of
 seeds): ``short`` (every model on the experiment's one interval), ``baseline`` (an HNN from scratch
 on a transfer experiment's target), ``transfer`` (source → target, γ frozen or thawed) and
-``march`` (time-marching on the experiment's interval). Each is one :class:`Scheme` subclass and
+``march`` (time-marching on the experiment's interval) and ``solve`` (the float64 collocation
+solver, nothing trained). Each is one :class:`Scheme` subclass and
 one :data:`SCHEMES` entry; the planner, the memory check, the task runner and the labels all go
 through this table instead of testing scheme names.
 
@@ -18,6 +19,7 @@ import json
 from typing import Any, ClassVar, final
 
 import jax
+import numpy as np
 
 from atlasnn.checkpoint import load_checkpoint, load_state
 from atlasnn.errors import CheckpointError
@@ -27,7 +29,7 @@ from atlasnn.limits import check_training_memory
 from atlasnn.nn import make_model, model_kind
 from atlasnn.training import TrainState, march, march_batch, train_batch, transfer_batch
 
-__all__ = ["Scheme", "SCHEMES", "table_columns", "baseline_column", "column_labels", "column_label"]
+__all__ = ["Scheme", "SCHEMES", "active_schemes", "table_columns", "baseline_column", "column_labels", "column_label"]
 
 
 def _hook(event: str, task: Any, column: str, state: Any) -> None:
@@ -64,6 +66,10 @@ class Scheme(abc.ABC):
     @abc.abstractmethod
     def column(self, model: str) -> str:
         """The table column of ``model`` trained by this scheme."""
+
+    def label(self, model: str) -> str:
+        """The display label of ``model``'s column: "ATLAS-NN (exp, time-marching)"."""
+        return model_kind(model).label_with(self.word)
 
     @abc.abstractmethod
     def stages(self, cfg) -> list[tuple[str, Any]]:
@@ -298,26 +304,70 @@ class March(Scheme):
             run.finish_march(sol, scheme, st, seed)
 
 
-#: name -> scheme, in table order (a transfer run: baseline, transfers, marches).
-SCHEMES: dict[str, Scheme] = {s.name: s for s in (Baseline(), Short(), Transfer(), March())}
+@final
+class Solve(Scheme):
+    """The float64 collocation solver (:func:`atlasnn.solver.solve_batch`): nothing trained; the
+    task's seeds (each its own draw of random features) marched by one compiled program."""
+
+    name, word, record_role = "solve", "", "solve"
+    COLUMN: ClassVar[str] = "collocation"
+
+    def models(self, cfg):
+        return [self.COLUMN] if cfg.solve is not None else []
+
+    def column(self, model):
+        return model
+
+    def label(self, model):
+        return "Collocation (float64)"
+
+    def stages(self, cfg):
+        return [("solve", cfg.eval_stage)]
+
+    def points(self, cfg):
+        return []
+
+    def epoch_work(self, cfg) -> float:
+        return 0.0  # no epochs: a batch of seeds is one small program
+
+    def check_memory(self, cfg, n_seeds, state_dim):
+        return None  # a window's system is 2d·M unknowns: far below any limit
+
+    def train(self, run):
+        settings, st, seeds = run.cfg.solve, run.cfg.eval_stage, list(run.task.seeds)
+        sols = settings.solver.solve_batch(run.system, np.repeat(np.asarray(run.z0)[None], len(seeds), 0), st.t0, st.T,
+                                           rtol=settings.rtol, atol=settings.atol, seeds=seeds)
+        check_interrupt()
+        for seed, sol in zip(seeds, sols):
+            run.finish_solve(sol, st, seed)
+
+
+#: name -> scheme, in table order (a transfer run: baseline, transfers, marches, the solver).
+SCHEMES: dict[str, Scheme] = {s.name: s for s in (Baseline(), Short(), Transfer(), March(), Solve())}
+
+
+def active_schemes(cfg) -> list[Scheme]:
+    """The schemes ``cfg`` runs, in table order (its ``schemes`` key, default all)."""
+    chosen = getattr(cfg, "schemes", None)
+    return [s for s in SCHEMES.values() if chosen is None or s.name in chosen]
 
 
 def column_label(model: str, scheme: str) -> str:
     """The display label of ``model`` trained by ``scheme``: "ATLAS-NN (exp, time-marching)"."""
-    return model_kind(model).label_with(SCHEMES[scheme].word)
+    return SCHEMES[scheme].label(model)
 
 
 def table_columns(cfg) -> list[str]:
     """Table columns: SE, then every scheme's models (transfer: baseline HNN, the transferred
-    models, the marched ones)."""
-    return ["se"] + [s.column(m) for s in SCHEMES.values() for m in s.models(cfg)]
+    models, the marched ones, the solver)."""
+    return ["se"] + [s.column(m) for s in active_schemes(cfg) for m in s.models(cfg)]
 
 
 def column_labels(cfg) -> dict[str, str]:
     """column -> label of every table column of ``cfg``."""
     out = {"se": "SE"}
-    for s in SCHEMES.values():
-        out.update({s.column(m): column_label(m, s.name) for m in s.models(cfg)})
+    for s in active_schemes(cfg):
+        out.update({s.column(m): s.label(m) for m in s.models(cfg)})
     return out
 
 

@@ -3,7 +3,8 @@
 The experiments whose config names the suite (``suite = "hard"``) are run one after the other,
 each in its default profile and in every profile listed in :data:`SUITE_PROFILES` that it has
 (the hard-problem suite: direct training with adaptive time-marching, then ``fixed``: time-marching
-on fixed windows). Each run gets its own directory under ``out/EXPERIMENT/PROFILE``; a finished
+on fixed windows, and ``solve``: the float64 collocation solver, nothing trained); ``profiles``
+runs a subset of them. Each run gets its own directory under ``out/EXPERIMENT/PROFILE``; a finished
 one is kept, an interrupted one resumed, so the command can be stopped and run again. At the end
 ``suite.json`` and ``suite.md`` summarise every problem and scheme (:mod:`atlasnn.report`).
 """
@@ -23,7 +24,7 @@ from atlasnn.report import suite_markdown, suite_summary
 __all__ = ["SUITE_PROFILES", "suite_members", "run_suite"]
 
 #: the profiles a suite experiment is run in besides its default one, when it has them
-SUITE_PROFILES = ("fixed",)
+SUITE_PROFILES = ("fixed", "solve")
 
 
 def suite_members(name: str) -> list[str]:
@@ -36,10 +37,15 @@ def suite_members(name: str) -> list[str]:
 
 
 def run_suite(name: str, out: str | Path | None = None, *, seeds: tuple[int, ...] | None = None, jobs: int = 1,
-              quick: bool = False, only: list[str] | None = None, progress: bool = False,
-              log: Callable[[str], None] = print) -> Path:
+              quick: bool = False, only: list[str] | None = None, profiles: list[str] | None = None,
+              progress: bool = False, log: Callable[[str], None] = print) -> Path:
     """Run (or continue) every experiment of suite ``name`` in every profile; returns the directory
-    holding suite.json and suite.md. ``only``: a subset of the members."""
+    holding suite.json and suite.md. ``only``: a subset of the members; ``profiles``: of the
+    profiles ("default" for the file as written)."""
+    known = ("default", *SUITE_PROFILES)
+    for p in profiles or ():
+        if p not in known:
+            raise ConfigError(f"--profile {p}: not a profile of the suite; choose from {list(known)}")
     members = suite_members(name)
     if only:
         unknown = sorted(set(only) - set(members))
@@ -51,8 +57,8 @@ def run_suite(name: str, out: str | Path | None = None, *, seeds: tuple[int, ...
     for exp in members:
         path = builtin_config_path(exp)
         listed = parse_toml(path.read_text(encoding="utf-8"), str(path)).get("profiles") or {}
-        profiles = [None] + [p for p in SUITE_PROFILES if p in listed]
-        for profile in profiles:
+        chosen = [None] + [p for p in SUITE_PROFILES if p in listed]
+        for profile in [p for p in chosen if not profiles or (p or "default") in profiles]:
             cfg = load_config(path, quick=quick, profile=profile)
             run_dir = out / exp / (profile or "default")
             dirs.append(run_dir)

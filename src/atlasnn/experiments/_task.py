@@ -144,6 +144,36 @@ def march_verdict(cfg: ExperimentConfig, sol, rec: TrainingRecord, energy: np.nd
                           "march.window, or raise march.train.epochs").as_dict()
 
 
+def solve_record(training: Task, sol, metrics_: dict, ckpt: str, stage: Stage) -> TrainingRecord:
+    """The record of a collocation solve: no epochs; its "loss" is the worst window's local error
+    estimate over the tolerance (≤ 1 for every window kept), its wall time its share of the program
+    that marched the task's seeds (the first call's compilation or cache load included)."""
+    info, ratios = sol.info, [float(r.loss) for r in sol.windows]
+    lengths = np.diff(sol.edges)
+    return TrainingRecord(
+        column=training.column, label=column_label(training.model, training.role), model=training.model,
+        seed=training.seed, role="solve", interval=(stage.t0, stage.T), metrics=metrics_, gamma={}, epochs=0,
+        stop_reason="tolerance", returned_loss=max(ratios), checkpoint=ckpt, tolerance_met=max(ratios) <= 1.0,
+        # one program marches the task's seeds: each is charged its share; the first call's compilation is in it
+        wall_time=float(info["solve_time"]) / int(info.get("batch", 1)), compile_time=None,
+        batch_size=int(info.get("batch", 1)), final_loss=ratios[-1], best_loss=min(ratios), lr=None, epochs_budget=0,
+        march=MarchSummary(n_windows=len(ratios), window=float(lengths.max()), window_losses=ratios,
+                           window_epochs=[0] * len(ratios), edges=[float(e) for e in sol.edges]),
+        extra={"solver": info["settings"], "rtol": info["rtol"], "atol": info["atol"], "rejected": info["rejected"],
+               "newton_iterations": info["newton_iterations"],
+               "first_call_time": info["first_call_time"], "batch_time": info["solve_time"]},
+    )
+
+
+def solve_verdict(cfg: ExperimentConfig, rec: TrainingRecord, energy: np.ndarray, e0: float, stage: Stage) -> dict:
+    """The quality verdict of a collocation solve: its error estimate and energy (no loss curve:
+    the worst window's error over its tolerance stands for one)."""
+    return judge_training([rec.returned_loss], stop_reason="tolerance", energy=energy, energy0=e0, gamma={},
+                          returned_loss=rec.returned_loss, interval=(stage.t0, stage.T), key="solve",
+                          estimate=rec.estimate, thresholds=cfg.quality,
+                          estimate_advice="lower solve.rtol and solve.atol, or raise solve.features").as_dict()
+
+
 class TaskRun:
     """The trainings of one task while they run: system, grids, unsaved states, outputs."""
 
@@ -315,12 +345,27 @@ class TaskRun:
         save_piecewise(self.run_dir / rel, sol, train_config=dataclasses.asdict(scheme),
                        extra={"experiment": self.cfg.name, "column": column, "model": self.task.model,
                               "role": "march", "seed": seed, "interval": [stage.t0, stage.T]})
+        self._measured(sol, column, seed, lambda per, energy, est: march_record(self.task.one(seed), sol, scheme, per,
+                                                                               rel, stage),
+                       lambda rec, energy: march_verdict(self.cfg, sol, rec, energy, self.e0, stage, scheme.train.epochs))
+
+    def finish_solve(self, sol, stage: Stage, seed: int) -> None:
+        column = self.task.column
+        rel = f"models/{column}_seed{seed}.npz"
+        save_piecewise(self.run_dir / rel, sol, extra={"experiment": self.cfg.name, "column": column,
+                                                       "model": self.task.model, "role": "solve", "seed": seed,
+                                                       "interval": [stage.t0, stage.T]})
+        self._measured(sol, column, seed, lambda per, energy, est: solve_record(self.task.one(seed), sol, per, rel, stage),
+                       lambda rec, energy: solve_verdict(self.cfg, rec, energy, self.e0, stage))
+
+    def _measured(self, sol, column: str, seed: int, make_record, judge) -> None:
+        """Measure a piecewise solution on the evaluation grid, estimate its error, keep its record."""
         per, z, energy = measure_solution(sol, self.grids["eval"], self.grids["eval_ref"], self.names, self.e0)
         est = sol.estimate(z0=self.z0)
         per["estimate_relative"] = est.relative_max
-        rec = march_record(self.task.one(seed), sol, scheme, per, rel, stage)
+        rec = make_record(per, energy, est)
         rec.estimate = est.summary()
-        rec.quality = march_verdict(self.cfg, sol, rec, energy, self.e0, stage, scheme.train.epochs)
+        rec.quality = judge(rec, energy)
         self.out[seed]["records"].append(rec.as_dict())
         self.out[seed]["arrays"][f"pred_{column}_seed{seed}"] = z
         self.out[seed]["arrays"][f"energy_{column}_seed{seed}"] = energy

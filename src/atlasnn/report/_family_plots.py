@@ -59,7 +59,9 @@ def plot_bundle_errors(t: np.ndarray, per_seed: Mapping[int, np.ndarray], stem: 
 
 def plot_estimates(records: Sequence[Mapping[str, Any]], unknown: str, truth: float | None,
                    stem: str | Path) -> list[Path]:
-    """``records``: {"seed", "method", "estimate", "std"} for one unknown; estimate ± 2σ."""
+    """``records``: {"seed", "method", "estimate", "std"[, "trusted"]} for one unknown; estimate
+    ± 2σ; an untrusted fit (``trusted`` False) is drawn hollow with a red ring and the legend
+    says so."""
     fig = _new_figure((6.0, 3.6))
     ax = fig.add_subplot()
     methods = list(dict.fromkeys(r["method"] for r in records))
@@ -70,8 +72,13 @@ def plot_estimates(records: Sequence[Mapping[str, Any]], unknown: str, truth: fl
         x = np.asarray([seeds.index(r["seed"]) for r in rs]) + (j - (len(methods) - 1) / 2) * width
         y = np.asarray([r["estimate"] for r in rs], float)
         s = np.asarray([r["std"] for r in rs], float)
-        ax.errorbar(x, y, yerr=2 * np.where(np.isfinite(s), s, 0), fmt="o", ms=4, capsize=3,
-                    color=METHOD_COLORS.get(m, f"C{j}"), label=m)
+        ok = np.asarray([r.get("trusted", True) for r in rs], bool)
+        color = METHOD_COLORS.get(m, f"C{j}")
+        ax.errorbar(x, y, yerr=2 * np.where(np.isfinite(s), s, 0), fmt="none", capsize=3, color=color)
+        ax.plot(x[ok], y[ok], "o", ms=4, color=color, label=m)
+        if not ok.all():
+            ax.plot(x[~ok], y[~ok], "o", ms=7, mfc="none", mec="red", mew=1.5,
+                    label=f"{m}: untrusted (summary.md says why)")
     if truth is not None:
         ax.axhline(truth, color="0.4", lw=0.8, ls=":", label="truth")
     ax.set_xticks(range(len(seeds)), [f"seed {s}" for s in seeds])

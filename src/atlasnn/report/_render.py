@@ -52,7 +52,10 @@ def _histories(run_dir: Path, results: dict) -> dict[str, dict]:
         if r.march is not None:  # one file of all windows; its loss: the windows' one after the other
             sol = load_piecewise(path, expect=expect, owner=owner)
             extra, gam = sol.info.get("extra") or {}, {}
-            loss = np.concatenate([np.asarray(w.history) for w in sol.windows if w.history is not None])
+            curves = [np.asarray(w.history) for w in sol.windows if w.history is not None]
+            if not curves:  # solved, not trained (the collocation solver): no loss curve
+                continue
+            loss = np.concatenate(curves)
         else:
             ck = load_checkpoint(path)
             ck.require(expect, owner=owner)
@@ -109,7 +112,7 @@ def write_figures(run_dir: Path, results: dict, figures: str = "all") -> list[Pa
     table_cols = [c for c in results["columns"] if c != "se"]
     if results["kind"] == "short":
         histories = {labels[c]: loss_runs(c) for c in table_cols if loss_runs(c)}
-        written += plots.plot_loss_curves(fig_dir / "loss", histories,
+        written += [] if not histories else plots.plot_loss_curves(fig_dir / "loss", histories,
                                           title=figure_title(results, f"{results['experiment']}: training loss"))
         gam = {labels[c]: hist[(c, seed0)]["gamma"] for c in table_cols if (c, seed0) in hist and hist[(c, seed0)]["gamma"]}
     else:
@@ -123,10 +126,10 @@ def write_figures(run_dir: Path, results: dict, figures: str = "all") -> list[Pa
             written += plots.plot_loss_curves(fig_dir / "loss_source", histories, tolerance=_tolerance(results),
                                               title=figure_title(results, f"{results['experiment']}: source-task loss"))
         target = {labels[c]: loss_runs(c) for c in table_cols if loss_runs(c)}
-        written += plots.plot_loss_curves(fig_dir / "loss", target, tolerance=_tolerance(results),
+        written += [] if not target else plots.plot_loss_curves(fig_dir / "loss", target, tolerance=_tolerance(results),
                                           title=figure_title(results, f"{results['experiment']}: target-task loss"))
-        if _tolerance(results) is not None:
-            first = {labels[c]: hist[(c, seed0)]["loss"] for c in table_cols if (c, seed0) in hist}
+        first = {labels[c]: hist[(c, seed0)]["loss"] for c in table_cols if (c, seed0) in hist}
+        if _tolerance(results) is not None and first:
             written += plots.plot_target_loss_comparison(
                 fig_dir / "target_loss_comparison", first, _tolerance(results),
                 title=figure_title(results, f"{results['experiment']}: target-task loss, seed {seed0}"))

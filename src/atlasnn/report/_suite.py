@@ -54,7 +54,8 @@ def _scheme_row(results: dict, column: str, records: list[TrainingRecord]) -> di
     eff = [r.effectivity for r in records]
     status = [r.status or "n/a" for r in records]
     windows = [r.march.n_windows for r in records if r.march is not None]
-    rejected = [sum(a.get("outcome") == "rejected" for a in r.march.windows) for r in records if r.march is not None]
+    rejected = [int(r.extra["rejected"]) if r.role == "solve" else sum(a.get("outcome") == "rejected" for a in r.march.windows)
+                for r in records if r.march is not None]
     worst_abs = _worst(abs_err)
     return {
         "column": column, "label": (results.get("labels") or {}).get(column, column), "seeds": [r.seed for r in records],
@@ -87,7 +88,7 @@ def suite_summary(run_dirs: Sequence[str | Path]) -> dict[str, Any]:
             mine = [r for r in records if r.column == column and r.in_table]
             if mine:
                 row = _scheme_row(res, column, mine)
-                row["scheme"] = _scheme_name(column, profile)
+                row["scheme"] = _scheme_name(column, profile, mine[0].role)
                 row["run_dir"] = str(Path(d))
                 entry["rows"].append(row)
     rows = [row for p in problems.values() for row in p["rows"]]
@@ -96,7 +97,9 @@ def suite_summary(run_dirs: Sequence[str | Path]) -> dict[str, Any]:
                        "false_ok": sum(r["false_ok"] for r in rows), "false_alarm": sum(r["false_alarm"] for r in rows)}}
 
 
-def _scheme_name(column: str, profile: str) -> str:
+def _scheme_name(column: str, profile: str, role: str) -> str:
+    if role == "solve":
+        return "float64 collocation (solved, not trained)"
     if column.endswith("_march"):
         return "time-marching, fixed windows" if profile == "fixed" else "time-marching, adaptive windows"
     return "direct training"

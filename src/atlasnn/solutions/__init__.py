@@ -8,13 +8,8 @@ from atlasnn.solutions._bounds import log_norm, residual_bound
 from atlasnn.solutions._estimate import TRUST_FRACTION, ErrorEstimate, estimate_error, state_range
 from atlasnn.solutions._linearised import propagate, residual_and_jacobian
 from atlasnn.solutions._piecewise import PiecewiseSolution, WindowRecord, stack_models, unstack_models, window_edges
-from atlasnn.solutions._solution import (
-    INTERVAL_SLACK,
-    OUTSIDE_MODES,
-    ExtrapolationError,
-    ExtrapolationWarning,
-    Solution,
-)
+from atlasnn.solutions._base import INTERVAL_SLACK, ExtrapolationError, ExtrapolationWarning
+from atlasnn.solutions._solution import OUTSIDE_MODES, Solution
 
 __all__ = [
     "AbstractSolution",

@@ -23,10 +23,7 @@ import numpy as np
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
 from atlasnn.solutions._base import (
-    INTERVAL_SLACK,
     AbstractSolution,
-    ExtrapolationError,
-    ExtrapolationWarning,
     check_inside,
 )
 from atlasnn.solutions._evaluate import value_and_rate_padded

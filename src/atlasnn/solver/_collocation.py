@@ -31,7 +31,7 @@ __all__ = ["Collocation", "require_float64"]
 def require_float64() -> None:
     """Refuse, in one line, a device on which JAX cannot compute in float64."""
     with jax.enable_x64(True):
-        if jnp.zeros(1, jnp.float64).dtype != jnp.float64:
+        if jax.device_put(np.zeros(1, np.float64)).dtype != jnp.float64:  # a transfer, not a program
             raise ConfigError(f"the collocation solver needs float64, which the {jax.default_backend()} device "
                               "does not offer; run on the CPU (JAX_PLATFORMS=cpu) or use solver=AdamMarch()")
 
@@ -169,20 +169,22 @@ class Collocation(AbstractSolver):
         nodes = collocation_nodes(self.points, self.nodes)
         check = check_grid(2 * self.check + 1, self.check_grid)
         rows, first_call = [], 0.0
+        # the program's inputs as NumPy arrays: building them with jax.numpy would compile a small
+        # program per operation in a new process (tens of milliseconds of a warm start)
+        f64 = lambda x: np.asarray(x, np.float64)  # noqa: E731
+        args = ((f64([f.a for f in feats]), f64([f.b for f in feats])), f64(nodes), tuple(map(f64, check)),
+                f64(self.shape))
+        zeros = np.zeros(b, np.int64)
+        state = MarchState(np.full(b, float(t0)), f64(z0s), np.full(b, float(self.first_window or 0.0)),
+                           np.zeros_like(f64(z0s)), zeros, zeros, zeros)
+        T_, rtol_, atol_ = f64(T), f64(rtol), f64(atol)
         with jax.enable_x64(True):
-            f64 = lambda x: jnp.asarray(x, jnp.float64)  # noqa: E731
-            args = ((f64([f.a for f in feats]), f64([f.b for f in feats])), f64(nodes), tuple(map(f64, check)),
-                    f64(self.shape))
-            zeros = jnp.zeros(b, jnp.int64)
-            state = MarchState(jnp.full(b, float(t0)), f64(z0s), jnp.full(b, float(self.first_window or 0.0)),
-                               jnp.zeros_like(f64(z0s)), zeros, zeros, zeros)
-            T_, rtol_, atol_ = f64(T), f64(rtol), f64(atol)
             while True:
                 tic = time.perf_counter()
                 out = jax.device_get(program(*args, state, T_, rtol_, atol_))
                 if not rows:  # the first call compiles (or loads from the cache) and runs
                     first_call = time.perf_counter() - tic
-                state = jax.tree_util.tree_map(jnp.asarray, out.state)
+                state = out.state
                 counts = np.asarray(out.count)
                 rows.append([[np.asarray(x)[m, :counts[m]] for m in range(b)] for x in out[1:-1]])
                 t_now, failed = np.asarray(out.state.t), np.asarray(out.state.failed)
@@ -198,8 +200,9 @@ class Collocation(AbstractSolver):
         n = start.size
         scaling = window_scaling(self.scaling)
         with jax.enable_x64(True):
-            skeleton = make_model(np.zeros(system.state_dim), scaling=self.scaling, width=self.features, depth=1,
-                                  activation="tanh")
+            # its shapes only (every leaf is set below): a model drawn at random would compile the draw
+            skeleton = jax.eval_shape(lambda: make_model(np.zeros(system.state_dim), scaling=self.scaling,
+                                                         width=self.features, depth=1, activation="tanh"))
             host = self._stacked(skeleton, feats, length, z_start, weights, scaling)  # NumPy leaves
             stacked = jax.tree_util.tree_map(jnp.asarray, host)
         models = [jax.tree_util.tree_map(lambda x, k=k: x[k], host) for k in range(n)]
@@ -221,15 +224,15 @@ class Collocation(AbstractSolver):
             "w0": first, "b0": f64(np.broadcast_to(feats.b, (n, feats.count))), "w1": f64(weights),
             "b1": np.zeros((n, z_start.shape[1]), np.float64), "z0": f64(z_start),
         }
-        stacked = jax.tree_util.tree_map(lambda x: np.broadcast_to(np.asarray(x), (n,) + x.shape)
-                                         if eqx.is_array(x) else x, skeleton)
         stacked = eqx.tree_at(lambda m: (m.net.weights[0], m.net.biases[0], m.net.weights[1], m.net.biases[1], m.z0),
-                              stacked, (leaves["w0"], leaves["b0"], leaves["w1"], leaves["b1"], leaves["z0"]))
+                              skeleton, (leaves["w0"], leaves["b0"], leaves["w1"], leaves["b1"], leaves["z0"]))
         gamma = [scaling.gamma(h, self.shape) for h in length]
         if gamma and gamma[0]:
             raw = {g: f64([inverse_softplus(x[g]) for x in gamma]) for g in gamma[0]}
             stacked = eqx.tree_at(lambda m: tuple(getattr(m.scaling, f"raw_{g}") for g in raw), stacked,
                                   tuple(raw.values()))
+        if any(isinstance(x, jax.ShapeDtypeStruct) for x in jax.tree_util.tree_leaves(stacked)):
+            raise AssertionError("a leaf of the window model was left unset")  # a model grew a parameter
         return stacked
 
     def settings(self) -> dict[str, Any]:

@@ -36,6 +36,7 @@ from jax import lax
 
 from atlasnn.compile_cache import program_cache
 from atlasnn.precision import trace_settings
+from atlasnn.solver._exported import exported_program
 from atlasnn.solver._features import window_scaling
 
 __all__ = ["MarchState", "ChunkResult", "compiled_march"]
@@ -223,10 +224,18 @@ def _cached(system, scaling_name, chunk, max_newton, newton_tol, fresh, unroll, 
     return jax.jit(batched), jax.jit(alone)
 
 
+#: the tree of a program's result (a ChunkResult holding a MarchState), for its exported form
+_OUT_TREE = jax.tree_util.tree_structure(
+    ChunkResult(*([0] * (len(ChunkResult._fields) - 1)), MarchState(*([0] * len(MarchState._fields)))))
+
+
 def compiled_march(system: Any, scaling: str, *, chunk: int, max_newton: int, newton_tol: float, fresh: int,
                    unroll: int, order: float, growth: float, max_rejects: int, safety: float, members: int):
     """The compiled march for a system and these settings, over ``members`` members (features and
     state with a leading axis, also for one); one program per shape, cached, keyed also by the
-    trace settings so that a program traced under others is never reused."""
-    return _cached(system, scaling, int(chunk), int(max_newton), float(newton_tol), int(fresh), int(unroll),
-                   float(order), float(growth), int(max_rejects), float(safety), trace_settings())[int(members == 1)]
+    trace settings so that a program traced under others is never reused; served from its
+    exported form on disk where the system qualifies (:mod:`._exported`)."""
+    settings = (scaling, int(chunk), int(max_newton), float(newton_tol), int(fresh), int(unroll), float(order),
+                float(growth), int(max_rejects), float(safety), trace_settings())
+    jitted = _cached(system, *settings)[int(members == 1)]
+    return exported_program(jitted, system, {"settings": settings, "alone": members == 1}, _OUT_TREE)

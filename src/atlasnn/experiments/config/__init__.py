@@ -4,7 +4,6 @@ parsed into typed settings; the built-in experiments' files live in ``experiment
 from atlasnn.experiments.config._config import (
     EvaluationConfig,
     ExperimentConfig,
-    MarchSettings,
     Stage,
     SystemConfig,
     TrainSettings,
@@ -17,6 +16,7 @@ from atlasnn.experiments.config._config import (
     parse_end_time,
     read_config,
 )
+from atlasnn.experiments.config._methods import MarchSettings, SolveSettings
 from atlasnn.experiments.config._family import (
     FIT_METHODS,
     FamilyConfig,
@@ -53,6 +53,7 @@ __all__ = [
     "family_config_path",
     "Stage",
     "MarchSettings",
+    "SolveSettings",
     "SystemConfig",
     "TrainSettings",
     "EvaluationConfig",

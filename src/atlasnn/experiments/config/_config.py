@@ -46,10 +46,17 @@ from atlasnn.experiments.config._schema import (
     parse_value,
     settings_fields,
 )
+from atlasnn.experiments.config._methods import (
+    MarchSettings,
+    SolveSettings,
+    march_settings,
+    polish_config,
+    solve_settings,
+)
 from atlasnn.experiments.config._system_checks import _config_folder, _python_target, check_system_builds
 from atlasnn.experiments.config._types import _fail, _number, _table
 from atlasnn.systems import BUILTIN_SYSTEMS, builtin_system, expression_system, python_system
-from atlasnn.training import DEFAULT_WINDOW_TRAIN, LMConfig, MarchConfig, PolishConfig, TrainConfig, n_windows_for
+from atlasnn.training import TrainConfig
 
 
 def _deep_merge(base: dict, over: dict) -> dict:
@@ -129,18 +136,6 @@ class Stage:
 
 
 @dataclass(frozen=True)
-class MarchSettings:
-    """The ``[march]`` table: which models are marched, their network, and the scheme."""
-
-    models: tuple[str, ...]
-    width: int
-    depth: int
-    activation: str
-    first_layer_scale: float
-    scheme: Any  # atlasnn.training._marching.MarchConfig (progress and seed are set per training)
-
-
-@dataclass(frozen=True)
 class ExperimentConfig:
     """One experiment: a short run (``interval``) or a transfer run (``source`` → ``target``)."""
 
@@ -167,6 +162,8 @@ class ExperimentConfig:
     paper_experiment: str = ""
     first_layer_scale: float = 1.0
     march: MarchSettings | None = None
+    solve: SolveSettings | None = None
+    schemes: tuple[str, ...] | None = None  # None: every scheme the tables give
     polish: Any = None  # atlasnn.training._polish.PolishConfig, or None
     profile: str = "default"
     seed_batch: int | str = "auto"
@@ -188,10 +185,13 @@ def _default_name(values: dict, source: str) -> str:
     return parse_value(SCHEMA[""].key("name").type, "name", Path(source).stem)
 
 
-def _system_config(v: dict, given: dict, base: Path | None = None) -> SystemConfig:
+def _system_config(v: dict, given: dict, base: Path | None = None, default_name: str | None = None) -> SystemConfig:
     """A built-in name, a hamiltonian expression or a Python file; with a hamiltonian, as many
     momenta as coordinates and z0 of length 2d. Without one, coordinates and momenta are not used;
-    a Python file's names are optional (d from z0 then)."""
+    a Python file's names are optional (d from z0 then). An expression or a file without a name
+    takes ``default_name`` (the config's), which its messages then use."""
+    if v["name"] is None and (v["python"] is not None or v["hamiltonian"] is not None):
+        v = {**v, "name": default_name}
     if v["python"] is not None:
         if v["hamiltonian"] is not None:
             _fail("system.python", v["python"], "give either system.python or system.hamiltonian, not both")
@@ -339,11 +339,10 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     v = parse_table("", "", data)
 
     kind = v["kind"] or ("transfer" if "source" in data else "short")
-    system = _system_config(v["system"], data["system"], _config_folder(source))
+    system = _system_config(v["system"], data["system"], _config_folder(source), default_name=_default_name(v, source))
     base_train = _train_settings("train", v["train"], data.get("train", {}))
     _check_stages_present(kind, data)
-    if not v["models"] and (kind != "short" or v["march"] is None):
-        _fail("models", [], "give at least one model (an empty list needs a short experiment with a [march] table)")
+    _check_schemes(kind, v, data)
     stages = {p: _stage(p, v[p], data[p], base_train) for p in ("interval", "source", "target") if p in data}
     if kind == "transfer":
         _check_same_start(stages["source"], stages["target"])
@@ -358,12 +357,27 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     cfg = ExperimentConfig(**{
         **by_name, "name": _default_name(v, source), "kind": kind, "system": system, "stage": stages.get("interval"),
         "source": stages.get("source"), "target": stages.get("target"), "evaluation": evaluation, "raw": raw,
-        "march": None if v["march"] is None else _march_settings(v["march"], data["march"], eval_stage),
-        "polish": None if v["polish"] is None else _polish_config("polish", v["polish"]),
+        "march": None if v["march"] is None else march_settings(v["march"], data["march"], eval_stage),
+        "solve": None if v["solve"] is None else solve_settings(v["solve"]),
+        "schemes": None if v["schemes"] is None else tuple(v["schemes"]),
+        "polish": None if v["polish"] is None else polish_config("polish", v["polish"]),
         "quality": _quality(v["quality"]),
     })
     check_system_builds(system)
     return cfg
+
+
+def _check_schemes(kind: str, v: dict[str, Any], data: dict[str, Any]) -> None:
+    """Every scheme named in ``schemes`` has its table; the config trains or solves something."""
+    named = v["schemes"]
+    for scheme, table in (("march", "march"), ("solve", "solve")):
+        if named is not None and scheme in named and v[table] is None:
+            _fail("schemes", data.get("schemes"), f"{scheme} needs a [{table}] table")
+    if named is not None and not v["models"] and set(named) <= {"short", "baseline", "transfer"}:
+        _fail("models", [], f"schemes {list(named)} need at least one model")
+    if not v["models"] and v["solve"] is None and (kind != "short" or v["march"] is None):
+        _fail("models", [], "give at least one model (an empty list needs a short experiment with a [march] table, "
+                            "or a [solve] table)")
 
 
 def apply_profile(data: dict[str, Any], profile: str | None, source: str) -> dict[str, Any]:
@@ -385,68 +399,6 @@ def _quality(v: dict[str, Any]) -> Thresholds:
         _fail("quality.estimate_suspect", v["estimate_suspect"],
               f"must not exceed quality.estimate_failed = {v['estimate_failed']:g}")
     return Thresholds(**v)
-
-
-def _polish_config(path: str, v: dict[str, Any]) -> PolishConfig | LMConfig | None:
-    """The [polish] table (or march.polish) as the second phase's config, or None (method none)."""
-    given = {k: v[k] for k in ("steps", "n_points", "patience") if v.get(k) is not None}
-    if v["method"] == "none":
-        return None
-    if v["method"] == "lm":
-        if v["memory"] != 20:
-            _fail(f"{path}.memory", v["memory"], "is a key of method lbfgs, not lm")
-        return LMConfig(precision=v["precision"], **given)
-    if v["precision"] == "mixed":
-        _fail(f"{path}.precision", "mixed", "is a precision of method lm; lbfgs takes model or float64")
-    return PolishConfig(memory=v["memory"], precision=v["precision"], **given)
-
-
-def _window_train(path: str, given: dict[str, Any], base, length: float):
-    """A window's TrainConfig: ``base`` with the keys given in the table at ``path`` (sigma_per_T
-    is in units of the window length, as the stages' is of their T)."""
-    if "sigma" in given and "sigma_per_T" in given:
-        _fail(f"{path}.sigma", given["sigma"], "give either sigma or sigma_per_T, not both")
-    fields = {f.name for f in dataclasses.fields(type(base))}
-    changes = {k: (tuple(x) if isinstance(x, list) else x) for k, x in given.items() if k in fields}
-    if "sigma_per_T" in given:
-        changes["sigma"] = given["sigma_per_T"] * length
-    out = base.replace(**changes)
-    return out.replace(chunk=min(out.chunk, out.epochs))  # a longer chunk would only run masked epochs
-
-
-def _march_settings(v: dict[str, Any], given: dict[str, Any], stage: Stage) -> MarchSettings:
-    """The [march] table as a MarchSettings (the scheme's train configs over the measured defaults)."""
-    if v.get("window") is not None and v.get("n_windows") is not None:
-        _fail("march.window", given.get("window"), "give window or n_windows, not both")
-    window = None if v.get("n_windows") is not None and "window" not in given else v.get("window")
-    scheme = MarchConfig(n_windows=v.get("n_windows"), window=window, thaw=v["thaw"],
-                         carry_adam=v["carry_adam"], start=v["start"],
-                         polish=_polish_config("march.polish", v["polish"]), rtol=v["rtol"], atol=v["atol"],
-                         first_window=v["first_window"], min_window=v["min_window"],
-                         max_rejects=v["max_rejects"], max_windows=v["max_windows"])
-    if scheme.adaptive:
-        for key in ("sigma_per_T",):
-            for table in ("train", "first_train"):
-                if key in (given.get(table) or {}):
-                    _fail(f"march.{table}.{key}", given[table][key], "needs fixed windows (window = a length); "
-                          "with window = \"auto\" give sigma (in units of the collocation spacing)")
-        length = stage.T - stage.t0
-    else:
-        count = n_windows_for(stage.t0, stage.T, scheme)
-        if count > scheme.max_windows:
-            key = "n_windows" if v.get("n_windows") is not None else "window"
-            _fail(f"march.{key}", given.get(key, v.get(key)), f"cuts [{stage.t0:g}, {stage.T:g}] into {count} windows, "
-                  f"more than march.max_windows = {scheme.max_windows}; use longer windows or raise max_windows "
-                  f"(at most 100000)")
-        length = (stage.T - stage.t0) / count
-    train = _window_train("march.train", given.get("train") or {}, DEFAULT_WINDOW_TRAIN, length)
-    first = None
-    if given.get("first_train"):
-        first = _window_train("march.first_train", given["first_train"], train, length)
-    net = v["network"]
-    return MarchSettings(models=tuple(v["models"]), width=net["width"], depth=net["depth"],
-                         activation=net["activation"], first_layer_scale=net["first_layer_scale"],
-                         scheme=scheme.replace(train=train, first=first))
 
 
 def read_config(path: str | Path) -> dict[str, Any]:

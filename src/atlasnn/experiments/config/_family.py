@@ -32,7 +32,7 @@ _BUNDLE_KEYS = {"T", "t0", "z0_rel", "z0_low", "z0_high", "ranges", "windows", "
                 "batch", "lr", "lm_steps", "lm_points", "lm_rounds", "margin", "test_members", "test_times",
                 "test_seed"}
 _OBS_KEYS = {"file", "n", "t0", "T", "names", "noise", "times_seed"}
-_FIT_KEYS = {"methods", "width", "depth", "epochs", "lm_steps", "lm_points", "data_weight", "segments",
+_FIT_KEYS = {"methods", "width", "depth", "epochs", "lm_steps", "lm_points", "data_weight", "segments", "starts",
              "bundle_windows", "bundle_epochs", "bundle_lm_steps", "bundle_lm_points", "bundle_width"}
 
 
@@ -95,11 +95,14 @@ class ObservationSettings:
 @dataclass(frozen=True)
 class FitSettings:
     """[fit]: which methods run (``joint``, ``bundle``, ``shooting``), the joint network's settings,
-    the shooting baseline's ``segments``, the bundle's (``bundle_*``)."""
+    the shooting baseline's ``segments`` and ``starts`` (``"auto"``: the guess and 12 more per
+    unknown over the bounds, :func:`atlasnn.inverse.fit_multistart`; 1: the guess alone), the
+    bundle's (``bundle_*``)."""
 
     methods: tuple[str, ...] = ("joint", "shooting")
     joint: JointConfig = JointConfig()
     segments: int = 1
+    starts: int | str = "auto"
     bundle_windows: int = 1
     bundle_epochs: int = 2000
     bundle_lm_steps: int = 100
@@ -252,6 +255,8 @@ def _fit(v: dict, quick: bool) -> FitSettings:
                             ("bundle_lm_steps", 0, 10**5), ("bundle_lm_points", 2, 65536), ("bundle_width", 1, 1024)):
         if name in v:
             kw[name] = _integer(f"fit.{name}", v[name], low, high)
+    if "starts" in v and v["starts"] != "auto":
+        kw["starts"] = _integer("fit.starts", v["starts"], 1, 10_000)
     out = FitSettings(**kw)
     if quick:
         out = dataclasses.replace(out, bundle_epochs=min(out.bundle_epochs, 300),
@@ -280,8 +285,9 @@ def parse_family(data: dict[str, Any], *, source: str = "config", quick: bool = 
     _table("", data, allowed)
     if "system" not in data:
         _fail("system", None, "missing (the Hamiltonian system)")
-    system = _system_config(parse_table("system", "system", data["system"]), data["system"], _config_folder(source))
     name = _string("name", data.get("name", Path(source).stem))
+    system = _system_config(parse_table("system", "system", data["system"]), data["system"], _config_folder(source),
+                            default_name=name)
     description = _string("description", data.get("description", ""))
     seeds = _seeds(data.get("seeds", [0]))
     if kind == "bundle":

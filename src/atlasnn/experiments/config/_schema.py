@@ -71,6 +71,8 @@ MAX_SEED = 2**32 - 1  # jax.random.PRNGKey takes a uint32 seed (larger ones wrap
 MAX_SEEDS = 10_000
 MAX_TIME = 1e6  # |t0|, |T|
 MAX_STEPS = 100_000_000  # classical integrator steps (se_steps × fine_factor)
+#: the schemes a config can run (atlasnn.experiments._schemes.SCHEMES, whose keys a test compares)
+SCHEME_NAMES = ("baseline", "short", "transfer", "march", "solve")
 
 
 
@@ -209,6 +211,14 @@ _STATIC_TABLES: dict[str, TableSpec] = {
         Key("march", Sub("march"), None, "Time-marching ATLAS-NN on the experiment's interval (a transfer run's "
             "target): the interval cut into windows, each trained from the previous window's end state, γ "
             "learned in the first (docs/METHOD.md); adds a column per model.", default_text="none"),
+        Key("solve", Sub("solve"), None, "The float64 collocation solver (atlasnn.solve, docs/SOLVER.md) on the "
+            "experiment's interval (a transfer run's target): no training; each seed draws its own random "
+            "features; adds the column collocation.", default_text="none"),
+        Key("schemes", NameList(lambda: f"expected a non-empty list drawn from {list(SCHEME_NAMES)}", SCHEME_NAMES,
+                                unique=True), None, "Which of the config's schemes run (short: the models on the "
+            "interval; baseline, transfer: a transfer run's; march: [march]; solve: [solve]); e.g. a profile "
+            "with schemes = [\"solve\"] runs the collocation solver alone.",
+            default_text="every scheme the file's tables give"),
         Key("polish", Sub("polish"), None, "L-BFGS after Adam on every training whose errors are tabulated "
             "(short runs, targets, the baseline); none by default.", default_text="none"),
         Key("execution", Sub("execution"), {}, "How the trainings are run (not what they compute)."),
@@ -284,6 +294,19 @@ _STATIC_TABLES: dict[str, TableSpec] = {
             "(e.g. more epochs while γ is learned)."),
         Key("polish", Sub("polish"), {}, "The second phase of every window after Adam (default: "
             "Levenberg–Marquardt, method = \"lm\"; method = \"none\" turns it off)."),
+    )),
+    "solve": TableSpec("The float64 collocation solver (atlasnn.solver.Collocation): windows of ATLAS-NN's trial "
+                       "solution z_k + f(s)·W φ(s/h) with seeded random tanh features φ, W solved by Gauss–Newton, "
+                       "each window accepted when its estimated local error meets atol + rtol·|z|.", (
+        Key("rtol", Number(low=1e-15, high=1), 1e-12, "Relative part of each window's local tolerance."),
+        Key("atol", Number(low=1e-15, high=1), 1e-14, "Absolute part of each window's local tolerance."),
+        Key("features", Integer(1, 1000), 20, "M, the random features per window (2d·M unknowns per window)."),
+        Key("points", Integer(1, 10_000), None, "P collocation nodes per window (at least features).",
+            default_text="features + 4"),
+        Key("scaling", Choice(("linear", "tanh", "rational_exp")), "linear", "The time scaling f of each window: "
+            "f = s (measured the best here), or ATLAS-NN's tanh or rational-exp shape."),
+        Key("safety", Number(low=0, low_open=True, high=1000), 3.0, "The local error estimate is multiplied by this "
+            "before the test (it reads a median 2–3× low: docs/SOLVER.md)."),
     )),
     "march.network": TableSpec("The network of the marched models.", _network_keys(
         48, 4.0, "measured: 3–8 lowers a window's error 2–9×")),
