@@ -53,3 +53,20 @@ def test_profiles_pick_a_subset_and_an_unknown_one_is_refused(tmp_path, monkeypa
     assert started == [("kepler-e09", "solve", ("solve",)), ("toda-3", "solve", ("solve",))]
     with pytest.raises(ConfigError, match="--profile adaptive: not a profile of the suite"):
         run_suite("hard", tmp_path, profiles=["adaptive"], log=lambda *a: None)
+
+
+def test_overwrite_runs_finished_members_again(tmp_path, monkeypatch):
+    started = []
+
+    def fake_run(cfg, run_dir, **kw):
+        started.append((run_dir.parent.name, kw.get("overwrite")))
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / "meta.json").write_text(json.dumps({"status": "complete"}))
+        (run_dir / "results.json").write_text("{}")
+
+    monkeypatch.setattr(_suite, "run_experiment", fake_run)
+    monkeypatch.setattr(_suite, "suite_summary", lambda dirs: {"problems": []})
+    monkeypatch.setattr(_suite, "suite_markdown", lambda summary: "")
+    for overwrite in (False, False, True):
+        run_suite("hard", tmp_path, profiles=["solve"], only=["toda-3"], overwrite=overwrite, log=lambda *a: None)
+    assert started == [("toda-3", True), ("toda-3", True)]  # the second call kept it, the third ran it again

@@ -251,7 +251,7 @@ def cmd_suite(args) -> int:
 
     seeds = _seeds(args)
     out = run_suite(args.name, args.out, seeds=seeds, jobs=_jobs(args), quick=args.quick, only=args.only or None,
-                    profiles=args.profiles or None, progress=not args.no_progress)
+                    profiles=args.profiles or None, overwrite=args.overwrite, progress=not args.no_progress)
     print((out / "suite.md").read_text(encoding="utf-8"))
     return 0
 

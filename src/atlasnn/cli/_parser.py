@@ -105,6 +105,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run only these profiles (default, fixed, solve: the collocation solver alone)")
     s.add_argument("--quick", action="store_true", help="the configs' quick variants")
     s.add_argument("--out", default=None, metavar="DIR", help="suite directory (default runs/suite-NAME[-quick])")
+    s.add_argument("--overwrite", action="store_true",
+                   help="run finished members again (default: keep them; an interrupted one is always resumed)")
     s.add_argument("--no-progress", action="store_true", help="no progress bars")
     s.set_defaults(func=cmd_suite)
 

@@ -5,7 +5,8 @@ each in its default profile and in every profile listed in :data:`SUITE_PROFILES
 (the hard-problem suite: direct training with adaptive time-marching, then ``fixed``: time-marching
 on fixed windows, and ``solve``: the float64 collocation solver, nothing trained); ``profiles``
 runs a subset of them. Each run gets its own directory under ``out/EXPERIMENT/PROFILE``; a finished
-one is kept, an interrupted one resumed, so the command can be stopped and run again. At the end
+one is kept (``--overwrite`` runs it again), an interrupted one resumed, so the command can be
+stopped and run again. At the end
 ``suite.json`` and ``suite.md`` summarise every problem and scheme (:mod:`atlasnn.report`).
 """
 
@@ -38,10 +39,10 @@ def suite_members(name: str) -> list[str]:
 
 def run_suite(name: str, out: str | Path | None = None, *, seeds: tuple[int, ...] | None = None, jobs: int = 1,
               quick: bool = False, only: list[str] | None = None, profiles: list[str] | None = None,
-              progress: bool = False, log: Callable[[str], None] = print) -> Path:
+              overwrite: bool = False, progress: bool = False, log: Callable[[str], None] = print) -> Path:
     """Run (or continue) every experiment of suite ``name`` in every profile; returns the directory
     holding suite.json and suite.md. ``only``: a subset of the members; ``profiles``: of the
-    profiles ("default" for the file as written)."""
+    profiles ("default" for the file as written); ``overwrite``: run finished ones again too."""
     known = ("default", *SUITE_PROFILES)
     for p in profiles or ():
         if p not in known:
@@ -62,7 +63,7 @@ def run_suite(name: str, out: str | Path | None = None, *, seeds: tuple[int, ...
             cfg = load_config(path, quick=quick, profile=profile)
             run_dir = out / exp / (profile or "default")
             dirs.append(run_dir)
-            state = run_state(run_dir)
+            state = "new" if overwrite else run_state(run_dir)
             if state == "complete":
                 log(f"suite {name}: {exp} ({profile or 'default'}): complete, kept")
                 continue
