@@ -62,7 +62,7 @@ suite-doc: $(BIN)/atlasnn
 # The float64 collocation solver (docs/SOLVER.md) on every hard problem and both long experiments,
 # five seeds each, nothing trained (--profile solve); records and summary into docs/runs/suite-solve/.
 solve-runs: $(BIN)/atlasnn
-	$(BIN)/atlasnn suite hard --profile solve --out runs/suite-solve --no-progress
+	$(BIN)/atlasnn suite hard --profile solve --out runs/suite-solve --overwrite --no-progress
 	for e in henon-heiles-long oscillator-long; do \
 	  $(BIN)/atlasnn reproduce $$e --profile solve --out runs/suite-solve/$$e/solve --overwrite --no-progress || exit 1; done
 	$(BIN)/python scripts/solve_doc.py runs/suite-solve docs/runs/suite-solve
