@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from atlasnn.cli import main
-from atlasnn.errors import AtlasError
+from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.evaluation import FitResult, fit_shooting, shooting_misfit, synthetic_observations
 from atlasnn.experiments import _family_run
 from atlasnn.inverse import fit_multistart, judge_fit
@@ -84,6 +84,9 @@ def test_a_multistart_skips_starts_it_cannot_integrate_and_refuses_only_when_all
     monkeypatch.setattr(_multistart, "fit_shooting", lambda *a, **k: (_ for _ in ()).throw(AtlasError("escapes")))
     with pytest.raises(AtlasError, match="from any of 3 starts over the bounds .*narrow the bounds"):
         fit_multistart(HH, OBS, [Unknown("lam", 0.7, 0.2, 1.5)], starts=3)
+    monkeypatch.setattr(_multistart, "fit_shooting", real)
+    with pytest.raises(ConfigError, match="segments=40 needs at least 80 observation times"):
+        fit_multistart(HH, OBS, [Unknown("lam", 0.7, 0.2, 1.5)], segments=40, starts=3)  # not "every start failed"
 
 
 INVERSE = """

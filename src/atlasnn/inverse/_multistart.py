@@ -92,6 +92,8 @@ def fit_multistart(system: HamiltonianSystem, observations: Observations, unknow
         trial = tuple(dataclasses.replace(u, guess=float(g)) for u, g in zip(unknowns, point))
         try:
             fits.append(fit_shooting(system, observations, trial, z0, t0=t0, segments=segments, **shooting))
+        except ConfigError:
+            raise  # bad input is bad from every start
         except AtlasError as exc:  # an orbit that escapes from this start: the next one
             failed.append({"start": point.tolist(), "reason": str(exc)})
     if not fits:
