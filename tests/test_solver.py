@@ -80,13 +80,17 @@ def test_error_falls_as_features_grow(ho):
     assert errors[-1] < 1e-3 * errors[0], errors
 
 
-def test_tolerance_controls_the_error_and_the_estimate_tracks_it():
-    system = henon_heiles()
-    z0 = [0.3, -0.3, 0.3, 0.15]
-    T = 6 * np.pi
-    t = np.linspace(0.0, T, 600)
+def _henon_heiles(T: float, points: int):
+    """The paper's Hénon–Heiles problem on [0, T]: system, z0, times, DOP853 reference, range."""
+    system, z0 = henon_heiles(), [0.3, -0.3, 0.3, 0.15]
+    t = np.linspace(0.0, T, points)
     ref = reference_solution(system, z0, t, rtol=1e-13, atol=1e-13)
-    scale = np.ptp(ref, axis=0).max()
+    return system, z0, t, ref, np.ptp(ref, axis=0).max()
+
+
+def test_tolerance_controls_the_error_and_the_estimate_tracks_it():
+    T = 6 * np.pi
+    system, z0, t, ref, scale = _henon_heiles(T, 600)
     errs = []
     for rtol in (1e-7, 1e-10):
         sol = solve(system, z0, (0.0, T), rtol=rtol, atol=rtol / 100)
@@ -104,12 +108,8 @@ def test_tolerance_controls_the_error_and_the_estimate_tracks_it():
 
 
 def test_every_seed_meets_the_target_on_henon_heiles():
-    system = henon_heiles()
-    z0 = [0.3, -0.3, 0.3, 0.15]
     T = 24 * np.pi
-    t = np.linspace(0.0, T, 2000)
-    ref = reference_solution(system, z0, t, rtol=1e-13, atol=1e-13)
-    scale = np.ptp(ref, axis=0).max()
+    system, z0, t, ref, scale = _henon_heiles(T, 2000)
     for seed in range(3):
         sol = solve(system, z0, (0.0, T), solver=Collocation(seed=seed))
         assert np.max(np.abs(sol(t) - ref)) < 1e-9 * scale, seed

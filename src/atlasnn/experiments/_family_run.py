@@ -165,15 +165,14 @@ def _fit_once(method: str, cfg: FamilyConfig, system, obs, t0: float, seed: int)
             return judge_fit(fit_shooting(system, obs, cfg.unknowns, t0=t0, segments=fit.segments), cfg.unknowns), 0.0
         return fit_multistart(system, obs, cfg.unknowns, t0=t0, segments=fit.segments, starts=fit.starts,
                               seed=seed), 0.0
-    if method == "joint":
-        return judge_fit(fit_joint(system, obs, cfg.unknowns, t0=t0, config=fit.joint, seed=seed), cfg.unknowns), 0.0
+    if method == "joint":  # the network fits are judged by _fit_seed, against the shooting's best
+        return fit_joint(system, obs, cfg.unknowns, t0=t0, config=fit.joint, seed=seed), 0.0
     box = bundle_box_for(system, cfg.unknowns, None, float(obs.t[-1]), t0)
     trained = train_bundle(system, box, BundleTrainConfig(windows=fit.bundle_windows, epochs=fit.bundle_epochs,
                                                           lm_steps=fit.bundle_lm_steps,
                                                           lm_points=fit.bundle_lm_points),
                            width=fit.bundle_width, seed=seed)
-    result = judge_fit(fit_with_bundle(trained.solution, obs, cfg.unknowns), cfg.unknowns)
-    return result, trained.train_time + trained.compile_time
+    return fit_with_bundle(trained.solution, obs, cfg.unknowns), trained.train_time + trained.compile_time
 
 
 def _record(result, method: str, seed: int, training: float, truth: dict | None) -> dict[str, Any]:
@@ -215,9 +214,10 @@ def _fit_seed(cfg: FamilyConfig, system, obs, t0: float, seed: int, truth, log) 
                             "names": [u.name for u in cfg.unknowns]})
             log(f"  seed {seed} {method}: FAILED — {exc}")
     best = fits.get("shooting", (None,))[0]
+    better = best if best is not None and best.trusted else None
     for method, (result, training) in fits.items():
-        if best is not None and method != "shooting" and best.trusted:
-            judge_fit(result, cfg.unknowns, system=system, observations=obs, better=best)
+        if method != "shooting":  # shooting's fit was judged where it was made
+            judge_fit(result, cfg.unknowns, system=system, observations=obs, better=better)
         rec = _record(result, method, seed, training, truth)
         records.append(rec)
         log(_fit_line(seed, method, result, rec))

@@ -19,7 +19,6 @@ import json
 from typing import Any, ClassVar, final
 
 import jax
-import numpy as np
 
 from atlasnn.checkpoint import load_checkpoint, load_state
 from atlasnn.errors import CheckpointError
@@ -27,6 +26,7 @@ from atlasnn.experiments._signals import check_interrupt
 from atlasnn.experiments._store import one_line, source_state_path, state_path, write_json
 from atlasnn.limits import check_training_memory
 from atlasnn.nn import make_model, model_kind
+from atlasnn.solver import solve_batch
 from atlasnn.training import TrainState, march, march_batch, train_batch, transfer_batch
 
 __all__ = ["Scheme", "SCHEMES", "active_schemes", "table_columns", "baseline_column", "column_labels", "column_label"]
@@ -335,8 +335,8 @@ class Solve(Scheme):
 
     def train(self, run):
         settings, st, seeds = run.cfg.solve, run.cfg.eval_stage, list(run.task.seeds)
-        sols = settings.solver.solve_batch(run.system, np.repeat(np.asarray(run.z0)[None], len(seeds), 0), st.t0, st.T,
-                                           rtol=settings.rtol, atol=settings.atol, seeds=seeds)
+        sols = solve_batch(run.system, [run.z0] * len(seeds), (st.t0, st.T), solver=settings.solver, seeds=seeds,
+                           rtol=settings.rtol, atol=settings.atol)
         check_interrupt()
         for seed, sol in zip(seeds, sols):
             run.finish_solve(sol, st, seed)

@@ -22,10 +22,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
-from atlasnn.solutions._base import (
-    AbstractSolution,
-    check_inside,
-)
+from atlasnn.solutions._base import AbstractSolution, check_inside
 from atlasnn.solutions._evaluate import value_and_rate_padded
 from atlasnn.systems import HamiltonianSystem
 
