@@ -14,8 +14,11 @@ $(BIN)/atlasnn: pyproject.toml
 quick: $(BIN)/atlasnn
 	$(BIN)/atlasnn reproduce oscillator-short --quick --overwrite
 
+# two workers (pytest-xdist), a test file per worker at a time: 5.7 min on the 2-core machine
+# against 9.6 min in one process (CONTRIBUTING.md); TEST_WORKERS=0 runs them in this process
+TEST_WORKERS ?= 2
 test: $(BIN)/atlasnn
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile)
 
 # The paper's four experiments at full settings, 5 seeds, both profiles (docs/REPRODUCTION.md).
 # `make reproduce-all` is the paper profile; its wall time goes to runs/paper/timing.json.

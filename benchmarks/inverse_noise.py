@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from atlasnn.evaluation import fit_shooting, synthetic_observations
+from atlasnn.inverse import fit_shooting, synthetic_observations
 from atlasnn.inverse import fit_joint
 from atlasnn.observations import Unknown
 from atlasnn.systems import expression_system

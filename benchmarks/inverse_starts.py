@@ -11,6 +11,11 @@ noise draw per case: a draw 2–4σ off makes every fit of that case miss this, 
 
     python -m benchmarks.inverse_starts --out docs/benchmarks/inverse_starts.json
     python -m benchmarks.inverse_starts --only hh-builtin --append --out docs/benchmarks/inverse_starts.json
+    python -m benchmarks.inverse_starts --collocation-only --out docs/benchmarks/inverse_starts.json
+
+The simultaneous collocation fit (:func:`atlasnn.inverse.fit_collocation`) runs from every guess
+too; ``--collocation-only`` adds (or refreshes) its column in an existing JSON without refitting
+the others (the data and the grid are deterministic).
 """
 
 from __future__ import annotations
@@ -24,8 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from atlasnn.errors import AtlasError
-from atlasnn.evaluation import fit_shooting, synthetic_observations
-from atlasnn.inverse import JointConfig, fit_joint, fit_multistart, judge_fit
+from atlasnn.inverse import fit_shooting, synthetic_observations
+from atlasnn.inverse import JointConfig, fit_collocation, fit_joint, fit_multistart, judge_fit
 from atlasnn.observations import Unknown
 from atlasnn.systems import expression_system
 
@@ -75,13 +80,53 @@ def score(fit, truth: np.ndarray, best) -> dict:
             "seconds": fit.wall_time, "notes": list(fit.notes), "method": fit.method}
 
 
-def run_case(name: str, case: dict, count: int, joint: int, log) -> dict:
+def _data(case: dict):
+    """(observations, truth, the data's global minimum: shooting started at the truth)."""
     system, truth_d = case["system"], case["unknowns"]
-    truth = np.array([v[0] for v in truth_d.values()])
     times = np.sort(np.random.default_rng(7).uniform(0.0, case["T"], case["n"]))
     obs = synthetic_observations(system, system.initial_state(), times, case["names"], 0.01, 0)
     at_truth = [Unknown(n, t, lo, hi) for n, (t, lo, hi) in truth_d.items()]
-    best = fit_shooting(system, obs, at_truth)  # the data's global minimum (checked: the multistarts agree)
+    best = fit_shooting(system, obs, at_truth)  # checked: the multistarts and the collocation fits agree
+    return obs, np.array([v[0] for v in truth_d.values()]), best
+
+
+def _collocation(case: dict, obs, unknowns, truth, best) -> dict:
+    fit = fit_collocation(case["system"], obs, unknowns)
+    row = score(fit, truth, best)
+    row.update(windows=fit.search["windows"], lm_steps=fit.search["lm_steps"],
+               collocation_estimate=fit.search["collocation_estimate"],
+               polish_moved_sigmas=fit.search.get("polish_moved_sigmas"))
+    return row
+
+
+def summarise(rows: list[dict]) -> dict:
+    summary = {}
+    for method in ("single", "multistart", "joint", "collocation"):
+        rs = [r[method] for r in rows if method in r]
+        if rs:
+            summary[method] = {"fits": len(rs), "global_minimum": sum(r["global_minimum"] for r in rs),
+                               "global_or_marked": sum(r["global_minimum"] or not r["trusted"] for r in rs),
+                               "recovered": sum(r["recovered"] for r in rs),
+                               "recovered_or_marked": sum(r["recovered"] or not r["trusted"] for r in rs),
+                               "confident_wrong": sum(r["confident_wrong"] for r in rs),
+                               "median_seconds": float(np.nanmedian([r.get("seconds", np.nan) for r in rs]))}
+    return summary
+
+
+def add_collocation(name: str, case: dict, result: dict, log) -> None:
+    """Fit every guess of an existing case's rows by collocation; refresh its summary."""
+    obs, truth, best = _data(case)
+    for row in result["rows"]:
+        unknowns = [Unknown(n, x, lo, hi) for (n, (_, lo, hi)), x in zip(case["unknowns"].items(), row["guess"])]
+        row["collocation"] = _collocation(case, obs, unknowns, truth, best)
+        log(f"{name} guess {row['guess']}: collocation {row['collocation']['estimate']} "
+            f"{'trusted' if row['collocation']['trusted'] else 'UNTRUSTED'} {row['collocation']['seconds']:.2f} s")
+    result["summary"] = summarise(result["rows"])
+
+
+def run_case(name: str, case: dict, count: int, joint: int, log) -> dict:
+    system, truth_d = case["system"], case["unknowns"]
+    obs, truth, best = _data(case)
     rows, grid = [], guesses(truth_d, count)
     joint_at = set(np.linspace(0, len(grid) - 1, joint).round().astype(int).tolist()) if joint else set()
     for i, g in enumerate(grid):
@@ -101,20 +146,12 @@ def run_case(name: str, case: dict, count: int, joint: int, log) -> dict:
             jf = fit_joint(system, obs, unknowns, config=JointConfig(), seed=0)
             jf = judge_fit(jf, unknowns, system=system, observations=obs, better=multi)
             row["joint"] = {**score(jf, truth, best), "seconds": time.perf_counter() - tic}
+        row["collocation"] = _collocation(case, obs, unknowns, truth, best)
         rows.append(row)
         log(f"{name} guess {g}: " + "; ".join(f"{k} {r.get('estimate', r.get('refused', '?'))} "
                                               f"{'trusted' if r['trusted'] else 'UNTRUSTED'}"
                                               for k, r in row.items() if k != "guess"))
-    summary = {}
-    for method in ("single", "multistart", "joint"):
-        rs = [r[method] for r in rows if method in r]
-        if rs:
-            summary[method] = {"fits": len(rs), "global_minimum": sum(r["global_minimum"] for r in rs),
-                               "global_or_marked": sum(r["global_minimum"] or not r["trusted"] for r in rs),
-                               "recovered": sum(r["recovered"] for r in rs),
-                               "recovered_or_marked": sum(r["recovered"] or not r["trusted"] for r in rs),
-                               "confident_wrong": sum(r["confident_wrong"] for r in rs),
-                               "median_seconds": float(np.nanmedian([r.get("seconds", np.nan) for r in rs]))}
+    summary = summarise(rows)
     return {"case": name, "truth": truth.tolist(), "global_minimum": best.estimate.tolist(), "global_std": best.std.tolist(), "names": list(truth_d), "observed": case["names"], "n": case["n"],
             "T": case["T"], "rows": rows, "summary": summary}
 
@@ -126,10 +163,21 @@ def main() -> None:
     ap.add_argument("--joint", type=int, default=4, help="guesses per case (spread over the grid) also fitted by the joint network")
     ap.add_argument("--only", action="append", default=[])
     ap.add_argument("--append", action="store_true", help="add the cases run to those already in --out")
+    ap.add_argument("--collocation-only", action="store_true",
+                    help="fit only the collocation column into the cases already in --out")
     args = ap.parse_args()
     out = {"machine": machine_info(), "guesses": args.guesses, "cases": []}
     if args.append and args.out and args.out.is_file():
         out = json.loads(args.out.read_text(encoding="utf-8"))
+    if args.collocation_only:
+        out = json.loads(args.out.read_text(encoding="utf-8"))
+        out["collocation_machine"] = machine_info()
+        for result in out["cases"]:
+            if not args.only or result["case"] in args.only:
+                add_collocation(result["case"], cases()[result["case"]], result, print)
+                print(result["case"], json.dumps(result["summary"]["collocation"]))
+        args.out.write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
+        return
     for name, case in cases().items():
         if args.only and name not in args.only:
             continue

@@ -89,6 +89,24 @@ def test_quick_single_interval_template_runs_as_written(tmp_path, capsys):
     assert (out / "tables.md").is_file() and (out / "figures" / "trajectories.png").is_file()
 
 
+def test_a_long_template_is_time_marched_and_solved_and_runs_as_written(tmp_path, capsys):
+    rc, path, _ = init(tmp_path, capsys, "long.toml", "--T", "12", "--march", "--solve")
+    assert rc == 0
+    cfg = load_config(path)
+    assert cfg.stage.T == 12.0 and cfg.models == () and cfg.march.models == ("atlas_exp",) and cfg.solve.rtol == 1e-12
+    out = tmp_path / "run"
+    assert main(["run", str(path), "--quick", "--out", str(out), "--no-progress"]) == 0
+    res = json.loads((out / "results.json").read_text())
+    assert {r["column"] for r in res["runs"]} == {"atlas_exp_march", "collocation"}
+    solved = next(r for r in res["runs"] if r["column"] == "collocation")
+    assert max(solved["metrics"]["max_abs"].values()) < 1e-8  # the float64 solver, against the run's DOP853 reference
+
+
+def test_march_and_solve_do_not_go_with_a_transfer_template(tmp_path, capsys):
+    rc, path, out = init(tmp_path, capsys, "t.toml", "--transfer", "--march")
+    assert rc == 2 and "single-interval template" in out.err and not path.exists()
+
+
 def test_an_existing_file_is_kept_unless_force(tmp_path, capsys):
     path = tmp_path / "mine.toml"
     path.write_text("# my own work\n")

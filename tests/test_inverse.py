@@ -10,7 +10,7 @@ import pytest
 
 from atlasnn.cli import main
 from atlasnn.errors import ConfigError
-from atlasnn.evaluation import fit_shooting, synthetic_observations
+from atlasnn.inverse import fit_shooting, synthetic_observations
 from atlasnn.experiments.config import load_family, parse_family
 from atlasnn.inverse import JointConfig, bundle_box_for, fit_joint, fit_with_bundle
 from atlasnn.observations import Unknown
@@ -112,9 +112,11 @@ def test_family_command_end_to_end(tmp_path, capsys):
     out = tmp_path / "run"
     assert main(["family", "pendulum-inverse", "--quick", "--seeds", "1", "--out", str(out)]) == 0
     res = json.loads((out / "results.json").read_text())
-    assert {r["method"] for r in res["records"]} == {"joint", "bundle", "shooting"}
+    assert {r["method"] for r in res["records"]} == {"joint", "bundle", "collocation", "shooting"}
     shoot = next(r for r in res["records"] if r["method"] == "shooting")
     joint = next(r for r in res["records"] if r["method"] == "joint")
     assert abs(joint["estimate"][0] - shoot["estimate"][0]) < 2 * shoot["std"][0]
+    col = next(r for r in res["records"] if r["method"] == "collocation")
+    assert abs(col["estimate"][0] - shoot["estimate"][0]) < 0.5 * shoot["std"][0]
     assert (out / "figures" / "estimates_g.png").is_file() and (out / "summary.md").is_file()
     assert main(["family"]) == 0 and "pendulum-inverse" in capsys.readouterr().out

@@ -12,9 +12,9 @@ import pytest
 
 from atlasnn.cli import main
 from atlasnn.errors import AtlasError, ConfigError
-from atlasnn.evaluation import FitResult, fit_shooting, shooting_misfit, synthetic_observations
+from atlasnn.inverse import FitResult, fit_shooting, shooting_misfit, synthetic_observations
 from atlasnn.experiments import _family_run
-from atlasnn.inverse import fit_multistart, judge_fit
+from atlasnn.inverse import Joint, fit_multistart, judge_fit
 from atlasnn.observations import Unknown
 from atlasnn.systems import henon_heiles
 
@@ -113,7 +113,7 @@ lm_steps = 5
 def test_a_family_run_keeps_every_fit_when_a_method_or_a_figure_fails(tmp_path, monkeypatch, capsys):
     toml = tmp_path / "trust.toml"
     toml.write_text(INVERSE)
-    monkeypatch.setattr(_family_run, "fit_joint", lambda *a, **k: (_ for _ in ()).throw(AtlasError("joint: boom")))
+    monkeypatch.setattr(Joint, "fit", lambda *a, **k: (_ for _ in ()).throw(AtlasError("joint: boom")))
 
     def no_orbit(*a, **k):
         raise AtlasError("predict_fit: cannot integrate")

@@ -1,4 +1,4 @@
-"""Tests of least-squares shooting (atlasnn.evaluation): synthetic data, single and multiple
+"""Tests of least-squares shooting (atlasnn.inverse): synthetic data, single and multiple
 shooting fits, their standard errors, unidentifiable unknowns and the one-line errors."""
 
 from __future__ import annotations
@@ -9,14 +9,9 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import AtlasError, ConfigError
-from atlasnn.evaluation import (
-    FitResult,
-    fit_shooting,
-    predict_fit,
-    reference_solution,
-    synthetic_observations,
-)
-from atlasnn.evaluation import _shooting as shooting
+from atlasnn.evaluation import _parametric as parametric
+from atlasnn.evaluation import reference_solution
+from atlasnn.inverse import FitResult, fit_shooting, predict_fit, synthetic_observations
 from atlasnn.observations import Observations, Unknown
 from atlasnn.systems import HamiltonianSystem, builtin_system, expression_system
 
@@ -85,9 +80,9 @@ def test_noise_free_oscillator_recovers_lam(osc):
     t = np.linspace(0.0, 4 * np.pi, 7)
     np.testing.assert_allclose(predict_fit(osc, fit, None, t), reference_solution(osc, None, t), atol=1e-6)
     # one compiled right-hand side per system and shape: another fit compiles nothing new
-    size = shooting._compiled(osc)[1]._cache_size()
+    size = parametric._compiled(osc)[1]._cache_size()
     fit_shooting(osc, obs, [Unknown("lam", 2.0, 0.1, 3.0)])
-    assert shooting._compiled(osc)[1]._cache_size() == size == 1
+    assert parametric._compiled(osc)[1]._cache_size() == size == 1
 
 
 def test_one_percent_noise_is_within_three_standard_errors(osc):

@@ -37,8 +37,9 @@ _FACE = {
     "checkpoint": ("save_checkpoint", "load_checkpoint", "save_piecewise", "load_piecewise", "save_bundle",
                    "load_bundle"),
     "evaluation": ("reference_solution", "integrate", "error_table", "judge_training", "Metric", "register_metric",
-                   "fit_shooting", "synthetic_observations", "reference_members"),
-    "inverse": ("fit_joint", "JointConfig", "fit_with_bundle"),
+                   "reference_members"),
+    "inverse": ("fit", "Shooting", "CollocationFit", "Joint", "Bundle", "FitResult", "fit_joint", "JointConfig",
+                "fit_with_bundle", "fit_collocation", "fit_multistart", "fit_shooting", "synthetic_observations"),
     "observations": ("Observations", "Unknown", "load_observations"),
     "experiments": ("run_experiment", "resume_experiment", "run_sweep", "load_config", "run_family"),
 }

@@ -412,6 +412,14 @@ def _init_params(items: list[str]) -> dict[str, float]:
     return out
 
 
+def _init_end(text: str):
+    """--T as TOML will hold it: a number, or an expression string such as "20*pi"."""
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
 def cmd_init(args) -> int:
     from atlasnn.experiments.config import write_template
 
@@ -424,8 +432,8 @@ def cmd_init(args) -> int:
     split = lambda names: [n for part in names or () for n in part.split(",") if n]  # noqa: E731  "q1,q2" or q1 q2
     write_template(args.path, force=args.force, transfer=args.transfer, system=args.system,
                    hamiltonian=args.hamiltonian, coordinates=split(args.coordinates), momenta=split(args.momenta), z0=z0,
-                   params=_init_params(split(args.params)))
-    kind = "transfer (source -> target)" if args.transfer else "single interval"
+                   params=_init_params(split(args.params)), T=_init_end(args.T), march=args.march, solve=args.solve)
+    kind = "transfer (source -> target)" if args.transfer else "single interval" + (", time-marched" if args.march else "")
     print(f"wrote {args.path} ({kind}); every key is commented there, all of them: `atlasnn config`")
     print(f"  smoke test (a few hundred epochs): atlasnn run {shlex.quote(args.path)} --quick")
     print(f"  the full budget:                   atlasnn run {shlex.quote(args.path)}")

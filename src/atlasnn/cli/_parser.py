@@ -155,6 +155,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--params", nargs="+", default=None, metavar="NAME=VALUE", help="parameter values, e.g. "
                    "lam=0.5 (a built-in's parameters, or names used in --hamiltonian)")
     s.add_argument("--force", action="store_true", help="overwrite an existing file")
+    s.add_argument("--T", default="4*pi", metavar="T", help="end of the interval (a number or e.g. 20*pi; "
+                   "default 4*pi)")
+    s.add_argument("--march", action="store_true", help="time-march the model over [0, T] (for anything longer "
+                   "than a few periods) instead of training it directly")
+    s.add_argument("--solve", action="store_true", help="also the float64 collocation solver's column (atlasnn.solve)")
     s.set_defaults(func=cmd_init)
 
     s = sub.add_parser("config", help="every key of an experiment file: type, default, limits, meaning")

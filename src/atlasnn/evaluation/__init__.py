@@ -1,6 +1,7 @@
 """Judging solutions: the classical integrators and the reference solution, error metrics (one
 declaration each), the quality verdict, the work–precision numbers (no plotting here), and
-least-squares shooting, the baseline for identifying parameters of H from data."""
+the parametric DOP853 solve (θ an argument, forward sensitivities beside it) that shooting and the
+members' reference use."""
 
 from atlasnn.evaluation import _workprecision as workprecision
 from atlasnn.evaluation._integrators import (
@@ -53,14 +54,7 @@ from atlasnn.evaluation._quality import (
 from atlasnn.evaluation._record import TABLE_ROLES, MarchSummary, TrainingRecord
 from atlasnn.evaluation._members import reference_members
 from atlasnn.evaluation._vectorised import MemberRun, verlet_members, yoshida4_members
-from atlasnn.evaluation._fit_result import MISFIT_LIMIT, FitResult, distrust, flag_misfit, gauss_newton_covariance
-from atlasnn.evaluation._shooting import (
-    check_shooting_inputs,
-    fit_shooting,
-    predict_fit,
-    shooting_misfit,
-    synthetic_observations,
-)
+from atlasnn.evaluation._parametric import ParametricSolveFailed, solve_parametric
 from atlasnn.evaluation._workprecision import SYMPLECTIC, WorkPoint
 
 __all__ = [
@@ -112,17 +106,9 @@ __all__ = [
     "workprecision",
     "WorkPoint",
     "SYMPLECTIC",
-    "synthetic_observations",
-    "FitResult",
-    "distrust",
-    "shooting_misfit",
-    "check_shooting_inputs",
-    "fit_shooting",
     "reference_members",
-    "gauss_newton_covariance",
-    "flag_misfit",
-    "MISFIT_LIMIT",
-    "predict_fit",
+    "solve_parametric",
+    "ParametricSolveFailed",
     "MemberRun",
     "verlet_members",
     "yoshida4_members",

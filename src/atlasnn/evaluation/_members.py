@@ -9,7 +9,7 @@ import numpy as np
 
 from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.evaluation._integrators import REFERENCE_ATOL, REFERENCE_RTOL
-from atlasnn.evaluation._shooting import _solve, _SolveFailed
+from atlasnn.evaluation._parametric import ParametricSolveFailed, solve_parametric
 from atlasnn.systems import BundleBox, HamiltonianSystem
 
 __all__ = ["reference_members"]
@@ -29,7 +29,7 @@ def reference_members(system: HamiltonianSystem, box: BundleBox, z0: Any, lam: A
     out = np.empty((z0.shape[0], t.size, system.state_dim))
     for i in range(z0.shape[0]):
         try:
-            out[i] = _solve(system, z0[i], theta[i], box.t0, t, rtol, atol)[0]
-        except _SolveFailed as exc:
+            out[i] = solve_parametric(system, z0[i], theta[i], box.t0, t, rtol, atol)[0]
+        except ParametricSolveFailed as exc:
             raise AtlasError(f"reference of member {i} (z0 = {z0[i].tolist()}) failed: {exc}") from None
     return out

@@ -20,20 +20,14 @@ import numpy as np
 
 from atlasnn.checkpoint import save_bundle
 from atlasnn.errors import AtlasError
-from atlasnn.evaluation import (
-    check_shooting_inputs,
-    fit_shooting,
-    predict_fit,
-    reference_members,
-    synthetic_observations,
-)
+from atlasnn.evaluation import reference_members
 from atlasnn.experiments._store import check_run_dir
 from atlasnn.experiments.config._family import FamilyConfig
 from atlasnn.fileio import write_json, write_text
-from atlasnn.inverse import auto_starts, bundle_box_for, fit_joint, fit_multistart, fit_with_bundle, judge_fit
+from atlasnn.inverse import check_shooting_inputs, fit, judge_fit, predict_fit, synthetic_observations
 from atlasnn.observations import Observations, load_observations
 from atlasnn.report import plot_bundle_errors, plot_bundle_map, plot_estimates, plot_fit_trajectory
-from atlasnn.training import BundleTrainConfig, train_bundle
+from atlasnn.training import train_bundle
 from atlasnn.version import __version__
 
 __all__ = ["run_family", "rewrite_family_summary", "EVAL_MEMBERS", "EVAL_TIMES"]
@@ -158,23 +152,6 @@ def _truth(cfg: FamilyConfig, system) -> dict[str, float] | None:
                      else float(system.params[u.name])) for u in cfg.unknowns}
 
 
-def _fit_once(method: str, cfg: FamilyConfig, system, obs, t0: float, seed: int):
-    fit = cfg.fit
-    if method == "shooting":
-        if fit.starts == 1:
-            return judge_fit(fit_shooting(system, obs, cfg.unknowns, t0=t0, segments=fit.segments), cfg.unknowns), 0.0
-        return fit_multistart(system, obs, cfg.unknowns, t0=t0, segments=fit.segments, starts=fit.starts,
-                              seed=seed), 0.0
-    if method == "joint":  # the network fits are judged by _fit_seed, against the shooting's best
-        return fit_joint(system, obs, cfg.unknowns, t0=t0, config=fit.joint, seed=seed), 0.0
-    box = bundle_box_for(system, cfg.unknowns, None, float(obs.t[-1]), t0)
-    trained = train_bundle(system, box, BundleTrainConfig(windows=fit.bundle_windows, epochs=fit.bundle_epochs,
-                                                          lm_steps=fit.bundle_lm_steps,
-                                                          lm_points=fit.bundle_lm_points),
-                           width=fit.bundle_width, seed=seed)
-    return fit_with_bundle(trained.solution, obs, cfg.unknowns), trained.train_time + trained.compile_time
-
-
 def _record(result, method: str, seed: int, training: float, truth: dict | None) -> dict[str, Any]:
     rec = {**result.as_dict(), "fit_method": result.method, "seed": seed, "method": method,
            "training_seconds": training, "total_seconds": result.wall_time + training}
@@ -198,26 +175,26 @@ def _fit_line(seed: int, method: str, result, rec: dict) -> str:
 
 
 def _fit_seed(cfg: FamilyConfig, system, obs, t0: float, seed: int, truth, log) -> tuple[list[dict], dict]:
-    """Every method on one seed's data: records (a method that fails is a record saying so, and the
-    others go on) and the fits; the network fits are cross-checked against the shooting's best."""
+    """Every method on one seed's data, each through :func:`atlasnn.inverse.fit`: records (a method
+    that fails is a record saying so, and the others go on) and the fits; every fit is cross-checked
+    against the better of the two searches (shooting's multistart, the collocation fit)."""
     fits, records = {}, []
-    starts = auto_starts(len(cfg.unknowns)) if cfg.fit.starts == "auto" else cfg.fit.starts
-    what = {"shooting": "shooting" + ("" if starts == 1 else f" from {starts} starts over the bounds"),
-            "joint": f"joint network, {cfg.fit.joint.epochs} Adam epochs + {cfg.fit.joint.lm_steps} LM steps",
-            "bundle": f"bundle training, {cfg.fit.bundle_epochs} epochs, then least squares"}
-    for method in cfg.fit.methods:
-        log(f"  seed {seed} {method}: fitting ({what[method]})…")
+    for way in cfg.fit.method_objects():
+        method = way.name
+        log(f"  seed {seed} {method}: fitting ({way.describe(cfg.unknowns)})…")
         try:
-            fits[method] = _fit_once(method, cfg, system, obs, t0, seed)
+            result = fit(system, obs, cfg.unknowns, method=way, t0=t0, seed=seed)
+            fits[method] = (result, float(result.search.get("training_seconds", 0.0)))
         except AtlasError as exc:
             records.append({"seed": seed, "method": method, "failed": str(exc), "trusted": False,
                             "names": [u.name for u in cfg.unknowns]})
             log(f"  seed {seed} {method}: FAILED — {exc}")
-    best = fits.get("shooting", (None,))[0]
-    better = best if best is not None and best.trusted else None
     for method, (result, training) in fits.items():
-        if method != "shooting":  # shooting's fit was judged where it was made
-            judge_fit(result, cfg.unknowns, system=system, observations=obs, better=better)
+        # each fit against the best other trusted fit of the two searches, shooting's multistart and
+        # the collocation fit (the rules are idempotent: a fit already judged gains no repeated note)
+        others = [fits[m][0] for m in ("shooting", "collocation") if m in fits and m != method and fits[m][0].trusted]
+        better = min(others, key=lambda f: f.noise_estimate) if others else None
+        judge_fit(result, cfg.unknowns, system=system, observations=obs, better=better)
         rec = _record(result, method, seed, training, truth)
         records.append(rec)
         log(_fit_line(seed, method, result, rec))

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from atlasnn.errors import ConfigError
-from atlasnn.evaluation import FitResult, flag_misfit, gauss_newton_covariance
+from atlasnn.inverse._fit_result import FitResult, flag_misfit, gauss_newton_covariance
 from atlasnn.observations import Observations, Unknown, check_unknowns
 from atlasnn.solutions import BundleSolution
 from atlasnn.systems import BundleBox

@@ -40,7 +40,7 @@ import optax
 from jax.flatten_util import ravel_pytree
 
 from atlasnn.errors import ConfigError
-from atlasnn.evaluation import FitResult, flag_misfit, gauss_newton_covariance
+from atlasnn.inverse._fit_result import FitResult, flag_misfit, gauss_newton_covariance
 from atlasnn.nn import make_model
 from atlasnn.observations import Observations, Unknown, check_unknowns
 from atlasnn.systems import HamiltonianSystem

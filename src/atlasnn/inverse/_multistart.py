@@ -1,6 +1,6 @@
 """Fits that survive a bad first guess, and say when they are not to be trusted.
 
-:func:`fit_multistart` runs least-squares shooting (:func:`atlasnn.evaluation.fit_shooting`) from
+:func:`fit_multistart` runs least-squares shooting (:func:`fit_shooting`) from
 the user's guess and from a scrambled Halton set of starts spread over the unknowns' bounds, and
 keeps the fit of lowest misfit. A start whose orbit cannot be integrated (it escapes before the
 last observation) is skipped and counted, never fatal; only when every start fails is the fit
@@ -14,10 +14,10 @@ note naming the remedy):
   (Δχ² = ΔRSS/s² below the 99 % quantile of χ² with as many degrees of freedom as unknowns): the
   data cannot choose between them, and the σ of either understates the uncertainty;
 - another fit of the same data (the multistart's best) with a significantly lower misfit: this
-  fit sits in a local minimum (the cross-check applied to the joint and bundle fits).
+  fit sits in a local minimum (the cross-check a family run applies to every fit).
 
 The misfit rule itself (a residual far above the data's scale) is
-:func:`atlasnn.evaluation.flag_misfit`.
+:func:`flag_misfit`.
 """
 
 from __future__ import annotations
@@ -31,7 +31,8 @@ import numpy as np
 from scipy.stats import chi2, qmc
 
 from atlasnn.errors import AtlasError, ConfigError
-from atlasnn.evaluation import FitResult, distrust, fit_shooting, shooting_misfit
+from atlasnn.inverse._fit_result import FitResult, distrust
+from atlasnn.inverse._shooting import fit_shooting, shooting_misfit
 from atlasnn.observations import Observations, Unknown, check_unknowns
 from atlasnn.systems import HamiltonianSystem
 

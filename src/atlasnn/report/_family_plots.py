@@ -19,7 +19,7 @@ from atlasnn.report._plotkit import _new_figure, _save
 
 __all__ = ["plot_bundle_map", "plot_bundle_errors", "plot_estimates", "plot_fit_trajectory", "METHOD_COLORS"]
 
-METHOD_COLORS = {"shooting": "black", "joint": "tab:blue", "bundle": "tab:orange"}
+METHOD_COLORS = {"shooting": "black", "joint": "tab:blue", "bundle": "tab:orange", "collocation": "tab:green"}
 
 
 def plot_bundle_map(inputs: np.ndarray, labels: Sequence[str], errors: np.ndarray, stem: str | Path,

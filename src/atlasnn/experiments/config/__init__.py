@@ -18,7 +18,6 @@ from atlasnn.experiments.config._config import (
 )
 from atlasnn.experiments.config._methods import MarchSettings, SolveSettings
 from atlasnn.experiments.config._family import (
-    FIT_METHODS,
     FamilyConfig,
     builtin_families,
     family_config_path,
@@ -45,7 +44,6 @@ from atlasnn.experiments.config._templates import init_template, write_template
 __all__ = [
     "ExperimentConfig",
     "FamilyConfig",
-    "FIT_METHODS",
     "is_family",
     "parse_family",
     "load_family",

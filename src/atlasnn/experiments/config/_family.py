@@ -16,16 +16,15 @@ from atlasnn.experiments.config._config import SystemConfig, _system_config, bui
 from atlasnn.experiments.config._schema import MAX_SEEDS, parse_table
 from atlasnn.experiments.config._system_checks import _config_folder
 from atlasnn.experiments.config._types import _fail, _integer, _key, _number, _string, _table
-from atlasnn.inverse import JointConfig
+from atlasnn.inverse import FIT_METHODS, AbstractFitMethod, Bundle, CollocationFit, Joint, JointConfig, Shooting
 from atlasnn.nn import model_aliases
 from atlasnn.observations import Unknown
 from atlasnn.systems import BundleBox, HamiltonianSystem
 from atlasnn.training import BundleTrainConfig
 
-__all__ = ["FamilyConfig", "BundleSettings", "ObservationSettings", "FitSettings", "FIT_METHODS",
+__all__ = ["FamilyConfig", "BundleSettings", "ObservationSettings", "FitSettings",
            "is_family", "parse_family", "load_family", "QUICK_CAPS", "builtin_families", "family_config_path"]
 
-FIT_METHODS = ("joint", "bundle", "shooting")
 #: --quick: every budget capped (a smoke test of the whole pipeline)
 QUICK_CAPS = {"epochs": 300, "lm_steps": 10, "test_members": 16, "windows": 2}
 _BUNDLE_KEYS = {"T", "t0", "z0_rel", "z0_low", "z0_high", "ranges", "windows", "width", "depth", "model", "epochs",
@@ -33,7 +32,8 @@ _BUNDLE_KEYS = {"T", "t0", "z0_rel", "z0_low", "z0_high", "ranges", "windows", "
                 "test_seed"}
 _OBS_KEYS = {"file", "n", "t0", "T", "names", "noise", "times_seed"}
 _FIT_KEYS = {"methods", "width", "depth", "epochs", "lm_steps", "lm_points", "data_weight", "segments", "starts",
-             "bundle_windows", "bundle_epochs", "bundle_lm_steps", "bundle_lm_points", "bundle_width"}
+             "bundle_windows", "bundle_epochs", "bundle_lm_steps", "bundle_lm_points", "bundle_width",
+             "collocation_windows", "collocation_features"}
 
 
 @dataclass(frozen=True)
@@ -94,10 +94,11 @@ class ObservationSettings:
 
 @dataclass(frozen=True)
 class FitSettings:
-    """[fit]: which methods run (``joint``, ``bundle``, ``shooting``), the joint network's settings,
-    the shooting baseline's ``segments`` and ``starts`` (``"auto"``: the guess and 12 more per
-    unknown over the bounds, :func:`atlasnn.inverse.fit_multistart`; 1: the guess alone), the
-    bundle's (``bundle_*``)."""
+    """[fit]: which methods run (``joint``, ``bundle``, ``shooting``, ``collocation``), the joint
+    network's settings, the shooting baseline's ``segments`` and ``starts`` (``"auto"``: the guess
+    and 12 more per unknown over the bounds, :func:`atlasnn.inverse.fit_multistart`; 1: the guess
+    alone), the bundle's (``bundle_*``), the simultaneous collocation fit's (``collocation_*``,
+    :func:`atlasnn.inverse.fit_collocation`)."""
 
     methods: tuple[str, ...] = ("joint", "shooting")
     joint: JointConfig = JointConfig()
@@ -108,6 +109,19 @@ class FitSettings:
     bundle_lm_steps: int = 100
     bundle_lm_points: int = 512
     bundle_width: int = 32
+    collocation_windows: int | str = "auto"
+    collocation_features: int = 16
+
+    def method_objects(self) -> tuple[AbstractFitMethod, ...]:
+        """The listed methods as the objects :func:`atlasnn.inverse.fit` takes, with these settings."""
+        made = {"shooting": lambda: Shooting(segments=self.segments, starts=self.starts),
+                "joint": lambda: Joint(self.joint),
+                "bundle": lambda: Bundle(windows=self.bundle_windows, epochs=self.bundle_epochs,
+                                         lm_steps=self.bundle_lm_steps, lm_points=self.bundle_lm_points,
+                                         width=self.bundle_width),
+                "collocation": lambda: CollocationFit(windows=self.collocation_windows,
+                                                      features=self.collocation_features)}
+        return tuple(made[m]() if m in made else FIT_METHODS[m]() for m in self.methods)
 
 
 @dataclass(frozen=True)
@@ -240,7 +254,7 @@ def _fit(v: dict, quick: bool) -> FitSettings:
     _table("fit", v, _FIT_KEYS)
     methods = v.get("methods", list(FitSettings.methods))
     if not isinstance(methods, list) or not methods or any(m not in FIT_METHODS for m in methods):
-        _fail("fit.methods", methods, f"expected a non-empty list of {list(FIT_METHODS)}")
+        _fail("fit.methods", methods, f"expected a non-empty list of {sorted(FIT_METHODS)}")
     joint = {}
     for name, low, high in (("width", 1, 1024), ("depth", 1, 8), ("epochs", 0, 10**7), ("lm_steps", 0, 10**5),
                             ("lm_points", 2, 65536)):
@@ -252,11 +266,14 @@ def _fit(v: dict, quick: bool) -> FitSettings:
         joint = {**joint, "epochs": min(joint.get("epochs", 3000), 300), "lm_steps": min(joint.get("lm_steps", 300), 20)}
     kw: dict[str, Any] = {"methods": tuple(dict.fromkeys(methods)), "joint": JointConfig(**joint)}
     for name, low, high in (("segments", 1, 1000), ("bundle_windows", 1, 256), ("bundle_epochs", 0, 10**7),
-                            ("bundle_lm_steps", 0, 10**5), ("bundle_lm_points", 2, 65536), ("bundle_width", 1, 1024)):
+                            ("bundle_lm_steps", 0, 10**5), ("bundle_lm_points", 2, 65536), ("bundle_width", 1, 1024),
+                            ("collocation_features", 2, 256)):
         if name in v:
             kw[name] = _integer(f"fit.{name}", v[name], low, high)
     if "starts" in v and v["starts"] != "auto":
         kw["starts"] = _integer("fit.starts", v["starts"], 1, 10_000)
+    if "collocation_windows" in v and v["collocation_windows"] != "auto":
+        kw["collocation_windows"] = _integer("fit.collocation_windows", v["collocation_windows"], 1, 10_000)
     out = FitSettings(**kw)
     if quick:
         out = dataclasses.replace(out, bundle_epochs=min(out.bundle_epochs, 300),

@@ -48,11 +48,15 @@ def _system_items(system: str | None, hamiltonian: str | None, coordinates: Sequ
     return items + [("z0", [float(x) for x in z0] if z0 is not None else [1.0] * d + [0.0] * d)]
 
 
-def _tables(name: str, transfer: bool, system_items: list, what: str) -> list[tuple[str, list[tuple[str, Any]]]]:
-    """(table, [(key, value)]) in file order: the paper's oscillator settings."""
-    interval = "source [0, 4pi] -> target [0, 20pi]" if transfer else "one interval [0, 4pi]"
+def _tables(name: str, transfer: bool, system_items: list, what: str, T: Any = "4*pi", march: bool = False,
+            solve: bool = False) -> list[tuple[str, list[tuple[str, Any]]]]:
+    """(table, [(key, value)]) in file order: the paper's oscillator settings; ``march``: the
+    models time-marched over [0, T] instead of trained directly; ``solve``: the float64
+    collocation solver's column too."""
+    interval = "source [0, 4pi] -> target [0, 20pi]" if transfer else f"one interval [0, {T}]"
+    interval += ", time-marched" if march else ""
     top = [("name", name), ("description", f"{what}: {interval}"), ("kind", "transfer" if transfer else "short"),
-           ("models", list(MODELS)), ("seeds", [0])]
+           ("models", [] if march else list(MODELS)), ("seeds", [0])]
     train = [("epochs", 40000 if transfer else 100000), ("lr", 5e-3 if transfer else 8e-3),
              ("betas", [0.999, 0.9999]), ("lam_reg", 1.0), ("n_points", 200), ("sigma_per_T", 0.03)]
     train += [("tolerance", 4e-5)] if transfer else []
@@ -63,11 +67,15 @@ def _tables(name: str, transfer: bool, system_items: list, what: str) -> list[tu
         tables += [("source", [("t0", 0.0), ("T", "4*pi")]), ("source.train", [("n_points", 200), ("lr", 8e-3)]),
                    ("target", [("t0", 0.0), ("T", "20*pi")]), ("target.train", [("n_points", 500)])]
     else:
-        tables += [("interval", [("t0", 0.0), ("T", "4*pi")])]
+        tables += [("interval", [("t0", 0.0), ("T", T)])]
     tables += [("train", train)]
     tables += [(f"gamma_init.{k.name}", [(g, 1.0) for g in k.gamma_names]) for k in MODELS.values() if k.gamma_names]
     if transfer:
         tables += [("transfer", [("thaw", False), ("carry_adam", True), ("baseline", True)])]
+    if march:
+        tables += [("march", [("models", ["atlas_exp"])])]
+    if solve:
+        tables += [("solve", [("rtol", 1e-12), ("atol", 1e-14)])]
     tables += [("evaluation", [("eval_points", 5000 if transfer else 2000), ("fine_factor", 100)])]
     return tables
 
@@ -115,10 +123,17 @@ def _check(text: str, source: str) -> None:
 def init_template(path: str | Path, *, transfer: bool = False, system: str | None = None,
                   hamiltonian: str | None = None, coordinates: Sequence[str] = (),
                   momenta: Sequence[str] = (), z0: Sequence[float] | None = None,
-                  params: Mapping[str, float] | None = None) -> str:
+                  params: Mapping[str, float] | None = None, T: Any = "4*pi", march: bool = False,
+                  solve: bool = False) -> str:
     """The text of a validated template for ``path`` (not written). Default system: the pendulum.
-    ``params``: values of named parameters (a built-in's, which must exist, or names used in H)."""
+    ``params``: values of named parameters (a built-in's, which must exist, or names used in H).
+    ``T``: the interval's end (a number or an expression such as "20*pi"); ``march``: time-march
+    the model instead of training it directly (for anything longer than a few periods);
+    ``solve``: add the float64 collocation solver's column. Neither goes with ``transfer``."""
     path = Path(path)
+    if transfer and (march or solve or T != "4*pi"):
+        raise ConfigError("--march, --solve and --T make a single-interval template; a transfer one has source and "
+                          "target intervals (edit them in the file)")
     if system is not None and hamiltonian is not None:
         raise ConfigError("give --system or --hamiltonian, not both")
     if hamiltonian is None and (coordinates or momenta):
@@ -135,7 +150,7 @@ def init_template(path: str | Path, *, transfer: bool = False, system: str | Non
     text = None
     for separable in (True, False):  # separable = true if H passes the check
         items = _system_items(system, hamiltonian, coordinates, momenta, z0, separable, dict(params or {}))
-        text = _render(path.name, _tables(name, transfer, items, what), transfer)
+        text = _render(path.name, _tables(name, transfer, items, what, T, march, solve), transfer)
         try:
             _check(text, str(path))
             return text

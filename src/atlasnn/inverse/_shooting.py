@@ -11,9 +11,8 @@ where z(t; θ, z0) is the DOP853 solution of dz/dt = J∇H(z; θ) from t0. The m
 The Jacobian of the residuals comes from **forward sensitivities**: the variational equations
 dS/dt = A(z, θ) S + ∂f/∂θ · D, with A = ∂f/∂z, are integrated together with z, one column per
 unknown (D selects the parameter of the column; a z0 column starts at a unit vector instead).
-The right-hand side f(z, θ) = J∇H(z; θ) is built from ``system.parametric`` and jitted once per
-system in float64; θ reaches it as an argument of ``solve_ivp``, so trying a new θ compiles
-nothing. A column of the sensitivities is one forward-mode derivative (``jax.jvp``) of f.
+The solve is :func:`atlasnn.evaluation.solve_parametric` (θ an argument: trying a new θ compiles
+nothing).
 
 ``segments > 1`` gives **multiple shooting**: the observation times are split into consecutive
 segments, every segment after the first starts from its own unknown state, and the residuals are
@@ -24,149 +23,21 @@ user's unknowns are reported, with standard errors from the full Gauss–Newton 
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from typing import Any, Sequence
 
-import jax
-import jax.numpy as jnp
 import numpy as np
-from scipy.integrate import solve_ivp
 from scipy.optimize import least_squares
 
-from atlasnn.compile_cache import program_cache
 from atlasnn.errors import AtlasError, ConfigError
-from atlasnn.evaluation._fit_result import FitResult, flag_misfit, gauss_newton_covariance
-from atlasnn.evaluation._integrators import reference_solution
+from atlasnn.evaluation import ParametricSolveFailed, solve_parametric
+from atlasnn.inverse._fit_result import FitResult, flag_misfit, gauss_newton_covariance
+from atlasnn.inverse._synthetic import finite_number
 from atlasnn.observations import Observations, Unknown, check_unknowns
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["synthetic_observations", "fit_shooting", "predict_fit", "shooting_misfit", "check_shooting_inputs"]
-
-
-# ----------------------------------------------------------------------- synthetic data
-def synthetic_observations(system: HamiltonianSystem, z0: Any, times: Any, names: Sequence[str], noise: float,
-                           seed: int, *, t0: float = 0.0) -> Observations:
-    """Noisy samples of some state components along the reference trajectory.
-
-    The reference solution (DOP853, rtol = atol = 1e-12) from ``z0`` at ``t0`` (default 0, where the
-    fits start) with the system's own parameters, plus to component c Gaussian noise of standard
-    deviation ``noise × RMS_c`` (RMS_c = sqrt(mean of z_c(t_i)²) over the times: ``noise=0.01`` is
-    "1 % noise"), drawn from ``numpy.random.default_rng(seed)``.
-
-    Args:
-        system: the Hamiltonian system (its parameters are the truth).
-        z0: the state at t0, or ``None`` for the system's default.
-        times: strictly increasing, finite 1-D times (at least 2), all ≥ t0.
-        names: the observed state components, e.g. ``["x"]``.
-        noise: the relative noise level, finite and ≥ 0.
-        seed: the seed of the noise generator (equal seeds give equal data).
-    """
-    if not isinstance(system, HamiltonianSystem):
-        raise ConfigError(f"system must be a HamiltonianSystem, got {type(system).__name__}")
-    t = _times(times, "times")
-    start = _finite(t0, "t0")
-    if start > t[0]:
-        raise ConfigError(f"t0={start!r} lies after the first time {float(t[0])!r}")
-    level = _finite(noise, "noise")
-    if level < 0:
-        raise ConfigError(f"noise must be ≥ 0 (a fraction of each component's RMS), got {noise!r}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-        raise ConfigError(f"seed must be an integer, got {seed!r}")
-    probe = Observations(t=t, values=np.zeros((t.size, len(names))), names=tuple(names), source="synthetic")
-    idx = probe.indices(system.state_names)
-    grid = t if start == t[0] else np.concatenate([[start], t])
-    clean = reference_solution(system, z0, grid)[grid.size - t.size:, idx]
-    rms = np.sqrt(np.mean(clean**2, axis=0))
-    rng = np.random.default_rng(int(seed))
-    values = clean + level * rms * rng.standard_normal(clean.shape)
-    return Observations(t=t, values=values, names=probe.names, source="synthetic")
-
-
-def _finite(value: Any, what: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{what} must be a number, got {value!r}") from None
-    if isinstance(value, bool) or not math.isfinite(v):
-        raise ConfigError(f"{what} must be a finite number, got {value!r}")
-    return v
-
-
-def _times(times: Any, what: str) -> np.ndarray:
-    try:
-        t = np.asarray(times, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{what} must be a 1-D array of numbers") from None
-    if t.ndim != 1 or t.size < 2:
-        raise ConfigError(f"{what} must be a 1-D array of at least 2 times, got shape {t.shape}")
-    if not np.all(np.isfinite(t)):
-        raise ConfigError(f"{what} must be finite, {int(np.sum(~np.isfinite(t)))} entries are not")
-    if not np.all(np.diff(t) > 0):
-        i = int(np.argmax(~(np.diff(t) > 0)))
-        raise ConfigError(f"{what} must be strictly increasing, got {what}[{i}]={float(t[i])!r} >= "
-                          f"{what}[{i + 1}]={float(t[i + 1])!r}")
-    return t
-
-
-# ------------------------------------------------------------------ compiled right-hand sides
-@program_cache
-@functools.lru_cache(maxsize=32)
-def _compiled(system: HamiltonianSystem):
-    """(f, g): jitted f(z, θ) = J∇H(z; θ) and g(y, θ, D) = d/dt [z, S] for the variational system."""
-    fn, d = system.parametric, system.dim
-    n = 2 * d
-
-    def field_(z, theta):
-        grad = jax.grad(lambda zz: jnp.asarray(fn(zz[:d], zz[d:], theta)).reshape(()))(z)
-        return jnp.concatenate([grad[d:], -grad[:d]])
-
-    def augmented(y, theta, dtheta):
-        z, S = y[:n], y[n:].reshape(n, dtheta.shape[1])
-        # column k: A S_k + ∂f/∂θ D_k, one forward-mode derivative of f in the direction (S_k, D_k)
-        dS = jax.vmap(lambda s, dth: jax.jvp(field_, (z, theta), (s, dth))[1], in_axes=(1, 1), out_axes=1)(S, dtheta)
-        return jnp.concatenate([field_(z, theta), dS.reshape(-1)])
-
-    return jax.jit(field_), jax.jit(augmented)
-
-
-class _SolveFailed(Exception):
-    pass
-
-
-def _rhs(fn):
-    def rhs(t, y, *args):
-        out = np.asarray(fn(y, *args))
-        if not np.all(np.isfinite(out)):
-            raise _SolveFailed(f"the right-hand side is not finite at t = {t:.6g}")
-        return out
-    return rhs
-
-
-def _solve(system, z_init, theta, t0, times, rtol, atol, S_init=None, dtheta=None):
-    """(Z (len(times), 2d), S (len(times), 2d, m) or None, nfev) from z_init at t0; times sorted ≥ t0."""
-    f, g = _compiled(system)
-    n = system.state_dim
-    grid, inverse = np.unique(times, return_inverse=True)
-    with_s = dtheta is not None
-    y0 = np.concatenate([z_init, S_init.reshape(-1)]) if with_s else np.asarray(z_init, np.float64)
-    if grid[-1] <= t0:
-        Y, nfev = np.repeat(y0[None], grid.size, axis=0), 0
-    else:
-        with jax.enable_x64(True):
-            args = (jnp.asarray(theta, jnp.float64),) + ((jnp.asarray(dtheta, jnp.float64),) if with_s else ())
-            try:
-                sol = solve_ivp(_rhs(g if with_s else f), (t0, float(grid[-1])), y0, method="DOP853",
-                                t_eval=grid, rtol=rtol, atol=atol, args=args)
-            except _SolveFailed as exc:
-                raise _SolveFailed(f"DOP853 stopped: {exc}") from None
-        if not sol.success or sol.y.shape[1] != grid.size or not np.all(np.isfinite(sol.y)):
-            raise _SolveFailed(f"DOP853 failed: {' '.join(str(sol.message).split())}")
-        Y, nfev = sol.y.T, int(sol.nfev)
-    Y = Y[inverse]
-    S = Y[:, n:].reshape(len(times), n, -1) if with_s else None
-    return Y[:, :n], S, nfev
+__all__ = ["fit_shooting", "predict_fit", "shooting_misfit", "check_shooting_inputs"]
 
 
 # -------------------------------------------------------------------------------- problem
@@ -200,7 +71,7 @@ class _Problem:
 
     def trajectory(self, x, times):
         theta, z = self.theta_z0(x)
-        Z, _, nfev = _solve(self.system, z, theta, self.starts[0], times, self.rtol, self.atol)
+        Z, _, nfev = solve_parametric(self.system, z, theta, self.starts[0], times, self.rtol, self.atol)
         self.n_rhs, self.n_solves = self.n_rhs + nfev, self.n_solves + 1
         return Z
 
@@ -226,7 +97,7 @@ class _Problem:
             for c, (_, j) in enumerate(self.p_cols):
                 D[j, c] = 1.0
             S0[:, len(self.p_cols):] = np.eye(n)
-        Z, S, nfev = _solve(self.system, z, theta, self.starts[k], times, self.rtol, self.atol, S0, D)
+        Z, S, nfev = solve_parametric(self.system, z, theta, self.starts[k], times, self.rtol, self.atol, S0, D)
         self.n_rhs, self.n_solves = self.n_rhs + nfev, self.n_solves + 1
         return Z, S, cols
 
@@ -289,7 +160,7 @@ def fit_shooting(system: HamiltonianSystem, observations: Observations, unknowns
                     float(rtol), float(atol), float(continuity_weight))
     try:
         res, r, J = _minimise(prob, *_start(prob, unknowns), int(max_nfev))
-    except _SolveFailed as exc:
+    except ParametricSolveFailed as exc:
         raise AtlasError(f"shooting cannot integrate system {system.name!r} {exc}") from None
     n_data, n_user = observations.n_values, len(unknowns)
     cov, cond, weak = gauss_newton_covariance(J, float(r @ r), n_data - n_user)
@@ -328,7 +199,7 @@ def shooting_misfit(system: HamiltonianSystem, observations: Observations, unkno
     prob = _Problem(system, observations, unknowns, system.initial_state(z0).copy(), float(t0), 1, rtol, atol, 1.0)
     try:
         Z = prob.trajectory(np.asarray(values, np.float64), observations.t)
-    except _SolveFailed:
+    except ParametricSolveFailed:
         return math.inf
     r = Z[:, prob.idx] - observations.values
     return float(r.ravel() @ r.ravel()) if np.all(np.isfinite(r)) else math.inf
@@ -340,9 +211,9 @@ def _check_options(system, observations, t0, rtol, atol, continuity_weight, segm
     system.require_parametric("parameter identification")
     if not isinstance(observations, Observations):
         raise ConfigError(f"observations must be an Observations, got {type(observations).__name__}")
-    _finite(t0, "t0")
+    finite_number(t0, "t0")
     for name, val in (("rtol", rtol), ("atol", atol), ("continuity_weight", continuity_weight)):
-        if _finite(val, name) <= 0:
+        if finite_number(val, name) <= 0:
             raise ConfigError(f"{name} must be a positive number, got {val!r}")
     for name, val in (("segments", segments), ("max_nfev", max_nfev)):
         if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
@@ -354,15 +225,15 @@ def _minimise(prob: _Problem, x0, lo, hi, max_nfev: int):
     def fun(x):
         try:
             return prob.evaluate(x)[0]
-        except _SolveFailed:
+        except ParametricSolveFailed:
             return np.full(prob.n_res, np.nan)  # least_squares shrinks its step on a non-finite residual
 
     try:
         r0 = prob.evaluate(x0)[0]
-    except _SolveFailed as exc:
-        raise _SolveFailed(f"at the initial guess: {exc}") from None
+    except ParametricSolveFailed as exc:
+        raise ParametricSolveFailed(f"at the initial guess: {exc}") from None
     if not np.all(np.isfinite(r0)):
-        raise _SolveFailed("at the initial guess: the residuals are not finite")
+        raise ParametricSolveFailed("at the initial guess: the residuals are not finite")
     # multiple shooting: first with gaps weighted as data (the path may leave the continuous
     # trajectories and so pass the local minima of single shooting), then with the full weight
     ladder = [1.0, prob.w] if len(prob.rows) > 1 and prob.w > 1.0 else [prob.w]
@@ -373,8 +244,8 @@ def _minimise(prob: _Problem, x0, lo, hi, max_nfev: int):
         x0 = np.clip(res.x, lo, hi)
     try:
         r, J = prob.evaluate(res.x)
-    except _SolveFailed as exc:
-        raise _SolveFailed(f"at the optimum: {exc}") from None
+    except ParametricSolveFailed as exc:
+        raise ParametricSolveFailed(f"at the optimum: {exc}") from None
     return res, r, J
 
 
@@ -395,8 +266,8 @@ def _start(prob: _Problem, unknowns: tuple[Unknown, ...]):
     if len(prob.rows) > 1:
         try:
             Z = prob.trajectory(x0, np.asarray(prob.starts[1:]))
-        except _SolveFailed as exc:
-            raise _SolveFailed(f"at the initial guess: {exc}") from None
+        except ParametricSolveFailed as exc:
+            raise ParametricSolveFailed(f"at the initial guess: {exc}") from None
         x0 = np.concatenate([x0, Z.reshape(-1)])
         lo = np.concatenate([lo, np.full(Z.size, -np.inf)])
         hi = np.concatenate([hi, np.full(Z.size, np.inf)])
@@ -428,6 +299,6 @@ def predict_fit(system: HamiltonianSystem, fit: FitResult, z0: Any, t: Any) -> n
         else:
             theta[pn.index(u.name)] = u.guess
     try:
-        return _solve(system, z, theta, fit.t0, times, 1e-12, 1e-12)[0]
-    except _SolveFailed as exc:
+        return solve_parametric(system, z, theta, fit.t0, times, 1e-12, 1e-12)[0]
+    except ParametricSolveFailed as exc:
         raise AtlasError(f"predict_fit: cannot integrate system {system.name!r}: {exc}") from None

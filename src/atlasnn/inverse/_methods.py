@@ -1,0 +1,124 @@
+"""One door for every inverse fit: :func:`fit` takes a method object.
+
+A method is a small frozen dataclass deriving :class:`AbstractFitMethod` — its settings, a ``name``
+(the word a config's ``[fit] methods`` uses) and ``fit(...)``; a new method is one such class and
+one :func:`register_fit_method` entry. The built-in ones:
+
+* :class:`Shooting` — least-squares shooting with DOP853 (multiple shooting with ``segments``), from
+  the guess alone (``starts=1``) or as a multistart over the bounds (default);
+* :class:`CollocationFit` — the simultaneous float64 collocation fit, polished by shooting;
+* :class:`Joint` — one network trained on the data and Hamilton's equations together;
+* :class:`Bundle` — a bundle trained over the unknowns' bounds, then least squares on it.
+
+Every one returns a :class:`FitResult`, judged by the rules of :func:`judge_fit` that need no other fit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, ClassVar, Sequence
+
+from atlasnn.errors import ConfigError
+from atlasnn.inverse._base import AbstractFitMethod
+from atlasnn.inverse._bundle_fit import bundle_box_for, fit_with_bundle
+from atlasnn.inverse._collocation_fit import CollocationFit
+from atlasnn.inverse._fit_result import FitResult
+from atlasnn.inverse._joint import JointConfig, fit_joint
+from atlasnn.inverse._multistart import auto_starts, fit_multistart, judge_fit
+from atlasnn.inverse._shooting import fit_shooting
+from atlasnn.observations import Observations, Unknown
+from atlasnn.systems import HamiltonianSystem
+from atlasnn.training import BundleTrainConfig, train_bundle
+
+__all__ = ["AbstractFitMethod", "Shooting", "Joint", "Bundle", "FIT_METHODS", "register_fit_method", "fit"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Shooting(AbstractFitMethod):
+    """Least-squares shooting (:func:`fit_shooting`); ``starts``: ``"auto"`` (the guess and 12 more
+    per unknown over the bounds, :func:`fit_multistart`) or a count, 1 = the guess alone."""
+
+    segments: int = 1
+    starts: int | str = "auto"
+    name: ClassVar[str] = "shooting"
+
+    def fit(self, system, observations, unknowns, *, z0=None, t0=0.0, seed=0):
+        if self.starts == 1:
+            return judge_fit(fit_shooting(system, observations, unknowns, z0, t0=t0, segments=self.segments), unknowns)
+        return fit_multistart(system, observations, unknowns, z0, t0=t0, segments=self.segments, starts=self.starts,
+                              seed=seed)
+
+    def describe(self, unknowns):
+        count = auto_starts(len(unknowns)) if self.starts == "auto" else self.starts
+        return "shooting" + ("" if count == 1 else f" from {count} starts over the bounds")
+
+
+@dataclasses.dataclass(frozen=True)
+class Joint(AbstractFitMethod):
+    """One network trained on the data and Hamilton's equations together (:func:`fit_joint`)."""
+
+    config: JointConfig = JointConfig()
+    name: ClassVar[str] = "joint"
+
+    def fit(self, system, observations, unknowns, *, z0=None, t0=0.0, seed=0):
+        return fit_joint(system, observations, unknowns, z0, t0=t0, config=self.config, seed=seed)
+
+    def describe(self, unknowns):
+        return f"joint network, {self.config.epochs} Adam epochs + {self.config.lm_steps} LM steps"
+
+
+@dataclasses.dataclass(frozen=True)
+class Bundle(AbstractFitMethod):
+    """A bundle trained on the equations over the unknowns' bounds (time-marched in ``windows``),
+    then least squares with it as the model (:func:`fit_with_bundle`); the training's seconds are
+    in the result's ``search["training_seconds"]``."""
+
+    windows: int = 1
+    epochs: int = 2000
+    lm_steps: int = 100
+    lm_points: int = 512
+    width: int = 32
+    name: ClassVar[str] = "bundle"
+
+    def fit(self, system, observations, unknowns, *, z0=None, t0=0.0, seed=0):
+        box = bundle_box_for(system, unknowns, z0, float(observations.t[-1]), t0)
+        trained = train_bundle(system, box, BundleTrainConfig(windows=self.windows, epochs=self.epochs,
+                                                              lm_steps=self.lm_steps, lm_points=self.lm_points),
+                               width=self.width, seed=seed)
+        result = fit_with_bundle(trained.solution, observations, unknowns)
+        result.search = {**result.search, "training_seconds": trained.train_time + trained.compile_time}
+        return result
+
+    def describe(self, unknowns):
+        return f"bundle training, {self.epochs} epochs, then least squares"
+
+
+#: the fit methods by the name a config uses
+FIT_METHODS: dict[str, type] = {}
+
+
+def register_fit_method(cls: type) -> type:
+    """Add a method class (an :class:`AbstractFitMethod` with a ``name``) to :data:`FIT_METHODS`."""
+    if not (isinstance(cls, type) and issubclass(cls, AbstractFitMethod)):
+        raise ConfigError(f"a fit method must be an AbstractFitMethod subclass, got {cls!r}")
+    FIT_METHODS[cls.name] = cls
+    return cls
+
+
+for _cls in (Shooting, Joint, Bundle, CollocationFit):
+    register_fit_method(_cls)
+
+
+def fit(system: HamiltonianSystem, observations: Observations, unknowns: Sequence[Unknown],
+        method: AbstractFitMethod | None = None, *, z0: Any = None, t0: float = 0.0, seed: int = 0) -> FitResult:
+    """Fit ``unknowns`` (parameters of H, ``z0.<name>`` initial-state components) to
+    ``observations`` by ``method`` (default: :class:`Shooting`, a multistart over the bounds).
+
+    ``method`` is an object — ``Shooting(segments=4)``, ``CollocationFit()``, ``Joint(JointConfig(epochs=500))``,
+    ``Bundle(windows=4)`` — not a name (names are for configs, :data:`FIT_METHODS`)."""
+    method = Shooting() if method is None else method
+    if not isinstance(method, AbstractFitMethod):
+        hint = f" (use {FIT_METHODS[method].__name__}())" if isinstance(method, str) and method in FIT_METHODS else ""
+        raise ConfigError(f"method must be a fit method object, one of {sorted(c.__name__ for c in FIT_METHODS.values())}, "
+                          f"got {method!r}{hint}")
+    return method.fit(system, observations, unknowns, z0=z0, t0=t0, seed=seed)

@@ -1,0 +1,94 @@
+"""One door for inverse fits: :func:`atlasnn.inverse.fit` with method objects; a config's
+``[fit] methods`` names the same objects through one registry, and a new method is one class and
+one entry."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from atlasnn.cli import main
+from atlasnn.errors import ConfigError
+from atlasnn.experiments.config import load_family
+from atlasnn.inverse import (FIT_METHODS, AbstractFitMethod, Bundle, CollocationFit, Joint, Shooting, fit, fit_shooting,
+                             register_fit_method, synthetic_observations)
+from atlasnn.observations import Unknown
+from atlasnn.systems import henon_heiles
+
+HH = henon_heiles(lam=0.8)
+OBS = synthetic_observations(HH, HH.initial_state(), np.linspace(0.5, 10.0, 30), ["x", "y"], 0.01, 0)
+LAM = [Unknown("lam", 0.9, 0.2, 1.5)]
+
+
+def test_shooting_through_the_door_is_fit_shooting():
+    direct = fit_shooting(HH, OBS, LAM)
+    door = fit(HH, OBS, LAM, method=Shooting(starts=1))
+    assert np.array_equal(door.estimate, direct.estimate) and np.array_equal(door.std, direct.std)
+
+
+def test_the_default_method_is_the_multistart():
+    result = fit(HH, OBS, LAM)
+    assert result.search["starts"] == 13 and "13 starts" in result.method
+
+
+def test_the_collocation_method_object_takes_the_doors_seed():
+    a = fit(HH, OBS, LAM, method=CollocationFit(features=12), seed=3)
+    assert a.method == "collocation" and abs(a.value("lam") - fit_shooting(HH, OBS, LAM).value("lam")) < 0.5 * a.std[0]
+
+
+def test_a_name_instead_of_an_object_is_refused_naming_the_object():
+    with pytest.raises(ConfigError, match=r"use CollocationFit\(\)"):
+        fit(HH, OBS, LAM, method="collocation")
+
+
+def test_the_registry_holds_the_built_in_methods_by_their_config_names():
+    assert {n: c for n, c in FIT_METHODS.items() if n in ("shooting", "joint", "bundle", "collocation")} == {
+        "shooting": Shooting, "joint": Joint, "bundle": Bundle, "collocation": CollocationFit}
+    with pytest.raises(ConfigError, match="AbstractFitMethod subclass"):
+        register_fit_method(dict)
+
+
+def _config(tmp_path, fit_table):
+    path = tmp_path / "inv.toml"
+    path.write_text('name = "inv"\ndescription = "d"\nseeds = [0]\n[system]\nname = "henon_heiles"\n'
+                    '[observations]\nn = 30\nT = 8.0\nnames = ["x", "y"]\n[unknowns]\n'
+                    'lam = { guess = 0.9, low = 0.2, high = 1.5 }\n' + fit_table, encoding="utf-8")
+    return path
+
+
+def test_a_configs_settings_reach_the_method_objects(tmp_path):
+    cfg = load_family(_config(tmp_path, '[fit]\nmethods = ["shooting", "collocation"]\nsegments = 3\nstarts = 5\n'
+                                        'collocation_features = 12\n'))
+    shooting, collocation = cfg.fit.method_objects()
+    assert shooting == Shooting(segments=3, starts=5)
+    assert collocation == CollocationFit(features=12)
+
+
+@dataclasses.dataclass(frozen=True)
+class _GuessOnly(AbstractFitMethod):
+    """A method of this test: shooting from the guess, under another name."""
+
+    name = "guess-only"
+
+    def fit(self, system, observations, unknowns, *, z0=None, t0=0.0, seed=0):
+        return fit_shooting(system, observations, unknowns, z0, t0=t0)
+
+    def describe(self, unknowns):
+        return "shooting from the guess alone"
+
+
+def test_a_new_method_is_one_class_and_one_entry_and_a_config_can_name_it(tmp_path, capsys):
+    register_fit_method(_GuessOnly)
+    try:
+        path = _config(tmp_path, '[fit]\nmethods = ["guess-only"]\n')
+        assert main(["family", str(path), "--out", str(tmp_path / "out")]) == 0
+        records = json.loads((tmp_path / "out" / "results.json").read_text())["records"]
+        assert [r["method"] for r in records] == ["guess-only"] and "estimate" in records[0]
+        assert "fitting (shooting from the guess alone)" in capsys.readouterr().out
+    finally:
+        FIT_METHODS.pop("guess-only")
+    with pytest.raises(ConfigError, match="fit.methods"):
+        load_family(path)
