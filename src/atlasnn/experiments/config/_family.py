@@ -100,17 +100,18 @@ class FitSettings:
     alone), the bundle's (``bundle_*``), the simultaneous collocation fit's (``collocation_*``,
     :func:`atlasnn.inverse.fit_collocation`)."""
 
-    methods: tuple[str, ...] = ("joint", "shooting")
+    methods: tuple[str, ...] = ("joint", "collocation", "shooting")
     joint: JointConfig = JointConfig()
-    segments: int = 1
-    starts: int | str = "auto"
-    bundle_windows: int = 1
-    bundle_epochs: int = 2000
-    bundle_lm_steps: int = 100
-    bundle_lm_points: int = 512
-    bundle_width: int = 32
-    collocation_windows: int | str = "auto"
-    collocation_features: int = 16
+    # the defaults are the method objects' own (one home for each)
+    segments: int = Shooting.segments
+    starts: int | str = Shooting.starts
+    bundle_windows: int = Bundle.windows
+    bundle_epochs: int = Bundle.epochs
+    bundle_lm_steps: int = Bundle.lm_steps
+    bundle_lm_points: int = Bundle.lm_points
+    bundle_width: int = Bundle.width
+    collocation_windows: int | str = CollocationFit.windows
+    collocation_features: int = CollocationFit.features
 
     def method_objects(self) -> tuple[AbstractFitMethod, ...]:
         """The listed methods as the objects :func:`atlasnn.inverse.fit` takes, with these settings."""
