@@ -98,6 +98,8 @@ def test_a_long_template_is_time_marched_and_solved_and_runs_as_written(tmp_path
     assert main(["run", str(path), "--quick", "--out", str(out), "--no-progress"]) == 0
     res = json.loads((out / "results.json").read_text())
     assert {r["column"] for r in res["runs"]} == {"atlas_exp_march", "collocation"}
+    printed = capsys.readouterr().out
+    assert re.search(r"time-marching\) seed 0: \d+ epochs \(budget\), loss \S+, [\d.]+ s \+ [\d.]+ s compiling", printed)
     solved = next(r for r in res["runs"] if r["column"] == "collocation")
     assert max(solved["metrics"]["max_abs"].values()) < 1e-8  # the float64 solver, against the run's DOP853 reference
 

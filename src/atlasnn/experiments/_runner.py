@@ -160,8 +160,9 @@ def _log_done(log, i: int, n: int, output: dict, cfg: ExperimentConfig | None = 
                 f"rejected), worst window error {r.returned_loss:.2f} of its tolerance, {r.wall_time:.2f} s "
                 f"(compilation or cache load included)" + (f", {r.status}" if r.status else ""))
         elif r.role != "source":
+            compiling = "" if not r.compile_time else f" + {r.compile_time:.1f} s compiling"
             log(f"  [{i}/{n}] {r.label} seed {r.seed}: {r.epochs} epochs ({r.stop_reason}), "
-                f"loss {r.returned_loss:.3e}, {r.wall_time:.1f} s" + (f", {r.status}" if r.status else ""))
+                f"loss {r.returned_loss:.3e}, {r.wall_time:.1f} s{compiling}" + (f", {r.status}" if r.status else ""))
         for line in (divergence_advice(cfg, r) if cfg is not None else None, quality_warning(r)):
             if line:
                 log(f"  {line}")
