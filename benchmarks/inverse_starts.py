@@ -11,11 +11,13 @@ noise draw per case: a draw 2–4σ off makes every fit of that case miss this, 
 
     python -m benchmarks.inverse_starts --out docs/benchmarks/inverse_starts.json
     python -m benchmarks.inverse_starts --only hh-builtin --append --out docs/benchmarks/inverse_starts.json
-    python -m benchmarks.inverse_starts --collocation-only --out docs/benchmarks/inverse_starts.json
+    python -m benchmarks.inverse_starts --column collocation --out docs/benchmarks/inverse_starts.json
+    python -m benchmarks.inverse_starts --column segments --out docs/benchmarks/inverse_starts.json
 
-The simultaneous collocation fit (:func:`atlasnn.inverse.fit_collocation`) runs from every guess
-too; ``--collocation-only`` adds (or refreshes) its column in an existing JSON without refitting
-the others (the data and the grid are deterministic).
+The simultaneous collocation fit (:func:`atlasnn.inverse.fit_collocation`) and multiple shooting
+with ``segments="auto"`` from the guess alone run from every guess too; ``--column NAME`` adds
+(or refreshes) that column in an existing JSON without refitting the others (the data and the
+grid are deterministic).
 """
 
 from __future__ import annotations
@@ -101,7 +103,7 @@ def _collocation(case: dict, obs, unknowns, truth, best) -> dict:
 
 def summarise(rows: list[dict]) -> dict:
     summary = {}
-    for method in ("single", "multistart", "joint", "collocation"):
+    for method in ("single", "segments", "multistart", "joint", "collocation"):
         rs = [r[method] for r in rows if method in r]
         if rs:
             summary[method] = {"fits": len(rs), "global_minimum": sum(r["global_minimum"] for r in rs),
@@ -113,14 +115,28 @@ def summarise(rows: list[dict]) -> dict:
     return summary
 
 
-def add_collocation(name: str, case: dict, result: dict, log) -> None:
-    """Fit every guess of an existing case's rows by collocation; refresh its summary."""
+def _segments(case: dict, obs, unknowns, truth, best) -> dict:
+    """Multiple shooting from the guess alone, segments="auto"."""
+    try:
+        fit = judge_fit(fit_shooting(case["system"], obs, unknowns, segments="auto"), unknowns)
+    except AtlasError as exc:  # refused at the guess: not a confident answer
+        return {"refused": str(exc), "trusted": False, "recovered": False, "global_minimum": False,
+                "confident_wrong": False}
+    return {**score(fit, truth, best), "segments": fit.segments}
+
+
+#: the columns that --column can add to an existing JSON
+COLUMNS = {"collocation": _collocation, "segments": _segments}
+
+
+def add_column(column: str, name: str, case: dict, result: dict, log) -> None:
+    """Fit every guess of an existing case's rows by one more method; refresh its summary."""
     obs, truth, best = _data(case)
     for row in result["rows"]:
         unknowns = [Unknown(n, x, lo, hi) for (n, (_, lo, hi)), x in zip(case["unknowns"].items(), row["guess"])]
-        row["collocation"] = _collocation(case, obs, unknowns, truth, best)
-        log(f"{name} guess {row['guess']}: collocation {row['collocation']['estimate']} "
-            f"{'trusted' if row['collocation']['trusted'] else 'UNTRUSTED'} {row['collocation']['seconds']:.2f} s")
+        row[column] = got = COLUMNS[column](case, obs, unknowns, truth, best)
+        log(f"{name} guess {row['guess']}: {column} {got.get('estimate', got.get('refused'))} "
+            f"{'trusted' if got['trusted'] else 'UNTRUSTED'} {got.get('seconds', 0.0):.2f} s")
     result["summary"] = summarise(result["rows"])
 
 
@@ -147,6 +163,7 @@ def run_case(name: str, case: dict, count: int, joint: int, log) -> dict:
             jf = judge_fit(jf, unknowns, system=system, observations=obs, better=multi)
             row["joint"] = {**score(jf, truth, best), "seconds": time.perf_counter() - tic}
         row["collocation"] = _collocation(case, obs, unknowns, truth, best)
+        row["segments"] = _segments(case, obs, unknowns, truth, best)
         rows.append(row)
         log(f"{name} guess {g}: " + "; ".join(f"{k} {r.get('estimate', r.get('refused', '?'))} "
                                               f"{'trusted' if r['trusted'] else 'UNTRUSTED'}"
@@ -163,19 +180,19 @@ def main() -> None:
     ap.add_argument("--joint", type=int, default=4, help="guesses per case (spread over the grid) also fitted by the joint network")
     ap.add_argument("--only", action="append", default=[])
     ap.add_argument("--append", action="store_true", help="add the cases run to those already in --out")
-    ap.add_argument("--collocation-only", action="store_true",
-                    help="fit only the collocation column into the cases already in --out")
+    ap.add_argument("--column", choices=sorted(COLUMNS), default=None,
+                    help="fit only this column into the cases already in --out")
     args = ap.parse_args()
     out = {"machine": machine_info(), "guesses": args.guesses, "cases": []}
     if args.append and args.out and args.out.is_file():
         out = json.loads(args.out.read_text(encoding="utf-8"))
-    if args.collocation_only:
+    if args.column:
         out = json.loads(args.out.read_text(encoding="utf-8"))
-        out["collocation_machine"] = machine_info()
+        out[f"{args.column}_machine"] = machine_info()
         for result in out["cases"]:
             if not args.only or result["case"] in args.only:
-                add_collocation(result["case"], cases()[result["case"]], result, print)
-                print(result["case"], json.dumps(result["summary"]["collocation"]))
+                add_column(args.column, result["case"], cases()[result["case"]], result, print)
+                print(result["case"], json.dumps(result["summary"][args.column]))
         args.out.write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
         return
     for name, case in cases().items():

@@ -92,3 +92,10 @@ def test_a_new_method_is_one_class_and_one_entry_and_a_config_can_name_it(tmp_pa
         FIT_METHODS.pop("guess-only")
     with pytest.raises(ConfigError, match="fit.methods"):
         load_family(path)
+
+
+def test_auto_segments_from_a_config(tmp_path):
+    cfg = load_family(_config(tmp_path, '[fit]\nmethods = ["shooting"]\nsegments = "auto"\nstarts = 1\n'))
+    assert cfg.fit.method_objects() == (Shooting(segments="auto", starts=1),)
+    with pytest.raises(ConfigError, match="fit.segments"):
+        load_family(_config(tmp_path, '[fit]\nsegments = "many"\n'))

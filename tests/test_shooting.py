@@ -123,7 +123,7 @@ def test_unknown_initial_momentum_with_the_parameter(osc):
 def test_multiple_shooting_where_single_shooting_is_trapped(hh):
     obs = synthetic_observations(hh, None, np.linspace(0.0, 60.0, 120), ["x", "y"], 0.01, 0)
     multi = fit_shooting(hh, obs, [LAM], segments=4)
-    assert multi.method == "multiple shooting" and multi.names == ("lam",) and multi.segments == 4
+    assert multi.method == "multiple shooting (4 segments)" and multi.names == ("lam",) and multi.segments == 4
     assert multi.std.shape == (1,) and 0 < multi.std[0] < 0.01
     assert abs(multi.estimate[0] - 1.0) <= 3 * multi.std[0]
     single = fit_shooting(hh, obs, [LAM], max_nfev=30)
@@ -214,3 +214,19 @@ def test_synthetic_data_starts_where_the_fits_start():
     obs = synthetic_observations(pendulum, pendulum.z0, np.linspace(0.2, 6, 30), ["x"], noise=0.01, seed=1)
     fit = fit_shooting(pendulum, obs, [Unknown("g", guess=0.6, low=0.2, high=3.0)])
     assert abs(fit.value("g") - 1.0) < 4 * fit.std[0]
+
+
+def test_auto_segments_start_from_the_data_where_the_orbit_from_the_guess_escapes():
+    from atlasnn.inverse import auto_segments
+
+    hh = expression_system("(px**2 + py**2)/2 + (x**2 + y**2)/2 + lam*(x**2*y - y**3/3)", ["x", "y"], ["px", "py"],
+                           params={"lam": 1.0}, z0=[0.3, -0.3, 0.3, 0.15], name="hh")
+    times = np.sort(np.random.default_rng(7).uniform(0.0, 10.0, 50))
+    obs = synthetic_observations(hh, hh.initial_state(), times, ["x", "y"], 0.01, 0)
+    start = [Unknown("lam", 1.83, 0.2, 2.0)]
+    with pytest.raises(AtlasError, match="at the initial guess"):  # one orbit from the guess escapes
+        fit_shooting(hh, obs, start)
+    fit = fit_shooting(hh, obs, start, segments="auto")
+    best = fit_shooting(hh, obs, [Unknown("lam", 1.0, 0.2, 2.0)])  # the data's global minimum
+    assert abs(fit.value("lam") - best.value("lam")) <= 0.5 * best.std[0]
+    assert fit.segments == auto_segments(hh, obs, start) > 1 and fit.method.endswith("(auto)")

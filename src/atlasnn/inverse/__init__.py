@@ -20,7 +20,7 @@ from atlasnn.inverse._fit_result import MISFIT_LIMIT, FitResult, distrust, flag_
 from atlasnn.inverse._joint import JointConfig, fit_joint
 from atlasnn.inverse._methods import FIT_METHODS, Bundle, Joint, Shooting, fit, register_fit_method
 from atlasnn.inverse._multistart import auto_starts, fit_multistart, judge_fit
-from atlasnn.inverse._shooting import check_shooting_inputs, fit_shooting, predict_fit, shooting_misfit
+from atlasnn.inverse._shooting import auto_segments, check_shooting_inputs, fit_shooting, predict_fit, shooting_misfit
 from atlasnn.inverse._synthetic import synthetic_observations
 
 __all__ = [
@@ -47,6 +47,7 @@ __all__ = [
     "bundle_box_for",
     "auto_starts",
     "check_shooting_inputs",
+    "auto_segments",
     "shooting_misfit",
     "predict_fit",
     "synthetic_observations",

@@ -47,6 +47,7 @@ from scipy.interpolate import CubicSpline
 from atlasnn.compile_cache import program_cache
 from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.inverse._base import AbstractFitMethod
+from atlasnn.inverse._field import field_scale
 from atlasnn.inverse._fit_result import FitResult, distrust, flag_misfit
 from atlasnn.inverse._shooting import check_shooting_inputs, fit_shooting
 from atlasnn.observations import INITIAL_STATE_PREFIX, Observations, Unknown
@@ -302,24 +303,9 @@ def _levenberg_marquardt(prob: _Problem, x: np.ndarray, mu: float, max_steps: in
 
 
 def _auto_windows(system, unknowns, z0, span: float, n_obs: int) -> int:
-    """Windows of length 1/‖A‖, A the field's Jacobian at z0 (the guess's initial components) and
-    the largest of its norms at the parameters' guesses, lows and highs (so that the windows do not
-    depend on the guess); at least 2, at most one per observation."""
-    d, fn = system.dim, system.parametric
-    params = [u for u in unknowns if not u.name.startswith(INITIAL_STATE_PREFIX)]
-    state = np.array(z0, np.float64)
-    for u in unknowns:
-        if u.name.startswith(INITIAL_STATE_PREFIX):
-            state[system.state_names.index(u.name[len(INITIAL_STATE_PREFIX):])] = u.guess
-
-    def field(z, theta):
-        g = jax.grad(lambda zz: jnp.asarray(fn(zz[:d], zz[d:], theta)).reshape(()))(z)
-        return jnp.concatenate([g[d:], -g[:d]])
-
-    norm = 0.0
-    for pick in ("guess", "low", "high"):
-        theta = jnp.asarray(system.param_vector(**{u.name: getattr(u, pick) for u in params}))
-        norm = max(norm, float(np.linalg.norm(np.asarray(jax.jacfwd(field)(jnp.asarray(state), theta)), 2)))
+    """Windows of length 1/‖A‖ (:func:`field_scale`: the largest over the unknowns' guesses and
+    bounds, so the windows do not depend on the guess); at least 2, at most one per observation."""
+    norm = field_scale(system, unknowns, z0)
     length = 1.0 / norm if math.isfinite(norm) and norm > 0 else span
     return int(min(max(2, math.ceil(span / length)), max(2, n_obs)))
 

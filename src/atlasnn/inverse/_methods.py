@@ -35,10 +35,11 @@ __all__ = ["AbstractFitMethod", "Shooting", "Joint", "Bundle", "FIT_METHODS", "r
 
 @dataclasses.dataclass(frozen=True)
 class Shooting(AbstractFitMethod):
-    """Least-squares shooting (:func:`fit_shooting`); ``starts``: ``"auto"`` (the guess and 12 more
-    per unknown over the bounds, :func:`fit_multistart`) or a count, 1 = the guess alone."""
+    """Least-squares shooting (:func:`fit_shooting`); ``segments``: a count (1: single shooting) or
+    ``"auto"`` (:func:`auto_segments`); ``starts``: ``"auto"`` (the guess and 12 more per unknown
+    over the bounds, :func:`fit_multistart`) or a count, 1 = the guess alone."""
 
-    segments: int = 1
+    segments: int | str = 1
     starts: int | str = "auto"
     name: ClassVar[str] = "shooting"
 
@@ -50,7 +51,8 @@ class Shooting(AbstractFitMethod):
 
     def describe(self, unknowns):
         count = auto_starts(len(unknowns)) if self.starts == "auto" else self.starts
-        return "shooting" + ("" if count == 1 else f" from {count} starts over the bounds")
+        what = "shooting" if self.segments == 1 else f"multiple shooting ({self.segments} segments)"
+        return what + ("" if count == 1 else f" from {count} starts over the bounds")
 
 
 @dataclasses.dataclass(frozen=True)

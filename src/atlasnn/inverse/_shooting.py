@@ -18,7 +18,11 @@ nothing).
 segments, every segment after the first starts from its own unknown state, and the residuals are
 the data misfit of every segment plus the continuity gaps (end of segment k − start of segment
 k+1) multiplied by a weight, 1 at first and ``continuity_weight`` in a second pass. Only the
-user's unknowns are reported, with standard errors from the full Gauss–Newton covariance.
+user's unknowns are reported, with standard errors from the full Gauss–Newton covariance. The
+segments' start states begin at the data (observed components) and where the guess's orbit from
+the previous start arrives (the others), so an orbit that escapes from the guess over the whole
+record does not stop the fit. ``segments="auto"``: about three per 1/‖A‖ of the record
+(:func:`auto_segments`).
 """
 
 from __future__ import annotations
@@ -32,12 +36,13 @@ from scipy.optimize import least_squares
 
 from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.evaluation import ParametricSolveFailed, solve_parametric
+from atlasnn.inverse._field import field_scale
 from atlasnn.inverse._fit_result import FitResult, flag_misfit, gauss_newton_covariance
 from atlasnn.inverse._synthetic import finite_number
 from atlasnn.observations import Observations, Unknown, check_unknowns
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["fit_shooting", "predict_fit", "shooting_misfit", "check_shooting_inputs"]
+__all__ = ["fit_shooting", "predict_fit", "shooting_misfit", "check_shooting_inputs", "auto_segments"]
 
 
 # -------------------------------------------------------------------------------- problem
@@ -68,6 +73,12 @@ class _Problem:
         for i, j in self.z_cols:
             z[j] = x[i]
         return theta, z
+
+    def system_solve(self, theta, z, start, end):
+        """The state at ``end`` from ``z`` at ``start`` (one solve)."""
+        Z, _, nfev = solve_parametric(self.system, z, theta, start, np.array([end]), self.rtol, self.atol)
+        self.n_rhs, self.n_solves = self.n_rhs + nfev, self.n_solves + 1
+        return Z[-1].copy()
 
     def trajectory(self, x, times):
         theta, z = self.theta_z0(x)
@@ -126,7 +137,7 @@ class _Problem:
 
 # ------------------------------------------------------------------------------------ fit
 def fit_shooting(system: HamiltonianSystem, observations: Observations, unknowns: Sequence[Unknown],
-                 z0: Any = None, *, t0: float = 0.0, segments: int = 1, rtol: float = 1e-10,
+                 z0: Any = None, *, t0: float = 0.0, segments: int | str = 1, rtol: float = 1e-10,
                  atol: float = 1e-10, max_nfev: int = 200, continuity_weight: float = 1e3) -> FitResult:
     """Fit unknown parameters of H (and initial-state components) to observations by shooting.
 
@@ -153,9 +164,13 @@ def fit_shooting(system: HamiltonianSystem, observations: Observations, unknowns
         AtlasError: the model cannot be integrated at the initial guess (or during the fit).
     """
     start = time.perf_counter()
-    _check_options(system, observations, t0, rtol, atol, continuity_weight, segments, max_nfev)
+    auto = isinstance(segments, str) and segments == "auto"
+    _check_options(system, observations, t0, rtol, atol, continuity_weight, 1 if auto else segments, max_nfev)
     t0 = float(t0)
     unknowns = check_shooting_inputs(system, observations, unknowns, t0=t0, segments=segments)
+    if auto:
+        segments = auto_segments(system, observations, unknowns, z0, t0=t0)
+        _check_segments(observations, segments, t0)
     prob = _Problem(system, observations, unknowns, system.initial_state(z0).copy(), t0, int(segments),
                     float(rtol), float(atol), float(continuity_weight))
     try:
@@ -173,21 +188,23 @@ def fit_shooting(system: HamiltonianSystem, observations: Observations, unknowns
         std=np.sqrt(np.diag(cov)[:n_user]), covariance=cov[:n_user, :n_user],
         noise_estimate=float(math.sqrt(float(r @ r) / (n_data - n_user))),
         residual_rms=float(np.sqrt(np.mean(r[:n_data] ** 2))), wall_time=time.perf_counter() - start,
-        n_rhs=prob.n_rhs, n_solves=prob.n_solves, method="shooting" if segments == 1 else "multiple shooting",
+        n_rhs=prob.n_rhs, n_solves=prob.n_solves,
+        method=("shooting" if segments == 1 else f"multiple shooting ({segments} segments)") + (" (auto)" if auto else ""),
         success=bool(res.success), message=" ".join(str(res.message).split()), identifiable=not weak,
         notes=notes, t0=t0, n_data=n_data, segments=int(segments), cond=cond,
     ), observations)
 
 
 def check_shooting_inputs(system: HamiltonianSystem, observations: Observations, unknowns: Sequence[Unknown], *,
-                          t0: float = 0.0, segments: int = 1) -> tuple[Unknown, ...]:
+                          t0: float = 0.0, segments: int | str = 1) -> tuple[Unknown, ...]:
     """Refuse, as one line, what no shooting fit of these inputs could run with: observed names or
     unknowns the system lacks, observations before t0, more unknowns than data, more segments than
     the observation times allow. Returns the unknowns as a tuple."""
     observations.indices(system.state_names)
     observations.check_interval(float(t0), float(observations.t[-1]))
     unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values)
-    _check_segments(observations, int(segments), float(t0))
+    if not (isinstance(segments, str) and segments == "auto"):
+        _check_segments(observations, int(segments), float(t0))
     return unknowns
 
 
@@ -259,19 +276,45 @@ def _check_segments(obs: Observations, segments: int, t0: float) -> None:
 
 
 def _start(prob: _Problem, unknowns: tuple[Unknown, ...]):
-    """x0 and bounds: the guesses, then (multiple shooting) the guess trajectory at the segment starts."""
+    """x0 and bounds: the guesses, then (multiple shooting) the segments' start states."""
     x0 = np.array([u.guess for u in unknowns], np.float64)
     lo = np.array([u.low for u in unknowns], np.float64)
     hi = np.array([u.high for u in unknowns], np.float64)
     if len(prob.rows) > 1:
-        try:
-            Z = prob.trajectory(x0, np.asarray(prob.starts[1:]))
-        except ParametricSolveFailed as exc:
-            raise ParametricSolveFailed(f"at the initial guess: {exc}") from None
+        Z = _segment_starts(prob, x0)
         x0 = np.concatenate([x0, Z.reshape(-1)])
         lo = np.concatenate([lo, np.full(Z.size, -np.inf)])
         hi = np.concatenate([hi, np.full(Z.size, np.inf)])
     return x0, lo, hi
+
+
+def _segment_starts(prob: _Problem, x0: np.ndarray) -> np.ndarray:
+    """The segments' start states at the guess, reset to the data as they go: segment k starts at
+    its first observation, so its observed components start at that observation and the others
+    where the guess's orbit from the previous start (itself so reset) arrives. An orbit that
+    escapes from the guess over the whole record stays near the data this way; a piece that cannot
+    be integrated keeps the previous start's unobserved components."""
+    theta, z = prob.theta_z0(x0)
+    out = []
+    for k in range(1, len(prob.rows)):
+        try:
+            z = prob.system_solve(theta, z, prob.starts[k - 1], prob.starts[k])
+        except ParametricSolveFailed:
+            z = z.copy()
+        z[prob.idx] = prob.obs.values[prob.rows[k][0]]
+        out.append(z)
+    return np.asarray(out)
+
+
+def auto_segments(system: HamiltonianSystem, observations: Observations, unknowns: Sequence[Unknown], z0: Any = None,
+                  *, t0: float = 0.0) -> int:
+    """Segments of ``segments="auto"``: about three per 1/‖A‖ of the record (A the field's
+    Jacobian at z0, its largest norm over the unknowns' guesses and bounds), at most one per
+    three observations."""
+    norm = field_scale(system, unknowns, system.initial_state(z0))
+    span = float(observations.t[-1]) - float(t0)
+    wanted = math.ceil(span * norm / 3.0) if math.isfinite(norm) and norm > 0 else 1
+    return int(max(1, min(wanted, observations.count // 3)))
 
 
 # -------------------------------------------------------------------------------- predict

@@ -266,10 +266,12 @@ def _fit(v: dict, quick: bool) -> FitSettings:
     if quick:
         joint = {**joint, "epochs": min(joint.get("epochs", 3000), 300), "lm_steps": min(joint.get("lm_steps", 300), 20)}
     kw: dict[str, Any] = {"methods": tuple(dict.fromkeys(methods)), "joint": JointConfig(**joint)}
+    if v.get("segments") == "auto":
+        kw["segments"] = "auto"
     for name, low, high in (("segments", 1, 1000), ("bundle_windows", 1, 256), ("bundle_epochs", 0, 10**7),
                             ("bundle_lm_steps", 0, 10**5), ("bundle_lm_points", 2, 65536), ("bundle_width", 1, 1024),
                             ("collocation_features", 2, 256)):
-        if name in v:
+        if name in v and name not in kw:
             kw[name] = _integer(f"fit.{name}", v[name], low, high)
     if "starts" in v and v["starts"] != "auto":
         kw["starts"] = _integer("fit.starts", v["starts"], 1, 10_000)
