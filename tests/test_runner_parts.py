@@ -181,3 +181,24 @@ def test_a_run_that_cannot_fit_in_memory_is_refused_before_anything_is_written(t
     err = capsys.readouterr().err.strip()
     assert err.startswith("atlasnn: error: ") and "\n" not in err and "GiB" in err
     assert not out.exists()
+
+
+QUICK_FAILING = SHORT.replace("seeds = [0, 1]", "seeds = [0]").replace("epochs = 600", "epochs = 600\ntolerance = 1e-9") \
+    + "\n[quick]\ntrain.epochs = 20\n"
+
+
+@pytest.mark.parametrize("quick", [True, False])
+def test_a_quick_runs_failed_trainings_are_not_told_to_raise_the_capped_budget(tmp_path, capsys, quick):
+    cfg = tmp_path / "q.toml"
+    cfg.write_text(QUICK_FAILING)
+    args = ["run", str(cfg), "--out", str(tmp_path / "run"), "--no-progress"] + (["--quick"] if quick else [])
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    res = json.loads((tmp_path / "run" / "results.json").read_text())
+    advice = [r["quality"]["advice"] for r in res["runs"] if r["quality"]["status"] != "ok"]
+    assert advice  # 20 (or 600) epochs against a tolerance of 1e-9: judged suspect or failed
+    if quick:
+        assert all(a.startswith("A quick run (--quick) caps every budget") for a in advice)
+        assert "raise train.epochs" not in printed and "run without --quick" in printed
+    else:
+        assert all("raise train.epochs" in a for a in advice)

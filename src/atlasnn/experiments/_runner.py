@@ -149,6 +149,22 @@ def quality_warning(record: Mapping | TrainingRecord) -> str | None:
     return f"{r.who()} is {r.status}: {'; '.join(q.get('reasons') or [])}.{advice}"
 
 
+#: the advice of a training judged suspect or failed in a quick run: its budget was capped on purpose
+QUICK_ADVICE = ("A quick run (--quick) caps every budget, so this verdict judges the smoke test, not the "
+                "method or its settings: run without --quick for a verdict at the config's budget.")
+
+
+def _quick_advice(output: dict) -> dict:
+    """A quick run's output with the advice of every suspect or failed training replaced by
+    :data:`QUICK_ADVICE` (raising a capped budget, or lowering a learning rate tuned for the full
+    one, is not what to do)."""
+    for rec in output.get("records", []):
+        q = rec.get("quality") or {}
+        if q.get("status") not in (None, "ok") and q.get("advice"):
+            q["advice"] = QUICK_ADVICE
+    return output
+
+
 def _as_record(record: Mapping | TrainingRecord) -> TrainingRecord:
     return record if isinstance(record, TrainingRecord) else TrainingRecord.from_dict(record)
 
@@ -294,6 +310,7 @@ class _Run:
         self.started = time.time()
         self.previous_wall = float(meta.get("wall_time_total") or 0.0) if meta else 0.0
         self.outputs: dict[Task, dict] = {}  # per one-seed training
+        self.quick = False  # set by go()
 
     def wall_total(self) -> float:
         return self.previous_wall + time.time() - self.started
@@ -310,6 +327,7 @@ class _Run:
 
     def go(self, *, overwrite, config_text, quick, report, config_source, figures="all") -> dict[str, Any]:
         cfg = self.cfg
+        self.quick = bool(quick)
         system = system_of(cfg)
         z0 = system.initial_state(cfg.system.z0)
         e0 = float(system.energy64(z0))
@@ -410,7 +428,7 @@ class _Run:
 
         def on_done(task: Task, output: dict[int, dict]) -> None:
             for seed in task.seeds:
-                self.outputs[task.one(seed)] = output[seed]
+                self.outputs[task.one(seed)] = _quick_advice(output[seed]) if self.quick else output[seed]
                 _log_done(self.log, len(self.outputs), len(all_trainings), output[seed], self.cfg)
 
         ex.run(todo, work, on_done, shared_dir=self.out)
@@ -418,7 +436,7 @@ class _Run:
     def collect(self, system, e0, grids, arrays, int_rows, quick, reference) -> dict[str, Any]:
         """results.json's content from the outputs of every training (in plan order)."""
         cfg, st = self.cfg, self.cfg.eval_stage
-        ordered = [self.outputs[t] for t in trainings(self.tasks)]
+        ordered = [_quick_advice(self.outputs[t]) if quick else self.outputs[t] for t in trainings(self.tasks)]
         runs = [r for o in ordered for r in o["records"]]
         for o in ordered:
             arrays.update(o["arrays"])
