@@ -99,3 +99,12 @@ def test_auto_segments_from_a_config(tmp_path):
     assert cfg.fit.method_objects() == (Shooting(segments="auto", starts=1),)
     with pytest.raises(ConfigError, match="fit.segments"):
         load_family(_config(tmp_path, '[fit]\nsegments = "many"\n'))
+
+
+def test_family_no_progress_prints_the_results_but_not_the_phases(tmp_path, capsys):
+    path = _config(tmp_path, '[fit]\nmethods = ["shooting"]\nstarts = 1\n')
+    assert main(["family", str(path), "--out", str(tmp_path / "a")]) == 0
+    assert "seed 0 shooting: fitting (shooting)…" in capsys.readouterr().out
+    assert main(["family", str(path), "--out", str(tmp_path / "b"), "--no-progress"]) == 0
+    quiet = capsys.readouterr().out
+    assert "fitting" not in quiet and "seed 0 shooting: lam = " in quiet

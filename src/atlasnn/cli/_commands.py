@@ -186,7 +186,8 @@ def _run_family(path, args) -> int:
     out = Path(args.out or f"runs/{cfg.name}{'-quick' if args.quick else ''}")
     args.run_dir = out
     start = time.perf_counter()
-    run_family(cfg, out, overwrite=args.overwrite, config_text=Path(path).read_text(encoding="utf-8"))
+    run_family(cfg, out, overwrite=args.overwrite, config_text=Path(path).read_text(encoding="utf-8"),
+               progress=not args.no_progress)
     print(f"done in {time.perf_counter() - start:.1f} s: {out}/summary.md")
     return 0
 

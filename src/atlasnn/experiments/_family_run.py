@@ -37,8 +37,10 @@ EVAL_MEMBERS, EVAL_TIMES = 100_000, 100
 
 
 def run_family(cfg: FamilyConfig, out: str | Path, *, overwrite: bool = False, log: Callable[[str], None] = print,
-               config_text: str | None = None) -> dict[str, Any]:
-    """Run a bundle or inverse experiment into ``out``; returns the results dict."""
+               config_text: str | None = None, progress: bool = True) -> dict[str, Any]:
+    """Run a bundle or inverse experiment into ``out``; returns the results dict. ``progress``:
+    the lines said while a phase goes (a bundle's epochs and windows, "fitting …") are printed;
+    the results' lines are printed either way."""
     out = Path(out)
     check_run_dir(out, overwrite)
     system = cfg.system.build()
@@ -49,7 +51,7 @@ def run_family(cfg: FamilyConfig, out: str | Path, *, overwrite: bool = False, l
     if config_text is not None:
         write_text(out / "config.toml", config_text)
     runner = _run_bundle if cfg.kind == "bundle" else _run_inverse
-    results = runner(cfg, system, out, log)
+    results = runner(cfg, system, out, log, log if progress else _silent)
     results.update({"kind": cfg.kind, "name": cfg.name, "description": cfg.description, "quick": cfg.quick,
                     "atlasnn_version": __version__, "system": system.describe()})
     write_json(out / "results.json", results)
@@ -64,7 +66,11 @@ def _max_err(pred: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return np.max(np.abs(pred - ref), axis=-1)
 
 
-def _run_bundle(cfg: FamilyConfig, system, out: Path, log) -> dict[str, Any]:
+def _silent(_line: str) -> None:
+    """The progress log of a run with progress off."""
+
+
+def _run_bundle(cfg: FamilyConfig, system, out: Path, log, say) -> dict[str, Any]:
     st = cfg.bundle
     box = st.box(system)
     z_test, l_test = box.draw(np.random.default_rng(st.test_seed), st.test_members)
@@ -80,10 +86,10 @@ def _run_bundle(cfg: FamilyConfig, system, out: Path, log) -> dict[str, Any]:
     for seed in cfg.seeds:
         def progress(k, epoch, loss, seed=seed):
             if epoch % max(st.epochs // 2, 1) == 0 or epoch == st.epochs:
-                log(f"  seed {seed} window {k + 1}/{st.windows}: epoch {epoch}, loss {loss:.3g}")
+                say(f"  seed {seed} window {k + 1}/{st.windows}: epoch {epoch}, loss {loss:.3g}")
 
         def window_done(k, loss, seconds, seed=seed):
-            log(f"  seed {seed} window {k + 1}/{st.windows} done: loss {loss:.3g}, {seconds:.0f} s so far")
+            say(f"  seed {seed} window {k + 1}/{st.windows} done: loss {loss:.3g}, {seconds:.0f} s so far")
 
         trained = train_bundle(system, box, st.train_config(), scaling=st.model, width=st.width, depth=st.depth,
                                seed=seed, progress=progress, on_window=window_done)
@@ -174,14 +180,14 @@ def _fit_line(seed: int, method: str, result, rec: dict) -> str:
     return line + ("" if result.trusted else f" — UNTRUSTED: {result.notes[-1]}")
 
 
-def _fit_seed(cfg: FamilyConfig, system, obs, t0: float, seed: int, truth, log) -> tuple[list[dict], dict]:
+def _fit_seed(cfg: FamilyConfig, system, obs, t0: float, seed: int, truth, log, say) -> tuple[list[dict], dict]:
     """Every method on one seed's data, each through :func:`atlasnn.inverse.fit`: records (a method
     that fails is a record saying so, and the others go on) and the fits; every fit is cross-checked
     against the better of the two searches (shooting's multistart, the collocation fit)."""
     fits, records = {}, []
     for way in cfg.fit.method_objects():
         method = way.name
-        log(f"  seed {seed} {method}: fitting ({way.describe(cfg.unknowns)})…")
+        say(f"  seed {seed} {method}: fitting ({way.describe(cfg.unknowns)})…")
         try:
             result = fit(system, obs, cfg.unknowns, method=way, t0=t0, seed=seed)
             fits[method] = (result, float(result.search.get("training_seconds", 0.0)))
@@ -201,7 +207,7 @@ def _fit_seed(cfg: FamilyConfig, system, obs, t0: float, seed: int, truth, log) 
     return records, {m: r for m, (r, _) in fits.items()}
 
 
-def _run_inverse(cfg: FamilyConfig, system, out: Path, log) -> dict[str, Any]:
+def _run_inverse(cfg: FamilyConfig, system, out: Path, log, say) -> dict[str, Any]:
     truth = _truth(cfg, system)
     records, seeds, curves, notes = [], {}, {}, []
     first_obs = None
@@ -209,7 +215,7 @@ def _run_inverse(cfg: FamilyConfig, system, out: Path, log) -> dict[str, Any]:
         obs, t0 = _observations(cfg, system, seed)
         first_obs = first_obs or (obs, t0)
         seeds[str(seed)] = {"observations": obs.describe()}
-        recs, fits = _fit_seed(cfg, system, obs, t0, seed, truth, log)
+        recs, fits = _fit_seed(cfg, system, obs, t0, seed, truth, log, say)
         records += recs
         if seed == cfg.seeds[0]:
             curves = fits
