@@ -108,3 +108,16 @@ def test_family_no_progress_prints_the_results_but_not_the_phases(tmp_path, caps
     assert main(["family", str(path), "--out", str(tmp_path / "b"), "--no-progress"]) == 0
     quiet = capsys.readouterr().out
     assert "fitting" not in quiet and "seed 0 shooting: lam = " in quiet
+
+
+def test_a_run_on_file_observations_prints_no_nan_where_there_is_no_truth(tmp_path):
+    rows = "\n".join(f"{t},{x}" for t, x in zip(OBS.t, OBS.values[:, 0]))
+    (tmp_path / "obs.csv").write_text("t,x\n" + rows + "\n", encoding="utf-8")
+    path = tmp_path / "file.toml"
+    path.write_text('name = "file"\ndescription = "d"\nseeds = [0]\n[system]\nname = "henon_heiles"\n'
+                    'params = { lam = 0.8 }\n[observations]\nfile = "obs.csv"\n[unknowns]\n'
+                    'lam = { guess = 0.9, low = 0.2, high = 1.5 }\n[fit]\nmethods = ["shooting"]\nstarts = 1\n',
+                    encoding="utf-8")
+    assert main(["family", str(path), "--out", str(tmp_path / "run"), "--no-progress"]) == 0
+    summary = (tmp_path / "run" / "summary.md").read_text()
+    assert "nan" not in summary and "n/a/?" not in summary and "— (no truth)" in summary

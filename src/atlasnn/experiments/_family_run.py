@@ -11,7 +11,6 @@ seed) and records estimate, standard error, error against the truth and time. Bo
 from __future__ import annotations
 
 import json
-import math
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -315,9 +314,10 @@ def _summary(results: dict[str, Any]) -> str:
                              + " | — | — | **failed** | — |")
                 continue
             est = " | ".join(f"{e:.6g} ± {s:.2g}" for e, s in zip(r["estimate"], r["std"]))
-            rel = ", ".join(f"{abs(e):.2g}" for e in r.get("rel_error", [math.nan]))
+            # observations from a file have no truth: no error to show
+            rel = ", ".join(f"{abs(e):.2g}" for e in r["rel_error"]) if "rel_error" in r else "— (no truth)"
             trusted = "yes" if r.get("trusted", True) else "**no**"
-            lines.append(f"| {r['seed']} | {r['method']} | {est} | {rel} | {r.get('covered_2sigma', 'n/a')} | "
+            lines.append(f"| {r['seed']} | {r['method']} | {est} | {rel} | {r.get('covered_2sigma', '—')} | "
                          f"{trusted} | {r['total_seconds']:.2f} |")
         warned = [r for r in results["records"] if "failed" in r or not r.get("trusted", True)]
         if warned:
@@ -328,10 +328,11 @@ def _summary(results: dict[str, Any]) -> str:
         lines += ["", "| method | mean estimate | sd over seeds | median σ (Gauss–Newton) | within 2σ | median s |",
                   "|---|---|---|---|---|---|"]
         for m, o in results["overall"].items():
-            fmt = lambda v: ", ".join(f"{x:.3g}" for x in v)  # noqa: E731
+            fmt = lambda v: ", ".join(f"{x:.3g}" if np.isfinite(x) else "—" for x in v)  # noqa: E731  (one seed: no sd)
             lines.append(f"| {m} | {', '.join(f'{x:.6g}' for x in o['estimate_mean'])} | "
                          f"{fmt(o['estimate_sd_over_seeds'])} | {fmt(o['std_median'])} | "
-                         f"{o.get('covered_2sigma', 'n/a')}/{o.get('n', '?')} | {o['seconds_median']:.2f} |")
+                         + (f"{o['covered_2sigma']}/{o['n']}" if "covered_2sigma" in o else "— (no truth)")
+                         + f" | {o['seconds_median']:.2f} |")
     if results.get("notes"):
         lines += ["", "Notes:", ""] + [f"- {n}" for n in results["notes"]]
     return "\n".join(lines) + "\n"
