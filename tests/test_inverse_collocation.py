@@ -109,3 +109,12 @@ def test_a_family_run_fits_by_collocation_and_records_it(tmp_path, capsys):
 def test_the_fit_table_checks_the_collocation_keys(tmp_path):
     with pytest.raises(ConfigError, match="fit.collocation_windows"):
         load_family(_family(tmp_path, '[fit]\nmethods = ["collocation"]\ncollocation_windows = 0\n'))
+
+
+def test_data_that_start_long_after_t0_anchor_the_start_at_the_initial_value():
+    quartic = expression_system("p**2/2 + a*x**4/4", ["x"], ["p"], params={"a": 1.0}, z0=[1.0, 0.0], name="quartic")
+    times = np.sort(np.random.default_rng(0).uniform(5.0, 15.0, 30))  # nothing observed on [0, 5)
+    obs = synthetic_observations(quartic, quartic.initial_state(), times, ["x"], 0.01, 0)
+    best = _global(quartic, obs, [Unknown("a", 1.0, 0.2, 5.0)])
+    fit = fit_collocation(quartic, obs, [Unknown("a", 2.6, 0.2, 5.0)])
+    assert abs(fit.value("a") - best.value("a")) <= 0.5 * best.std[0] and fit.trusted

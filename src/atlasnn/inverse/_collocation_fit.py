@@ -222,21 +222,25 @@ class _Problem:
         self.free = np.setdiff1d(np.arange(self.cols_total), fixed)
 
     def _start(self, system, observations, z0) -> np.ndarray:
-        """θ at the guesses; the states and rates of a cubic spline through the data (unobserved
-        components held at their initial value); z_0 the known initial state."""
+        """θ at the guesses; the states and rates of a cubic spline through the data (and through
+        the initial value at t0 when the data start later; unobserved components held at their
+        initial value); z_0 the known initial state (its unknown components at their guesses)."""
         x = np.zeros(self.cols_total)
         x[:len(self.params)] = [u.guess for u in self.params]
         block = x[len(self.params):].reshape(self.k, self.width)
         starts = self.t0 + self.h * np.arange(self.k)
         block[:, :self.n] = z0
+        for u, j in zip(self.states, self.sidx):
+            block[:, j] = u.guess
         for col, j in enumerate(observations.indices(system.state_names)):
-            spline = CubicSpline(observations.t, observations.values[:, col])
+            t, v = observations.t, observations.values[:, col]
+            if t[0] > self.t0:  # anchored at the initial value, not extrapolated back to t0
+                t, v = np.concatenate([[self.t0], t]), np.concatenate([[block[0, j]], v])
+            spline = CubicSpline(t, v)
             block[1:, j] = spline(starts[1:])
             rates = spline(starts[:, None] + self.h * self.nodes[None, :], 1)  # (K, P)
             for k in range(self.k):  # a row of block is contiguous: its reshape is a view
                 block[k, self.n:].reshape(self.n, self.m)[j] = rates[k] @ self.q
-        for u, j in zip(self.states, self.sidx):
-            block[0, j] = u.guess
         return x
 
     def split(self, x):
