@@ -18,19 +18,27 @@ from scipy.integrate import solve_ivp
 from atlasnn.compile_cache import program_cache
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["solve_parametric", "ParametricSolveFailed"]
+__all__ = ["solve_parametric", "ParametricSolveFailed", "parametric_field"]
+
+
+def parametric_field(system: HamiltonianSystem):
+    """f(z, θ) = J∇_z H(z; θ) for one state z (2d,) and parameter vector θ, from
+    ``system.parametric`` (traceable, not jitted: callers put it in their own programs)."""
+    fn, d = system.parametric, system.dim
+
+    def field(z, theta):
+        grad = jax.grad(lambda zz: jnp.asarray(fn(zz[:d], zz[d:], theta)).reshape(()))(z)
+        return jnp.concatenate([grad[d:], -grad[:d]])
+
+    return field
 
 
 @program_cache
 @functools.lru_cache(maxsize=32)
 def _compiled(system: HamiltonianSystem):
     """(f, g): jitted f(z, θ) = J∇H(z; θ) and g(y, θ, D) = d/dt [z, S] for the variational system."""
-    fn, d = system.parametric, system.dim
-    n = 2 * d
-
-    def field_(z, theta):
-        grad = jax.grad(lambda zz: jnp.asarray(fn(zz[:d], zz[d:], theta)).reshape(()))(z)
-        return jnp.concatenate([grad[d:], -grad[:d]])
+    n = system.state_dim
+    field_ = parametric_field(system)
 
     def augmented(y, theta, dtheta):
         z, S = y[:n], y[n:].reshape(n, dtheta.shape[1])

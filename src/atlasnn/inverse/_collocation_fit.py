@@ -46,6 +46,7 @@ from scipy.interpolate import CubicSpline
 
 from atlasnn.compile_cache import program_cache
 from atlasnn.errors import AtlasError, ConfigError
+from atlasnn.evaluation import parametric_field
 from atlasnn.inverse._base import AbstractFitMethod
 from atlasnn.inverse._field import field_scale
 from atlasnn.inverse._fit_result import FitResult, distrust, flag_misfit
@@ -135,13 +136,9 @@ class _WindowData(NamedTuple):
 def _programs(system: HamiltonianSystem, param_index: tuple[int, ...], observed: tuple[int, ...]):
     """Compiled (residuals, Jacobian blocks) over all windows for a system, its unknown parameters
     and observed components; the rest (shapes aside) are arguments."""
-    d, fn = system.dim, system.parametric
+    field = parametric_field(system)
     pidx = jnp.asarray(param_index, dtype=jnp.int32)
     obs = jnp.asarray(observed, dtype=jnp.int32)
-
-    def field(z, theta):
-        g = jax.grad(lambda zz: jnp.asarray(fn(zz[:d], zz[d:], theta)).reshape(()))(z)
-        return jnp.concatenate([g[d:], -g[:d]])
 
     def window(x, z_next, unknown, lay: _Layout, data: _WindowData, mu):
         tau, y, mask, last = data

@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from atlasnn.evaluation import parametric_field
 from atlasnn.observations import INITIAL_STATE_PREFIX, Unknown
 from atlasnn.systems import HamiltonianSystem
 
@@ -18,16 +19,12 @@ def field_scale(system: HamiltonianSystem, unknowns: Sequence[Unknown], z0: np.n
     """‖A‖₂ with A = D(J∇H) at z0 (its unknown components at their guesses), the largest over the
     unknown parameters at their guesses, lows and highs: 1/‖A‖ is the time over which the orbit
     changes, whatever the guess (windows and segments are cut from it)."""
-    d, fn = system.dim, system.parametric
+    field = parametric_field(system)
     params = [u for u in unknowns if not u.name.startswith(INITIAL_STATE_PREFIX)]
     state = np.array(z0, np.float64)
     for u in unknowns:
         if u.name.startswith(INITIAL_STATE_PREFIX):
             state[system.state_names.index(u.name[len(INITIAL_STATE_PREFIX):])] = u.guess
-
-    def field(z, theta):
-        g = jax.grad(lambda zz: jnp.asarray(fn(zz[:d], zz[d:], theta)).reshape(()))(z)
-        return jnp.concatenate([g[d:], -g[:d]])
 
     norm = 0.0
     with jax.enable_x64(True):
