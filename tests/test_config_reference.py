@@ -14,11 +14,13 @@ from pathlib import Path
 from atlasnn.cli import main
 from atlasnn.errors import ConfigError
 from atlasnn.experiments.config import parse_config
-from atlasnn.experiments.config._reference import GENERATED_BY, reference_markdown, reference_text
+from atlasnn.experiments.config import parse_family
+from atlasnn.experiments.config._reference import FAMILY_TITLE, GENERATED_BY, reference_markdown, reference_text
 from atlasnn.experiments.config import SCHEMA
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBE = "zzz_probe"
+FAMILY = "<family>"  # the reference's section of a bundle or inverse file's top level
 SHORT = {
     "name": "probe", "system": {"name": "nonlinear_oscillator"}, "interval": {"T": 3.0},
     "train": {"epochs": 5, "n_points": 16}, "quick": {},
@@ -72,9 +74,9 @@ def documented(text: str) -> tuple[dict[str, list[str]], dict[str, str]]:
     """The plain-text reference read back: section -> keys listed, section -> 'same keys as'."""
     rows, same, section = {}, {}, None
     for line in text.splitlines():
-        m = re.match(r"^(Top level|\[([^\]]+)\]): (.*)", line)
+        m = re.match(r"^(Top level of a bundle or inverse file|Top level|\[([^\]]+)\]): (.*)", line)
         if m:
-            section = m.group(2) or ""
+            section = m.group(2) or ("" if m.group(1) == "Top level" else FAMILY)
             rows[section] = []
             s = re.match(r"same keys as (?:\[([^\]]+)\]|the top level)", m.group(3))
             if s:
@@ -117,7 +119,7 @@ def test_the_plain_text_and_markdown_references_list_the_same_keys():
     section = None
     for line in reference_markdown().splitlines():
         if line.startswith("## "):
-            section = "" if line == "## Top level" else line[4:-1]
+            section = {"## Top level": "", f"## {FAMILY_TITLE}": FAMILY}.get(line, line[4:-1])
             md[section] = []
         m = re.match(r"^\| `(\w+)` \|", line)
         if m:
@@ -150,3 +152,46 @@ def test_every_key_has_a_meaning_and_every_table_a_purpose():
         assert len(spec.meaning) > 10 and spec.meaning.endswith("."), table
         for k in spec.keys:
             assert len(k.meaning) > 10 and k.meaning.endswith("."), f"{table}.{k.name}"
+
+
+BUNDLE = {"name": "probe", "system": {"name": "nonlinear_oscillator"}, "bundle": {"T": 1.0}}
+INVERSE = {"name": "probe", "system": {"name": "nonlinear_oscillator"}, "observations": {"T": 4.0, "names": ["x"]},
+           "unknowns": {"lam": {"low": 0.5, "high": 2.0}}, "fit": {}}
+
+
+def family_accepted_keys(base: dict, path: str) -> list[str]:
+    """The keys parse_family accepts in the table at ``path`` of ``base`` (the probe's message)."""
+    parts = [p for p in path.split(".") if p]
+    try:
+        parse_family(_with_probe(base, parts))
+    except ConfigError as exc:
+        m = re.fullmatch(re.escape(".".join(parts + [PROBE])) + r" = 1: unknown key \(known: \[(.*)\]\)", str(exc))
+        assert m, str(exc)
+        return re.findall(r"'([^']*)'", m.group(1))
+    raise AssertionError(f"[{path}] accepted the probe key")
+
+
+def test_every_key_of_a_bundle_or_inverse_file_is_documented_and_no_other():
+    """Before the family tables were in the schema, `atlasnn config` listed none of them."""
+    rows, same = documented(reference_text())
+    root = set(family_accepted_keys(BUNDLE, "")) | set(family_accepted_keys(INVERSE, ""))
+    assert sorted(rows[FAMILY]) == sorted(root)
+    for base, path in ((BUNDLE, "bundle"), (INVERSE, "observations"), (INVERSE, "fit")):
+        assert sorted(rows[path]) == sorted(family_accepted_keys(base, path)), f"[{path}]"
+    assert sorted(rows["system"]) == sorted(family_accepted_keys(BUNDLE, "system"))
+
+
+def test_one_set_of_bundle_defaults_from_the_api_the_parser_and_the_reference():
+    """The Python API (BundleTrainConfig, train_bundle) and a config's [bundle] agree: before,
+    10 000 epochs and no LM against 1 000 epochs and 150 LM trials, width 64 against 32."""
+    import inspect
+
+    from atlasnn.training import BundleTrainConfig, train_bundle
+
+    st = parse_family(BUNDLE).bundle
+    assert st.train_config() == BundleTrainConfig()
+    sig = inspect.signature(train_bundle).parameters
+    assert (st.width, st.depth) == (sig["width"].default, sig["depth"].default)
+    bundle_part = reference_text().split("\n[bundle]:")[1]
+    for f in ("epochs", "lm_steps", "lm_points", "lm_rounds", "windows"):
+        assert f"  {f}: integer; default: {getattr(BundleTrainConfig(), f)};" in bundle_part, f

@@ -13,9 +13,13 @@ import re
 import textwrap
 from dataclasses import dataclass
 
+from atlasnn.experiments.config._family_schema import FAMILY_ROOT
 from atlasnn.experiments.config._schema import SCHEMA, Key, Sub, Variant
 
 GENERATED_BY = "atlasnn config --markdown > docs/CONFIG.md"
+FAMILY_TITLE = "Top level of a bundle or inverse file"
+FAMILY_PART = ("Bundle and inverse-problem files (`atlasnn family FILE.toml`): a [system] table as above and "
+               "either [bundle], or [observations], [unknowns] and [fit]. Their keys follow.")
 
 
 @dataclass(frozen=True)
@@ -34,10 +38,13 @@ class Section:
     meaning: str
     same_as: str | None  # path of the section with the same keys, or None
     rows: tuple[Row, ...]
+    part: str = ""  # "" an experiment file's; FAMILY_ROOT a bundle or inverse file's
 
     @property
     def title(self) -> str:
-        return f"[{self.path}]" if self.path else "Top level"
+        if self.path:
+            return f"[{self.path}]"
+        return "Top level" if not self.part else FAMILY_TITLE
 
 
 def toml_value(v) -> str:
@@ -73,24 +80,27 @@ def _join(path: str, name: str) -> str:
 
 
 def sections() -> list[Section]:
-    """Every table of the schema, depth first from the top level."""
+    """Every table of the schema, depth first from an experiment file's top level, then from a
+    bundle or inverse file's (whose [system] is the experiment's)."""
     out: list[Section] = []
     first: dict[str, str] = {}  # table id -> the path it was listed at
 
-    def walk(table: str, path: str, meaning: str) -> None:
+    def walk(table: str, path: str, meaning: str, part: str) -> None:
         if table in first:
-            out.append(Section(path, meaning, first[table], ()))
+            if first[table] != path:  # a family file's [system] is the experiment's, listed above
+                out.append(Section(path, meaning, first[table], (), part))
             return
         first[table] = path
         spec = SCHEMA[table]
-        out.append(Section(path, spec.meaning, None, tuple(_row(k, _join(path, k.name)) for k in spec.keys)))
+        out.append(Section(path, spec.meaning, None, tuple(_row(k, _join(path, k.name)) for k in spec.keys), part))
         for k in spec.keys:
             if isinstance(k.type, Sub):
-                walk(k.type.table, _join(path, k.name), k.meaning)
+                walk(k.type.table, _join(path, k.name), k.meaning, part)
             elif isinstance(k.type, Variant):
-                out.append(Section(_join(path, k.name), k.meaning, "", ()))
+                out.append(Section(_join(path, k.name), k.meaning, "", (), part))
 
-    walk("", "", SCHEMA[""].meaning)
+    walk("", "", SCHEMA[""].meaning, "")
+    walk(FAMILY_ROOT, "", SCHEMA[FAMILY_ROOT].meaning, FAMILY_ROOT)
     return out
 
 
@@ -114,7 +124,11 @@ def reference_text(width: int = 100) -> str:
     lines = ["atlasnn config reference (generated from src/atlasnn/experiments/config/_schema.py; "
              "`atlasnn config --markdown` prints it as Markdown)", ""]
     lines += textwrap.wrap(INTRO, width)
+    part = ""
     for s in sections():
+        if s.part != part:
+            part = s.part
+            lines += ["", "=" * 40, *textwrap.wrap(FAMILY_PART.replace("`", ""), width)]
         lines.append("")
         head = f"{s.title}: {_same(s) + '. ' if s.same_as is not None else ''}{s.meaning}"
         lines += textwrap.wrap(head, width, subsequent_indent="    ")
@@ -141,7 +155,11 @@ def reference_markdown() -> str:
         "",
         "The same reference as plain text: `atlasnn config`.",
     ]
+    part = ""
     for s in sections():
+        if s.part != part:
+            part = s.part
+            lines += ["", "# Bundle and inverse-problem files", "", FAMILY_PART]
         lines += ["", f"## {s.title}", ""]
         if s.same_as is not None:
             lines += [f"{_same(s).capitalize().replace('[', '`[').replace(']', ']`')}. {s.meaning}"]

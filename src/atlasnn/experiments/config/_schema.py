@@ -55,6 +55,7 @@ from atlasnn.experiments.config._types import (
     _key,
     _table,
 )
+from atlasnn.experiments.config._family_schema import FAMILY_TABLES
 from atlasnn.evaluation import INTEGRATORS
 from atlasnn.nn import ACTIVATIONS, MODELS, model_aliases
 from atlasnn.systems import BUILTIN_SYSTEMS
@@ -423,15 +424,18 @@ def _gamma_tables() -> dict[str, TableSpec]:
 
 
 class _Schema(Mapping):
-    """Every table by id: the static tables above and the [gamma_init] tables of the models
+    """Every table by id: the static tables above, a bundle or inverse file's
+    (:mod:`._family_schema`, its top level ``"family"``) and the [gamma_init] tables of the models
     registered now (so a model registered at run time is configurable at once)."""
 
     def _all(self) -> dict[str, TableSpec]:
-        return {**_STATIC_TABLES, **_gamma_tables()}
+        return {**_STATIC_TABLES, **FAMILY_TABLES, **_gamma_tables()}
 
     def __getitem__(self, table: str) -> TableSpec:
         if table in _STATIC_TABLES:
             return _STATIC_TABLES[table]
+        if table in FAMILY_TABLES:
+            return FAMILY_TABLES[table]
         return _gamma_tables()[table]
 
     def __iter__(self):
