@@ -162,6 +162,36 @@ def test_run_command_trains_a_bundle_from_a_config(tmp_path):
     assert "QUICK" in (out / "summary.md").read_text().upper()
 
 
+def test_an_interrupted_bundle_run_resumes_from_the_seeds_it_finished(tmp_path, monkeypatch):
+    """A bundle run interrupted after seed 0 keeps it (its record, its errors, its checkpoint) and
+    `family --resume` trains seed 1 only; before, there was no --resume."""
+    import json
+
+    import atlasnn.experiments._family_run as family_run
+    from atlasnn.cli import main
+
+    toml = tmp_path / "b.toml"
+    toml.write_text('name = "b"\nseeds = [0, 1]\n[system]\nname = "nonlinear_oscillator"\n[bundle]\nT = 1.0\n'
+                    'ranges = { lam = [0.8, 1.2] }\nwidth = 8\nepochs = 200\nlm_steps = 0\n'
+                    'test_members = 6\ntest_times = 11\n')
+    out, real, trained = tmp_path / "run", family_run._bundle_seed, []
+
+    def seed_1_interrupted(cfg, system, box, seed, *rest):
+        if seed == 1:
+            raise KeyboardInterrupt
+        trained.append(seed)
+        return real(cfg, system, box, seed, *rest)
+
+    monkeypatch.setattr(family_run, "_bundle_seed", seed_1_interrupted)
+    assert main(["family", str(toml), "--out", str(out), "--no-progress"]) == 130
+    kept = json.loads((out / "partial" / "seed0.json").read_text())["record"]
+    monkeypatch.setattr(family_run, "_bundle_seed", lambda *a: (trained.append(a[3]), real(*a))[1])
+    assert main(["run", "--resume", str(out), "--no-progress"]) == 0  # `run` resumes it as `family` does
+    res = json.loads((out / "results.json").read_text())
+    assert trained == [0, 1] and res["seeds"]["0"]["test"] == kept["test"] and set(res["seeds"]) == {"0", "1"}
+    assert (out / "figures" / "bundle_errors.png").is_file() and (out / "models" / "bundle_seed1.npz").is_file()
+
+
 @pytest.mark.parametrize("kw, match", [({"members": "corners"}, "members"), ({"retry_factor": 0.5}, "retry_factor"),
                                        ({"windows": 0}, "windows"), ({"epochs": 0, "lm_steps": 0}, "epochs > 0"),
                                        ({"lm_rounds": 0}, "lm_rounds")])

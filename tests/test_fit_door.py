@@ -121,3 +121,35 @@ def test_a_run_on_file_observations_prints_no_nan_where_there_is_no_truth(tmp_pa
     assert main(["family", str(path), "--out", str(tmp_path / "run"), "--no-progress"]) == 0
     summary = (tmp_path / "run" / "summary.md").read_text()
     assert "nan" not in summary and "n/a/?" not in summary and "— (no truth)" in summary
+
+
+def test_an_interrupted_family_run_resumes_from_the_seeds_it_finished(tmp_path, capsys, monkeypatch):
+    """Before, `family` had no --resume: an interrupted run lost every finished seed."""
+    import atlasnn.experiments._family_run as family_run
+
+    path = _config(tmp_path, '[fit]\nmethods = ["shooting"]\nstarts = 1\n').with_name("inv.toml")
+    path.write_text(path.read_text().replace("seeds = [0]", "seeds = [0, 1, 2]"), encoding="utf-8")
+    out = tmp_path / "run"
+    real, fitted = family_run._fit_seed, []
+
+    def interrupted_at_seed_1(cfg, system, obs, t0, seed, *rest):
+        if seed == 1:
+            raise KeyboardInterrupt
+        fitted.append(seed)
+        return real(cfg, system, obs, t0, seed, *rest)
+
+    monkeypatch.setattr(family_run, "_fit_seed", interrupted_at_seed_1)
+    assert main(["family", str(path), "--out", str(out), "--no-progress"]) == 130
+    assert f"atlasnn family --resume {out}" in capsys.readouterr().err
+    assert not (out / "results.json").exists() and (out / "partial" / "seed0.json").exists()
+    kept = json.loads((out / "partial" / "seed0.json").read_text())["records"][0]["estimate"]
+
+    monkeypatch.setattr(family_run, "_fit_seed", lambda *a: (fitted.append(a[4]), real(*a))[1])
+    assert main(["family", "--resume", str(out), "--no-progress"]) == 0
+    assert fitted == [0, 1, 2]  # seed 0 was not fitted again
+    records = json.loads((out / "results.json").read_text())["records"]
+    assert [r["seed"] for r in records] == [0, 1, 2] and records[0]["estimate"] == kept
+    assert not (out / "partial").exists() and (out / "figures" / "fit_trajectory.png").exists()
+    capsys.readouterr()
+    assert main(["family", "--resume", str(out)]) == 2
+    assert "the run is complete (results.json is written)" in capsys.readouterr().err

@@ -139,6 +139,7 @@ def cmd_reproduce(args) -> int:
 
 
 def cmd_run(args) -> int:
+    from atlasnn.experiments import is_unfinished_family_run
     from atlasnn.experiments.config import load_config
     from atlasnn.fileio import parse_toml
 
@@ -155,6 +156,8 @@ def cmd_run(args) -> int:
                 raise AtlasError(f"{args.config} is not the config the run in {out} was started with "
                                  f"({kept}); omit CONFIG to resume with the run's own copy")
 
+        if is_unfinished_family_run(args.resume):
+            return _resume_family(args, args.config)
         return _resume(args, check)
     if args.config is None:
         raise AtlasError("run needs a CONFIG.toml, or --resume DIR")
@@ -175,26 +178,51 @@ def _run_family(path, args) -> int:
     from atlasnn.experiments import run_family
     from atlasnn.experiments.config import load_family
 
+    import dataclasses
+
+    resume = getattr(args, "resume", None) if hasattr(args, "resume_seeds") else None
     cfg = load_family(path, quick=args.quick)
     if args.seeds is not None:
-        import dataclasses
-
         cfg = dataclasses.replace(cfg, seeds=_seeds(args))
-    for flag in ("resume", "scheduler", "seed_batch", "profile"):
+    if resume is not None:  # the seeds it was started with
+        cfg = dataclasses.replace(cfg, seeds=tuple(args.resume_seeds))
+    for flag in ("scheduler", "seed_batch", "profile"):
         if getattr(args, flag, None) not in (None, False):
             raise AtlasError(f"--{flag.replace('_', '-')} is not available for bundle and inverse experiments")
-    out = Path(args.out or f"runs/{cfg.name}{'-quick' if args.quick else ''}")
+    out = Path(resume or args.out or f"runs/{cfg.name}{'-quick' if args.quick else ''}")
     args.run_dir = out
     start = time.perf_counter()
-    run_family(cfg, out, overwrite=args.overwrite, config_text=Path(path).read_text(encoding="utf-8"),
-               progress=not args.no_progress)
+    try:
+        run_family(cfg, out, overwrite=args.overwrite, config_text=Path(path).read_text(encoding="utf-8"),
+                   progress=not args.no_progress, resume=resume is not None)
+    except KeyboardInterrupt:
+        print(f"interrupted: the seeds finished so far are kept in {out}/partial; finish the run with "
+              f"`atlasnn family --resume {out}`", file=sys.stderr)
+        return 130
     print(f"done in {time.perf_counter() - start:.1f} s: {out}/summary.md")
     return 0
+
+
+def _resume_family(args, named: str | None) -> int:
+    """``--resume DIR`` on an unfinished bundle or inverse run: as it was started."""
+    from atlasnn.experiments import check_resumable_family
+
+    if named is not None or args.overwrite:
+        raise AtlasError("--resume DIR runs DIR's run as it was started: give no config and no --overwrite")
+    if args.out is not None and Path(args.out).resolve() != Path(args.resume).resolve():
+        raise AtlasError(f"--out {args.out} differs from --resume {args.resume}")
+    if args.seeds is not None or args.quick:
+        raise AtlasError("--resume DIR runs as DIR's run was started: give no --seeds and no --quick")
+    started = check_resumable_family(args.resume)
+    args.quick, args.resume_seeds = bool(started["quick"]), started["seeds"]
+    return _run_family(Path(started["config"]), args)
 
 
 def cmd_family(args) -> int:
     from atlasnn.experiments.config import builtin_families, family_config_path
 
+    if args.resume is not None:
+        return _resume_family(args, args.name)
     if args.name is None:
         print("built-in bundle and inverse experiments: " + ", ".join(builtin_families()))
         return 0

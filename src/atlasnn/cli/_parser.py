@@ -75,6 +75,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seeds", type=int, default=None, metavar="K", help="seeds 0..K-1 (default: the config's)")
     s.add_argument("--out", default=None, metavar="DIR", help="run directory (default runs/NAME[-quick])")
     s.add_argument("--overwrite", action="store_true", help="reuse a non-empty run directory")
+    s.add_argument("--resume", default=None, metavar="DIR", help="finish an interrupted run in DIR: the seeds it "
+                   "finished are kept, the others run (its own config.toml; give no NAME)")
     s.add_argument("--no-progress", action="store_true", help="print the results only, not the lines said while "
                    "a phase goes (a bundle's epochs and windows, each fit's start)")
     s.set_defaults(func=cmd_family)

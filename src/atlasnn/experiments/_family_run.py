@@ -11,6 +11,7 @@ seed) and records estimate, standard error, error against the truth and time. Bo
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -18,45 +19,77 @@ from typing import Any, Callable
 import numpy as np
 
 from atlasnn.checkpoint import save_bundle
-from atlasnn.errors import AtlasError
+from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.evaluation import reference_members
 from atlasnn.experiments._store import check_run_dir
 from atlasnn.experiments.config._family import FamilyConfig
 from atlasnn.fileio import write_json, write_text
-from atlasnn.inverse import check_shooting_inputs, fit, judge_fit, predict_fit, synthetic_observations
+from atlasnn.inverse import FitResult, check_shooting_inputs, fit, judge_fit, predict_fit, synthetic_observations
 from atlasnn.observations import Observations, load_observations
 from atlasnn.report import plot_bundle_errors, plot_bundle_map, plot_estimates, plot_fit_trajectory
 from atlasnn.training import train_bundle
 from atlasnn.version import __version__
 
-__all__ = ["run_family", "rewrite_family_summary", "EVAL_MEMBERS", "EVAL_TIMES"]
+__all__ = ["run_family", "check_resumable_family", "is_unfinished_family_run", "rewrite_family_summary", "EVAL_MEMBERS", "EVAL_TIMES"]
 
 #: the evaluation-cost measurement: members × times
 EVAL_MEMBERS, EVAL_TIMES = 100_000, 100
 
 
 def run_family(cfg: FamilyConfig, out: str | Path, *, overwrite: bool = False, log: Callable[[str], None] = print,
-               config_text: str | None = None, progress: bool = True) -> dict[str, Any]:
+               config_text: str | None = None, progress: bool = True, resume: bool = False) -> dict[str, Any]:
     """Run a bundle or inverse experiment into ``out``; returns the results dict. ``progress``:
     the lines said while a phase goes (a bundle's epochs and windows, "fitting …") are printed;
-    the results' lines are printed either way."""
+    the results' lines are printed either way. Each seed is kept in ``out/partial/`` as it
+    finishes; ``resume``: continue a run in ``out`` that was interrupted, from the seeds it kept
+    (``cfg`` should be the one it ran: ``out/config.toml``)."""
     out = Path(out)
-    check_run_dir(out, overwrite)
+    if resume:
+        check_resumable_family(out)
+    else:
+        check_run_dir(out, overwrite)
+        shutil.rmtree(out / _PARTIAL, ignore_errors=True)  # --overwrite: no seed of an older run is reused
     system = cfg.system.build()
     if cfg.kind == "inverse":  # bad input is refused before anything is written or run
         obs, t0 = _observations(cfg, system, cfg.seeds[0])
         check_shooting_inputs(system, obs, cfg.unknowns, t0=t0, segments=cfg.fit.segments)
     out.mkdir(parents=True, exist_ok=True)
-    if config_text is not None:
-        write_text(out / "config.toml", config_text)
+    if not resume:
+        if config_text is not None:
+            write_text(out / "config.toml", config_text)
+        (out / _PARTIAL).mkdir(exist_ok=True)
+        write_json(out / _PARTIAL / "run.json", {"config": str(Path(cfg.source).resolve()), "quick": cfg.quick,
+                                                 "seeds": list(cfg.seeds)})
     runner = _run_bundle if cfg.kind == "bundle" else _run_inverse
     results = runner(cfg, system, out, log, log if progress else _silent)
     results.update({"kind": cfg.kind, "name": cfg.name, "description": cfg.description, "quick": cfg.quick,
                     "atlasnn_version": __version__, "system": system.describe()})
     write_json(out / "results.json", results)
     write_text(out / "summary.md", _summary(results))
+    shutil.rmtree(out / _PARTIAL, ignore_errors=True)  # every seed is in results.json now
     log(f"wrote {out / 'results.json'} and {out / 'summary.md'}")
     return results
+
+
+def is_unfinished_family_run(out: str | Path) -> bool:
+    """Whether ``out`` holds a bundle or inverse run that was started and not finished."""
+    return (Path(out) / _PARTIAL / "run.json").is_file() and not (Path(out) / "results.json").exists()
+
+
+def check_resumable_family(out: str | Path) -> dict[str, Any]:
+    """How the unfinished bundle or inverse run in ``out`` was started (its config file, --quick,
+    its seeds); refused in one line when ``out`` holds no such run."""
+    out = Path(out)
+    if (out / "results.json").is_file():
+        raise ConfigError(f"--resume {out}: the run is complete (results.json is written); nothing to resume")
+    try:
+        started = json.loads((out / _PARTIAL / "run.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        raise ConfigError(f"--resume {out}: no {_PARTIAL}/run.json there, so not an unfinished bundle or inverse "
+                          "run") from None
+    if not Path(started.get("config", "")).is_file():
+        raise ConfigError(f"--resume {out}: the run's config file {started.get('config')!r} is gone")
+    return started
 
 
 # ------------------------------------------------------------------------------ bundles
@@ -83,38 +116,14 @@ def _run_bundle(cfg: FamilyConfig, system, out: Path, log, say) -> dict[str, Any
     t_eval = np.linspace(box.t0, box.T, EVAL_TIMES)
     seeds, errors = {}, {}
     for seed in cfg.seeds:
-        def progress(k, epoch, loss, seed=seed):
-            if epoch % max(st.epochs // 2, 1) == 0 or epoch == st.epochs:
-                say(f"  seed {seed} window {k + 1}/{st.windows}: epoch {epoch}, loss {loss:.3g}")
-
-        def window_done(k, loss, seconds, seed=seed):
-            say(f"  seed {seed} window {k + 1}/{st.windows} done: loss {loss:.3g}, {seconds:.0f} s so far")
-
-        trained = train_bundle(system, box, st.train_config(), scaling=st.model, width=st.width, depth=st.depth,
-                               seed=seed, progress=progress, on_window=window_done)
-        sol = trained.solution
-        save_bundle(out / "models" / f"bundle_seed{seed}.npz", sol, extra={"seed": seed, "config": cfg.name})
-        err = _max_err(sol(t_test, z_test, l_test), ref)
-        errors[seed] = err
-        per_member = err.max(axis=1)
-        timings = []
-        for _ in range(2):
-            s = time.perf_counter()
-            sol(t_eval, z_eval, l_eval)
-            timings.append(time.perf_counter() - s)
-        exact = float(np.abs(sol(np.asarray([box.t0]), z_test, l_test)[:, 0] - z_test.astype(np.float32)).max())
-        seeds[str(seed)] = {
-            "train_time": trained.train_time, "compile_time": trained.compile_time,
-            "final_loss": [float(a[-1]) if a.size else None for a in trained.adam_loss],
-            "lm_loss": [float(a[-1]) if a.size else None for a in trained.lm_loss], "lm_stop": trained.lm_stop,
-            "retried": trained.retried,
-            "test": {"median": float(np.median(per_member)), "worst": float(per_member.max()),
-                     "p90": float(np.quantile(per_member, 0.9)), "per_member": per_member.tolist()},
-            "eval_seconds_first": timings[0], "eval_seconds": timings[1], "initial_state_error": exact,
-        }
-        log(f"  seed {seed}: trained in {trained.train_time:.1f} s; held-out max error median "
-            f"{np.median(per_member):.3g}, worst {per_member.max():.3g}; {EVAL_MEMBERS} members x {EVAL_TIMES} "
-            f"times in {timings[1]:.2f} s")
+        saved = _saved_seed(out, seed)
+        if saved is None:
+            saved = _bundle_seed(cfg, system, box, seed, (t_test, z_test, l_test, ref), (t_eval, z_eval, l_eval),
+                                 out, log, say)
+            _save_seed(out, seed, saved)
+        else:
+            log(f"  seed {seed}: done before (resumed), held-out max error median {saved['record']['test']['median']:.3g}")
+        seeds[str(seed)], errors[seed] = saved["record"], np.asarray(saved["errors"])
     labels = [*(f"{n}(0)" for n in system.state_names), *box.param_names]
     inputs = np.concatenate([z_test, l_test], axis=1)
     varying = [i for i in range(inputs.shape[1]) if np.ptp(inputs[:, i]) > 0]
@@ -122,7 +131,7 @@ def _run_bundle(cfg: FamilyConfig, system, out: Path, log, say) -> dict[str, Any
     first = cfg.seeds[0]
     figs = [*plot_bundle_map(inputs[:, order[:2]], [labels[i] for i in order[:2]], errors[first].max(axis=1),
                              out / "figures" / "bundle_map", f"seed {first}: held-out max error per member"),
-            *plot_bundle_errors(t_test, errors, out / "figures" / "bundle_errors", edges=list(sol.edges))]
+            *plot_bundle_errors(t_test, errors, out / "figures" / "bundle_errors", edges=list(st.train_config().window_edges(box.t0, box.T)))]
     medians = [v["test"]["median"] for v in seeds.values()]
     worsts = [v["test"]["worst"] for v in seeds.values()]
     return {"box": box.describe(), "settings": _jsonable(st.__dict__), "seeds": seeds,
@@ -137,6 +146,59 @@ def _run_bundle(cfg: FamilyConfig, system, out: Path, log, say) -> dict[str, Any
 
 def _jsonable(d: dict) -> dict:
     return json.loads(json.dumps(d, default=lambda o: list(o) if isinstance(o, tuple) else str(o)))
+
+
+def _bundle_seed(cfg: FamilyConfig, system, box, seed: int, test, timed, out: Path, log, say) -> dict[str, Any]:
+    """Train, save and measure one seed's bundle: its record and its held-out errors."""
+    st = cfg.bundle
+    t_test, z_test, l_test, ref = test
+
+    def progress(k, epoch, loss):
+        if epoch % max(st.epochs // 2, 1) == 0 or epoch == st.epochs:
+            say(f"  seed {seed} window {k + 1}/{st.windows}: epoch {epoch}, loss {loss:.3g}")
+
+    def window_done(k, loss, seconds):
+        say(f"  seed {seed} window {k + 1}/{st.windows} done: loss {loss:.3g}, {seconds:.0f} s so far")
+
+    trained = train_bundle(system, box, st.train_config(), scaling=st.model, width=st.width, depth=st.depth,
+                           seed=seed, progress=progress, on_window=window_done)
+    sol = trained.solution
+    save_bundle(out / "models" / f"bundle_seed{seed}.npz", sol, extra={"seed": seed, "config": cfg.name})
+    err = _max_err(sol(t_test, z_test, l_test), ref)
+    per_member = err.max(axis=1)
+    timings = []
+    for _ in range(2):
+        s = time.perf_counter()
+        sol(*timed)
+        timings.append(time.perf_counter() - s)
+    exact = float(np.abs(sol(np.asarray([box.t0]), z_test, l_test)[:, 0] - z_test.astype(np.float32)).max())
+    record = {
+        "train_time": trained.train_time, "compile_time": trained.compile_time,
+        "final_loss": [float(a[-1]) if a.size else None for a in trained.adam_loss],
+        "lm_loss": [float(a[-1]) if a.size else None for a in trained.lm_loss], "lm_stop": trained.lm_stop,
+        "retried": trained.retried,
+        "test": {"median": float(np.median(per_member)), "worst": float(per_member.max()),
+                 "p90": float(np.quantile(per_member, 0.9)), "per_member": per_member.tolist()},
+        "eval_seconds_first": timings[0], "eval_seconds": timings[1], "initial_state_error": exact,
+    }
+    log(f"  seed {seed}: trained in {trained.train_time:.1f} s; held-out max error median "
+        f"{np.median(per_member):.3g}, worst {per_member.max():.3g}; {EVAL_MEMBERS} members x {EVAL_TIMES} "
+        f"times in {timings[1]:.2f} s")
+    return {"record": record, "errors": err.tolist()}
+
+
+# ------------------------------------------------------------------------------ resuming
+_PARTIAL = "partial"  # the finished seeds of a run not yet written whole: partial/seed{S}.json
+
+
+def _saved_seed(out: Path, seed: int) -> dict[str, Any] | None:
+    path = out / _PARTIAL / f"seed{seed}.json"
+    return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else None
+
+
+def _save_seed(out: Path, seed: int, data: dict[str, Any]) -> None:
+    (out / _PARTIAL).mkdir(parents=True, exist_ok=True)
+    write_json(out / _PARTIAL / f"seed{seed}.json", _jsonable(data))
 
 
 # ------------------------------------------------------------------------------ inverse
@@ -214,7 +276,14 @@ def _run_inverse(cfg: FamilyConfig, system, out: Path, log, say) -> dict[str, An
         obs, t0 = _observations(cfg, system, seed)
         first_obs = first_obs or (obs, t0)
         seeds[str(seed)] = {"observations": obs.describe()}
-        recs, fits = _fit_seed(cfg, system, obs, t0, seed, truth, log, say)
+        saved = _saved_seed(out, seed)
+        if saved is None:
+            recs, fits = _fit_seed(cfg, system, obs, t0, seed, truth, log, say)
+            _save_seed(out, seed, {"records": recs})
+        else:
+            recs = saved["records"]
+            fits = {r["method"]: FitResult.from_dict({**r, "method": r["fit_method"]}) for r in recs if "failed" not in r}
+            log(f"  seed {seed}: done before (resumed), {len(fits)} fits")
         records += recs
         if seed == cfg.seeds[0]:
             curves = fits

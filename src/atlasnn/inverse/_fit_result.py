@@ -59,6 +59,15 @@ class FitResult:
             raise ConfigError(f"the fit has no unknown {name!r}; its unknowns are {list(self.names)}")
         return float(self.estimate[self.names.index(name)])
 
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "FitResult":
+        """The record :meth:`as_dict` wrote, read back (keys that are not fields are ignored)."""
+        arrays = {"estimate", "std", "covariance"}
+        kw = {f.name: (np.asarray(d[f.name], float) if f.name in arrays else
+                       tuple(d[f.name]) if f.name == "names" else d[f.name])
+              for f in dataclasses.fields(cls) if f.name in d}
+        return cls(**kw)
+
     def as_dict(self) -> dict[str, Any]:
         """A JSON-able summary of every field (non-finite numbers stay floats: ``inf``/``nan``)."""
         out: dict[str, Any] = {}

@@ -100,6 +100,12 @@ class BundleTrainConfig:
         if self.epochs == 0 and self.lm_steps == 0:
             raise ConfigError("bundle training needs epochs > 0 or lm_steps > 0")
 
+    def window_edges(self, t0: float, T: float) -> np.ndarray:
+        """The ``windows + 1`` edges of the equal windows over [t0, T] (the last exactly T)."""
+        edges = t0 + (T - t0) * np.arange(self.windows + 1) / self.windows
+        edges[-1] = T
+        return edges
+
 
 @dataclass
 class BundleTraining:
@@ -300,8 +306,7 @@ def train_bundle(system: HamiltonianSystem, box: BundleBox, config: BundleTrainC
     its neighbours (measured: window 7 of 8 of the oscillator bundle at 2.3e-4 between 2.8e-6 and
     1.8e-5; its members' errors then reached 0.5)."""
     box.check_system(system)
-    edges = box.t0 + (box.T - box.t0) * np.arange(config.windows + 1) / config.windows
-    edges[-1] = box.T
+    edges = config.window_edges(box.t0, box.T)
     model = make_bundle_model(box.centre(), box.half_width(), box.state_dim, scaling=scaling, width=width,
                               depth=depth, t0=box.t0, seed=seed)
     key = jax.random.PRNGKey(seed + 7919)
