@@ -176,7 +176,7 @@ def test_every_key_of_a_bundle_or_inverse_file_is_documented_and_no_other():
     rows, same = documented(reference_text())
     root = set(family_accepted_keys(BUNDLE, "")) | set(family_accepted_keys(INVERSE, ""))
     assert sorted(rows[FAMILY]) == sorted(root)
-    for base, path in ((BUNDLE, "bundle"), (INVERSE, "observations"), (INVERSE, "fit")):
+    for base, path in ((BUNDLE, "bundle"), (BUNDLE, "bundle.flowmap"), (INVERSE, "observations"), (INVERSE, "fit")):
         assert sorted(rows[path]) == sorted(family_accepted_keys(base, path)), f"[{path}]"
     assert sorted(rows["system"]) == sorted(family_accepted_keys(BUNDLE, "system"))
 

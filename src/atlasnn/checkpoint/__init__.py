@@ -4,6 +4,7 @@ every problem reported as one line naming the file; a time-marching run's progre
 window, to resume it; bundle solutions."""
 
 from atlasnn.checkpoint._bundle import KIND_BUNDLE, load_bundle, save_bundle
+from atlasnn.checkpoint._flowmap import KIND_FLOWMAP, load_flowmap, save_flowmap
 from atlasnn.checkpoint._format import FORMAT, FORMAT_VERSION
 from atlasnn.checkpoint._march import KIND_MARCH_PROGRESS, load_march_progress, save_march_progress
 from atlasnn.checkpoint._piecewise import KIND_PIECEWISE, load_piecewise, save_piecewise
@@ -27,6 +28,9 @@ __all__ = [
     "load_piecewise",
     "save_bundle",
     "load_bundle",
+    "save_flowmap",
+    "load_flowmap",
+    "KIND_FLOWMAP",
     "KIND_BUNDLE",
     "save_march_progress",
     "load_march_progress",

@@ -10,6 +10,7 @@ seed) and records estimate, standard error, error against the truth and time. Bo
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import time
@@ -18,7 +19,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from atlasnn.checkpoint import save_bundle
+from atlasnn.checkpoint import save_bundle, save_flowmap
 from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.evaluation import reference_members
 from atlasnn.experiments._store import check_run_dir
@@ -27,6 +28,7 @@ from atlasnn.fileio import write_json, write_text
 from atlasnn.inverse import FitResult, check_shooting_inputs, fit, judge_fit, predict_fit, synthetic_observations
 from atlasnn.observations import Observations, load_observations
 from atlasnn.report import plot_bundle_errors, plot_bundle_map, plot_estimates, plot_fit_trajectory
+from atlasnn.solver import solve_bundle
 from atlasnn.training import train_bundle
 from atlasnn.version import __version__
 
@@ -131,10 +133,10 @@ def _run_bundle(cfg: FamilyConfig, system, out: Path, log, say) -> dict[str, Any
     first = cfg.seeds[0]
     figs = [*plot_bundle_map(inputs[:, order[:2]], [labels[i] for i in order[:2]], errors[first].max(axis=1),
                              out / "figures" / "bundle_map", f"seed {first}: held-out max error per member"),
-            *plot_bundle_errors(t_test, errors, out / "figures" / "bundle_errors", edges=list(st.train_config().window_edges(box.t0, box.T)))]
+            *plot_bundle_errors(t_test, errors, out / "figures" / "bundle_errors", edges=_edges(st, box))]
     medians = [v["test"]["median"] for v in seeds.values()]
     worsts = [v["test"]["worst"] for v in seeds.values()]
-    return {"box": box.describe(), "settings": _jsonable(st.__dict__), "seeds": seeds,
+    return {"box": box.describe(), "settings": _jsonable(dataclasses.asdict(st)), "seeds": seeds,
             "test_members": st.test_members, "test_times": st.test_times, "reference_seconds": ref_time,
             "eval_members": EVAL_MEMBERS, "eval_times": EVAL_TIMES,
             "overall": {"median_of_medians": float(np.median(medians)), "worst_median": float(max(medians)),
@@ -160,10 +162,21 @@ def _bundle_seed(cfg: FamilyConfig, system, box, seed: int, test, timed, out: Pa
     def window_done(k, loss, seconds):
         say(f"  seed {seed} window {k + 1}/{st.windows} done: loss {loss:.3g}, {seconds:.0f} s so far")
 
-    trained = train_bundle(system, box, st.train_config(), scaling=st.model, width=st.width, depth=st.depth,
-                           seed=seed, progress=progress, on_window=window_done)
-    sol = trained.solution
-    save_bundle(out / "models" / f"bundle_seed{seed}.npz", sol, extra={"seed": seed, "config": cfg.name})
+    if st.method == "flowmap":
+        sol = solve_bundle(system, box, st.flowmap, seed=seed, progress=say)
+        save_flowmap(out / "models" / f"flowmap_seed{seed}.npz", sol, extra={"seed": seed, "config": cfg.name})
+        training = {"train_time": sol.info["seconds"], "compile_time": 0.0,
+                    "final_loss": [sol.info["residual_rms"]], "lm_loss": [], "lm_stop": [], "retried": [],
+                    "flowmap": sol.info}
+    else:
+        trained = train_bundle(system, box, st.train_config(), scaling=st.model, width=st.width, depth=st.depth,
+                               seed=seed, progress=progress, on_window=window_done)
+        sol = trained.solution
+        save_bundle(out / "models" / f"bundle_seed{seed}.npz", sol, extra={"seed": seed, "config": cfg.name})
+        training = {"train_time": trained.train_time, "compile_time": trained.compile_time,
+                    "final_loss": [float(a[-1]) if a.size else None for a in trained.adam_loss],
+                    "lm_loss": [float(a[-1]) if a.size else None for a in trained.lm_loss],
+                    "lm_stop": trained.lm_stop, "retried": trained.retried}
     err = _max_err(sol(t_test, z_test, l_test), ref)
     per_member = err.max(axis=1)
     timings = []
@@ -171,20 +184,24 @@ def _bundle_seed(cfg: FamilyConfig, system, box, seed: int, test, timed, out: Pa
         s = time.perf_counter()
         sol(*timed)
         timings.append(time.perf_counter() - s)
-    exact = float(np.abs(sol(np.asarray([box.t0]), z_test, l_test)[:, 0] - z_test.astype(np.float32)).max())
+    start_values = sol(np.asarray([box.t0]), z_test, l_test)[:, 0]
+    exact = float(np.abs(start_values - z_test.astype(start_values.dtype)).max())
     record = {
-        "train_time": trained.train_time, "compile_time": trained.compile_time,
-        "final_loss": [float(a[-1]) if a.size else None for a in trained.adam_loss],
-        "lm_loss": [float(a[-1]) if a.size else None for a in trained.lm_loss], "lm_stop": trained.lm_stop,
-        "retried": trained.retried,
+        **training,
         "test": {"median": float(np.median(per_member)), "worst": float(per_member.max()),
                  "p90": float(np.quantile(per_member, 0.9)), "per_member": per_member.tolist()},
         "eval_seconds_first": timings[0], "eval_seconds": timings[1], "initial_state_error": exact,
     }
-    log(f"  seed {seed}: trained in {trained.train_time:.1f} s; held-out max error median "
+    log(f"  seed {seed}: {'solved' if st.method == 'flowmap' else 'trained'} in {record['train_time']:.1f} s; "
+        f"held-out max error median "
         f"{np.median(per_member):.3g}, worst {per_member.max():.3g}; {EVAL_MEMBERS} members x {EVAL_TIMES} "
         f"times in {timings[1]:.2f} s")
     return {"record": record, "errors": err.tolist()}
+
+
+def _edges(st, box) -> list[float]:
+    """The window edges the figures mark (a flow map's windows are too many to draw)."""
+    return [] if st.method == "flowmap" else list(st.train_config().window_edges(box.t0, box.T))
 
 
 # ------------------------------------------------------------------------------ resuming

@@ -4,6 +4,7 @@ with their residual; one trial solution (:class:`Solution`) or a time-marching c
 
 from atlasnn.solutions._base import AbstractSolution
 from atlasnn.solutions._bundle import MEMBER_CHUNK, BundleSolution, bundle_start
+from atlasnn.solutions._flowmap import ChebyshevBasis, FlowMapBundle, chebyshev
 from atlasnn.solutions._bounds import log_norm, residual_bound
 from atlasnn.solutions._estimate import TRUST_FRACTION, ErrorEstimate, estimate_error, state_range
 from atlasnn.solutions._linearised import propagate, residual_and_jacobian
@@ -12,6 +13,9 @@ from atlasnn.solutions._base import INTERVAL_SLACK, ExtrapolationError, Extrapol
 from atlasnn.solutions._solution import OUTSIDE_MODES, Solution
 
 __all__ = [
+    "ChebyshevBasis",
+    "FlowMapBundle",
+    "chebyshev",
     "AbstractSolution",
     "ErrorEstimate",
     "estimate_error",

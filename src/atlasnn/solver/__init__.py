@@ -5,16 +5,22 @@ random tanh features, the output layer found by Gauss–Newton on collocation po
 accepted by their estimated error — as one compiled program. :class:`AdamMarch` is the paper's
 network trained by Adam window by window. A new solver is one :class:`AbstractSolver` subclass and
 one :func:`register_solver` entry.
+
+:func:`solve_bundle` solves a whole bundle (every initial state and parameter of a box) as one
+float64 flow map (:class:`FlowMap`), composed window after window.
 """
 
 from atlasnn.solver._base import SOLVERS, AbstractSolver, register_solver, solver_from_name
 from atlasnn.solver._collocation import Collocation, require_float64
+from atlasnn.solver._flowmap import FlowMap, solve_bundle
 from atlasnn.solver._features import WINDOW_SCALINGS, RandomFeatures, collocation_nodes
 from atlasnn.solver._solve import DEFAULT_ATOL, DEFAULT_RTOL, TIGHTEST_TOLERANCE, solve, solve_batch
 from atlasnn.solver._trained import AdamMarch
 
 __all__ = [
     "solve",
+    "solve_bundle",
+    "FlowMap",
     "solve_batch",
     "AbstractSolver",
     "Collocation",

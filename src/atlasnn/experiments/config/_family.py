@@ -21,6 +21,7 @@ from atlasnn.experiments.config._types import _fail, _key, _table
 from atlasnn.inverse import JointConfig
 from atlasnn.nn import model_aliases
 from atlasnn.observations import Unknown
+from atlasnn.solver import FlowMap
 
 __all__ = ["FamilyConfig", "BundleSettings", "ObservationSettings", "FitSettings",
            "is_family", "parse_family", "load_family", "QUICK_CAPS", "builtin_families", "family_config_path"]
@@ -64,6 +65,10 @@ def _bundle(v: Any, quick: bool) -> BundleSettings:
     if kw["z0_low"] is not None:
         kw["z0_rel"] = None
     kw["model"] = model_aliases()[kw["model"]]
+    try:
+        kw["flowmap"] = FlowMap(**kw["flowmap"])
+    except ConfigError as exc:
+        raise ConfigError(f"bundle.flowmap: {exc}") from None
     return _capped(BundleSettings(**kw), quick)
 
 

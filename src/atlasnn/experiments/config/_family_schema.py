@@ -37,6 +37,7 @@ from atlasnn.errors import ConfigError
 from atlasnn.inverse import FIT_METHODS, AbstractFitMethod, Bundle, CollocationFit, Joint, JointConfig, Shooting
 from atlasnn.nn import model_aliases
 from atlasnn.observations import Unknown
+from atlasnn.solver import FlowMap
 from atlasnn.systems import BundleBox, HamiltonianSystem
 from atlasnn.training import BundleTrainConfig
 
@@ -51,8 +52,10 @@ _T = BundleTrainConfig  # its dataclass defaults are the bundle's training defau
 @dataclass(frozen=True)
 class BundleSettings:
     """[bundle]: the box (z0 ± ``z0_rel`` or ``z0_low``/``z0_high``, parameter ``ranges``, [t0, T]),
-    the network, the training (defaults: :class:`BundleTrainConfig`'s), and the held-out test set
-    (``test_members`` members drawn with ``test_seed``, ``test_times`` times)."""
+    the network, the training (defaults: :class:`BundleTrainConfig`'s), the held-out test set
+    (``test_members`` members drawn with ``test_seed``, ``test_times`` times), and the ``method``:
+    ``"network"`` (trained) or ``"flowmap"`` (one float64 flow map solved by Gauss–Newton,
+    :func:`atlasnn.solver.solve_bundle` with ``flowmap``'s settings; the network keys are unused)."""
 
     T: float
     t0: float = 0.0
@@ -74,6 +77,8 @@ class BundleSettings:
     test_members: int = 200
     test_times: int = 100
     test_seed: int = 12345
+    method: str = "network"
+    flowmap: FlowMap = FlowMap()
 
     def box(self, system: HamiltonianSystem) -> BundleBox:
         if self.z0_low is not None:
@@ -248,6 +253,21 @@ FAMILY_TABLES: dict[str, TableSpec] = {
         Key("test_members", Integer(1, 10**5), _B.test_members, "Held-out members measured against DOP853."),
         Key("test_times", Integer(2, 10**5), _B.test_times, "Times per held-out member."),
         Key("test_seed", _SEED, _B.test_seed, "Seed of the held-out members' draw."),
+        Key("method", Choice(("network", "flowmap")), _B.method, "network: the trial solution's network trained "
+            "by Adam and LM window by window (the keys above); flowmap: one float64 flow map of a window solved by "
+            "Gauss–Newton and composed over [t0, T] (atlasnn.solver.solve_bundle, [bundle.flowmap])."),
+        Key("flowmap", Sub("bundle.flowmap"), {}, "The float64 flow map's settings (method = \"flowmap\")."),
+    )),
+    "bundle.flowmap": TableSpec("The float64 flow-map bundle (atlasnn.solver.FlowMap): ẑ(s; z, λ) = z + s·W φ(s, z, "
+                                "λ), φ products of Chebyshev polynomials, W by Gauss–Newton.", (
+        Key("windows", Integer(1, 100_000), FlowMap.windows, "h = (T − t0)/windows, the step of the map."),
+        Key("time_degree", Integer(1, 30), FlowMap.time_degree, "Chebyshev degree in s."),
+        Key("state_degree", Integer(1, 30), FlowMap.state_degree, "Total Chebyshev degree in the state."),
+        Key("param_degree", Integer(0, 30), FlowMap.param_degree, "Total Chebyshev degree in the parameters."),
+        Key("oversampling", Number(1, 100), FlowMap.oversampling, "Residual rows per unknown."),
+        Key("iterations", Integer(1, 100), FlowMap.iterations, "Gauss–Newton steps at most."),
+        Key("max_unknowns", Integer(1, 100_000), FlowMap.max_unknowns, "Larger problems are refused (the normal "
+            "matrix is dense)."),
     )),
     "observations": TableSpec("The data of an inverse problem: a file, or synthetic data drawn from the system "
                               "per seed.", (
