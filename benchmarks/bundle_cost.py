@@ -20,7 +20,8 @@ member's max |error| against DOP853 at 1e-12 (``reference_members``); DOP853 its
 (SciPy, one member after another), at rtol = atol = 1e-8 and 1e-12. The sensitivity reference is
 the central difference (δ = 1e-4) of the DOP853 references, good to about 1e-8.
 
-Network side: the bundle's evaluation time for the same queries (after compiling, best of 3), its
+Network side (or a float64 flow map, ``models/flowmap_seedS.npz``, whose sensitivities are central
+differences like the integrators'): the bundle's evaluation time for the same queries (after compiling, best of 3), its
 errors on the same held-out members, its training time (the run's results.json, or the training
 done here). Amortised per trajectory: (training + eval(N)) / N against classical(N) / N, the
 classical setting being the cheapest whose worst error is at most the bundle's worst error (the
@@ -89,16 +90,21 @@ def summary(err: np.ndarray) -> dict:
 
 # ------------------------------------------------------------------------------ the bundle
 def load_run(run_dir: str, seed: int):
-    from atlasnn.checkpoint import load_bundle
+    """A network bundle (models/bundle_seedS.npz) or a float64 flow map (models/flowmap_seedS.npz)."""
+    from atlasnn.checkpoint import load_bundle, load_flowmap
 
     results, model = Path(run_dir) / "results.json", Path(run_dir) / "models" / f"bundle_seed{seed}.npz"
+    flowmap = Path(run_dir) / "models" / f"flowmap_seed{seed}.npz"
+    if flowmap.is_file():
+        model = flowmap
     for p in (results, model):
         if not p.is_file():
             raise SystemExit(f"bundle_cost: {p} is missing (is {run_dir} a finished bundle run?)")
     record = json.loads(results.read_text(encoding="utf-8")).get("seeds", {}).get(str(seed))
     if not record or "train_time" not in record:
         raise SystemExit(f"bundle_cost: {results} has no train_time for seed {seed}")
-    return load_bundle(model), float(record["train_time"]), {"source": str(run_dir), "seed": seed,
+    loaded = load_flowmap(model) if model == flowmap else load_bundle(model)
+    return loaded, float(record["train_time"]), {"source": str(run_dir), "seed": seed,
                                                               "recorded_test": record.get("test")}
 
 
@@ -115,9 +121,26 @@ def train_here(seed: int):
                                                  "compile_time": float(out.compile_time)}
 
 
+def is_flowmap(sol) -> bool:
+    from atlasnn.solutions import FlowMapBundle
+
+    return isinstance(sol, FlowMapBundle)
+
+
 def bundle_sensitivity(sol, t, z0, lam) -> np.ndarray:
-    """ẑ and ∂ẑ/∂λ (N, T, 2d, P) in member chunks of equal size (one compilation)."""
+    """ẑ and ∂ẑ/∂λ (N, T, 2d, P) in member chunks of equal size (one compilation); a flow map by
+    central differences, as the integrators (one evaluation of 2P + 1 stacked member sets)."""
     n = z0.shape[0]
+    if is_flowmap(sol):
+        n_p = lam.shape[1]
+        shifted = [lam]
+        for j in range(n_p):
+            step = np.zeros_like(lam)
+            step[:, j] = FD_STEP
+            shifted += [lam + step, lam - step]
+        z = sol(t, np.concatenate([z0] * (2 * n_p + 1)), np.concatenate(shifted))
+        z = z.reshape(2 * n_p + 1, n, *z.shape[1:])
+        return np.stack([(z[1 + 2 * j] - z[2 + 2 * j]) / (2 * FD_STEP) for j in range(n_p)], axis=-1)
     chunk = min(SENS_CHUNK, n)
     pad = -(-n // chunk) * chunk - n
     zp, lp = np.concatenate([z0, np.repeat(z0[-1:], pad, 0)]), np.concatenate([lam, np.repeat(lam[-1:], pad, 0)])
@@ -135,7 +158,8 @@ class Problem:
         from atlasnn.systems import builtin_system
 
         self.sol, self.box = sol, sol.box
-        self.system = sol.system if sol.system is not None else builtin_system("nonlinear_oscillator")
+        system = getattr(sol, "system", None)
+        self.system = system if system is not None else builtin_system("nonlinear_oscillator")
         self.t = {"dense": np.linspace(self.box.t0, self.box.T, N_TIMES), "far": np.array([self.box.T])}
         self.t["sensitivity"] = self.t["dense"]
         self.z0, self.lam = self.box.draw(np.random.default_rng(HELD_OUT_SEED), HELD_OUT)
@@ -324,15 +348,21 @@ def finite(obj):
 def measure(sol, train: float, source: dict, sizes) -> dict:
     pb = Problem(sol)
     print(f"references for {HELD_OUT} held-out members: {pb.reference_seconds:.1f} s")
-    first = sol.windows[0]
+    if is_flowmap(sol):
+        kind = {"kind": "float64 flow map", "basis": {f: getattr(sol.basis, f) for f in
+                                                     ("time_degree", "state_degree", "param_degree", "h")},
+                "unknowns": sol.info.get("unknowns"), "dtype": "float64", "windows": sol.windows}
+    else:
+        first = sol.windows[0]
+        kind = {"kind": "network", "architecture": first.architecture(), "dtype": str(first.weights[0].dtype),
+                "windows": len(sol.windows)}
     result = {
         "problem": {"system": pb.system.describe(), "box": pb.box.describe(), "output_times": N_TIMES,
                     "held_out_members": HELD_OUT, "held_out_seed": HELD_OUT_SEED, "sizes": list(sizes),
                     "reference": "DOP853 rtol = atol = 1e-12; ∂z/∂λ by central differences of it, δ = 1e-4",
                     "classical_sensitivity": "central differences, δ = 1e-4, 2 extra solves per parameter "
                                              "in the same vectorised call; force evaluations include all three"},
-        "bundle": {**source, "train_time": train, "architecture": first.architecture(),
-                   "dtype": str(first.weights[0].dtype), "windows": len(sol.windows)},
+        "bundle": {**source, "train_time": train, **kind},
         "cases": {},
     }
     for case in pb.cases():

@@ -38,6 +38,15 @@ _KEEP_DEFAULT_DPI = {"test_plot_scaling_families"}
 
 
 @pytest.fixture(autouse=True)
+def _png_and_pdf():
+    """These tests check both formats a figure can be written in (PNG alone is the default)."""
+    from atlasnn.report import figure_formats
+
+    with figure_formats("png", "pdf"):
+        yield
+
+
+@pytest.fixture(autouse=True)
 def _low_dpi(monkeypatch, request):
     """Render PNGs at a lower resolution to keep the suite fast (one test keeps the default)."""
     import atlasnn.report._plotkit as plotkit

@@ -64,7 +64,7 @@ def test_non_separable_run_and_report(tmp_path, capsys):
     _no_se(run)
     figures = {p.name for p in (run / "figures").iterdir()}
     for name in ("trajectories", "errors", "energy", "loss"):
-        assert f"{name}.png" in figures and f"{name}.pdf" in figures
+        assert f"{name}.png" in figures and f"{name}.pdf" not in figures  # PNG alone unless --pdf
 
     # re-render from the directory alone
     for p in (run / "figures").iterdir():

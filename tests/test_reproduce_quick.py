@@ -30,7 +30,7 @@ def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("run") / "oscillator-short-quick"
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(config_module, "builtin_config_dir", lambda: configs)
-        assert main(["reproduce", "oscillator-short", "--quick", "--out", str(out), "--no-progress"]) == 0
+        assert main(["reproduce", "oscillator-short", "--quick", "--out", str(out), "--no-progress", "--pdf"]) == 0
     return out
 
 

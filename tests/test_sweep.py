@@ -58,7 +58,7 @@ def test_a_sweep_writes_complete_points_a_table_and_a_figure(swept, capsys):
         assert tomllib.loads((point / "config.toml").read_text())["train"]["lr"] == lr
         results = json.loads((point / "results.json").read_text())
         assert {r["lr"] for r in results["runs"]} == {lr}
-    assert (swept / "sweep.png").stat().st_size > 10_000 and (swept / "sweep.pdf").is_file()
+    assert (swept / "sweep.png").stat().st_size > 10_000
 
     # the summary: per point, the median and range over the three seeds of L2(x), from results.json
     rows = list(csv.DictReader((swept / "summary.csv").open()))

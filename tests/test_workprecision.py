@@ -65,7 +65,11 @@ def test_plot_writes_png_and_pdf(problem, tmp_path):
     pts.append(wp.network_point("net", "seed 0", 3.0, system, z_ref + 1e-3, z_ref, 0.5))
     from atlasnn.report import plot_work_precision
 
-    paths = plot_work_precision(tmp_path / "wp", pts, title="t")
+    from atlasnn.report import figure_formats
+
+    assert [p.suffix for p in plot_work_precision(tmp_path / "png", pts, title="t")] == [".png"]  # the default
+    with figure_formats("png", "pdf"):
+        paths = plot_work_precision(tmp_path / "wp", pts, title="t")
     assert [p.suffix for p in paths] == [".png", ".pdf"] and all(p.stat().st_size > 5000 for p in paths)
 
 

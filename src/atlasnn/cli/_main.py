@@ -65,6 +65,11 @@ def main(argv: list[str] | None = None) -> int:
     watch = _RunWatch(args)
     try:
         _check_out(args)
+        if getattr(args, "pdf", False):  # figures in PDF too (PNG alone is the default)
+            from atlasnn.report import figure_formats
+
+            with figure_formats("png", "pdf"):
+                return int(args.func(args) or 0)
         return int(args.func(args) or 0)
     except AtlasError as exc:
         message = " ".join(str(exc).splitlines()) or type(exc).__name__  # one line, always

@@ -56,6 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--figures", default="all", metavar="all|overview|none",
                        help="what to draw: every figure (default), the overview alone, or none (tables only; "
                             "`atlasnn report DIR` draws them later). Drawing takes about a second a figure")
+        s.add_argument("--pdf", action="store_true", help="write each figure as PDF too (default: PNG only; a "
+                       "PDF costs about as much again)")
 
     s = sub.add_parser("reproduce", help="run one of the built-in experiments (the paper's, the long-time ones, "
                                          "the hard-problem suite's)")

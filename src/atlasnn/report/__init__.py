@@ -11,7 +11,7 @@ from atlasnn.report._family_plots import (
     plot_estimates,
     plot_fit_trajectory,
 )
-from atlasnn.report._plotkit import DPI, Series, model_style, pi_ticks
+from atlasnn.report._plotkit import DPI, FIGURE_FORMATS, Series, figure_formats, model_style, pi_ticks
 from atlasnn.report._plots import (
     first_epoch_below,
     plot_energy,
@@ -33,6 +33,8 @@ from atlasnn.report._text import format_number, format_percent, replace_generate
 from atlasnn.report._workprecision_plot import plot_work_precision
 
 __all__ = [
+    "figure_formats",
+    "FIGURE_FORMATS",
     "plot_bundle_map",
     "plot_bundle_errors",
     "plot_estimates",

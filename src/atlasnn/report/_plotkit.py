@@ -3,7 +3,9 @@
 
 Figures are built on :class:`matplotlib.figure.Figure` objects directly, rendered by the Agg
 canvas, so no global pyplot state is created or needed (it works on a headless machine and inside
-threads). :func:`_save` writes ``<stem>.png`` (at :data:`DPI`) and ``<stem>.pdf``.
+threads). :func:`_save` writes ``<stem>.png`` (at :data:`DPI`), and ``<stem>.pdf`` too inside
+``figure_formats("png", "pdf")`` (the CLI's ``--pdf``): a PDF costs about as much again as the PNG,
+and most figures are looked at, not printed.
 
 The figures themselves are in :mod:`atlasnn.report._plots` (the paper's figures) and
 :mod:`atlasnn.report._summary_plots` (the overview of a run, loss against accuracy over many runs).
@@ -11,6 +13,8 @@ The figures themselves are in :mod:`atlasnn.report._plots` (the paper's figures)
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
 import re
 import zlib
@@ -27,7 +31,25 @@ from matplotlib.figure import Figure
 from atlasnn.errors import ConfigError
 from atlasnn.nn import MODELS
 
-__all__ = ["DPI", "Series", "model_style", "pi_ticks"]
+__all__ = ["DPI", "Series", "model_style", "pi_ticks", "figure_formats", "FIGURE_FORMATS"]
+
+#: the file formats a figure can be written in
+FIGURE_FORMATS = ("png", "pdf")
+_FORMATS: contextvars.ContextVar[tuple[str, ...]] = contextvars.ContextVar("atlasnn_figure_formats",
+                                                                           default=("png",))
+
+
+@contextlib.contextmanager
+def figure_formats(*formats: str):
+    """Every figure drawn inside is written in ``formats`` (default outside: PNG alone)."""
+    bad = [f for f in formats if f not in FIGURE_FORMATS]
+    if not formats or bad:
+        raise ConfigError(f"figure formats must be a non-empty choice of {list(FIGURE_FORMATS)}, got {list(formats)}")
+    token = _FORMATS.set(tuple(f for f in FIGURE_FORMATS if f in formats))
+    try:
+        yield
+    finally:
+        _FORMATS.reset(token)
 
 DPI = 150
 
@@ -283,14 +305,18 @@ def _new_figure(figsize: tuple[float, float]) -> Figure:
 def _save(fig: Figure, stem: str | Path) -> list[Path]:
     base = Path(stem)
     base.parent.mkdir(parents=True, exist_ok=True)
-    png = Path(f"{base}.png")
-    pdf = Path(f"{base}.pdf")
-    fig.savefig(png, dpi=DPI, format="png")
-    # The constrained layout was solved while drawing the PNG; the PDF has the same size in
-    # inches, so freeze those positions instead of solving the layout a second time.
-    fig.set_layout_engine("none")
-    fig.savefig(pdf, format="pdf", metadata={"CreationDate": None})
-    return [png, pdf]
+    paths = []
+    for fmt in _FORMATS.get():
+        path = Path(f"{base}.{fmt}")
+        if fmt == "png":
+            fig.savefig(path, dpi=DPI, format="png")
+            # The constrained layout was solved while drawing the PNG; the PDF has the same size
+            # in inches, so freeze those positions instead of solving the layout a second time.
+            fig.set_layout_engine("none")
+        else:
+            fig.savefig(path, format="pdf", metadata={"CreationDate": None})
+        paths.append(path)
+    return paths
 
 
 def _t_range(series: Iterable[Series]) -> tuple[float, float]:

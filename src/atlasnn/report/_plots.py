@@ -6,8 +6,8 @@ metric values) and turns them into figures.
 
 Figures are built on :class:`matplotlib.figure.Figure` objects directly, rendered by the Agg
 canvas, so no global pyplot state is created or needed (the module works on a headless machine and
-inside threads). Every ``plot_*`` function writes ``<stem>.png`` (150 dpi) and ``<stem>.pdf``,
-creating the parent directory if needed, and returns the list ``[png_path, pdf_path]``.
+inside threads). Every ``plot_*`` function writes ``<stem>.png`` (150 dpi), and ``<stem>.pdf`` inside
+``figure_formats("png", "pdf")``, creating the parent directory if needed, and returns the paths.
 
 Conventions shared by all figures:
 

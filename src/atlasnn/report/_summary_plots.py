@@ -6,8 +6,8 @@
   profile of one or several runs, with the paper's single run marked: does accuracy follow the
   loss, and where does the paper's run sit in our distribution?
 
-Like every figure of atlasnn, each function writes ``<stem>.png`` and ``<stem>.pdf`` and returns
-the two paths.
+Like every figure of atlasnn, each function writes ``<stem>.png`` (and ``<stem>.pdf`` with
+``figure_formats("png", "pdf")``) and returns the paths.
 """
 
 from __future__ import annotations

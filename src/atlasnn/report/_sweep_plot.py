@@ -14,10 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-
-from atlasnn.report._plotkit import DPI, model_style
+from atlasnn.report._plotkit import _new_figure, _save, model_style
 
 
 def _numeric(values: list[Any]) -> bool:
@@ -63,10 +60,9 @@ def _panel(ax, rows: list[dict], key: str, values: list[Any], labels: dict[str, 
 
 
 def plot_sweep(stem: Path, spec: dict, rows: list[dict], labels: dict[str, str], what: str) -> list[Path]:
-    """Write ``stem.png`` and ``stem.pdf``; returns their paths."""
+    """Write ``stem.png`` (and ``stem.pdf`` inside ``figure_formats("png", "pdf")``); returns the paths."""
     axes = spec["axes"]
-    fig = Figure(figsize=(4.4 * len(axes) + 0.6, 3.8), layout="constrained")
-    FigureCanvasAgg(fig)
+    fig = _new_figure((4.4 * len(axes) + 0.6, 3.8))
     panels = fig.subplots(1, len(axes), squeeze=False)[0]
     positive = True
     for ax, axis in zip(panels, axes):
@@ -80,8 +76,4 @@ def plot_sweep(stem: Path, spec: dict, rows: list[dict], labels: dict[str, str],
     over = "seeds" + (" and the other axes' values" if len(axes) > 1 else "")
     fig.suptitle(f"{spec['experiment']}: median and min–max over {over} ({'/'.join(map(str, seeds))} seeds per point)",
                  fontsize=10)
-    stem.parent.mkdir(parents=True, exist_ok=True)
-    paths = [stem.with_suffix(".png"), stem.with_suffix(".pdf")]
-    fig.savefig(paths[0], dpi=DPI)
-    fig.savefig(paths[1])
-    return paths
+    return _save(fig, stem)

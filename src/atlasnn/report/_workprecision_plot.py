@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Sequence
 
 from atlasnn.evaluation import SYMPLECTIC, WorkPoint
+from atlasnn.report._plotkit import _new_figure, _save
 
 __all__ = ["plot_work_precision"]
 
@@ -15,12 +16,8 @@ def plot_work_precision(stem: str | Path, points: Sequence[WorkPoint], *, title:
                         first_name: str = "x") -> list[Path]:
     """Two log–log panels, max error and L2(first coordinate) against seconds: a line per
     classical method (its settings joined), markers for the network points (one per seed)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.3), constrained_layout=True)
+    fig = _new_figure((11, 4.3))
+    axes = fig.subplots(1, 2)
     classical = [m for m in [*SYMPLECTIC, "dop853"] if any(p.method == m for p in points)]
     networks = list(dict.fromkeys(p.method for p in points if p.kind == "network"))
     markers = "os^Dv<>"
@@ -42,10 +39,4 @@ def plot_work_precision(stem: str | Path, points: Sequence[WorkPoint], *, title:
     axes[1].legend(fontsize=7, loc="best")
     if title:
         fig.suptitle(title)
-    paths = []
-    for ext in ("png", "pdf"):
-        path = Path(f"{stem}.{ext}")
-        fig.savefig(path, dpi=150)
-        paths.append(path)
-    plt.close(fig)
-    return paths
+    return _save(fig, stem)

@@ -12,7 +12,7 @@ float64 flow map (:class:`FlowMap`), composed window after window.
 
 from atlasnn.solver._base import SOLVERS, AbstractSolver, register_solver, solver_from_name
 from atlasnn.solver._collocation import Collocation, require_float64
-from atlasnn.solver._flowmap import FlowMap, solve_bundle
+from atlasnn.solver._flowmap import FlowMap, FlowMapProblem, flowmap_problem, solve_bundle
 from atlasnn.solver._features import WINDOW_SCALINGS, RandomFeatures, collocation_nodes
 from atlasnn.solver._solve import DEFAULT_ATOL, DEFAULT_RTOL, TIGHTEST_TOLERANCE, solve, solve_batch
 from atlasnn.solver._trained import AdamMarch
@@ -21,6 +21,8 @@ __all__ = [
     "solve",
     "solve_bundle",
     "FlowMap",
+    "FlowMapProblem",
+    "flowmap_problem",
     "solve_batch",
     "AbstractSolver",
     "Collocation",

@@ -42,7 +42,7 @@ from atlasnn.evaluation import parametric_field
 from atlasnn.solutions import ChebyshevBasis, FlowMapBundle
 from atlasnn.systems import BundleBox, HamiltonianSystem
 
-__all__ = ["FlowMap", "solve_bundle"]
+__all__ = ["FlowMap", "solve_bundle", "flowmap_problem", "FlowMapProblem"]
 
 
 @dataclass(frozen=True)
@@ -234,6 +234,14 @@ def _widened(box_: tuple[np.ndarray, np.ndarray], by: float = 0.1) -> tuple[np.n
     return box_[0] - by * width, box_[1] + by * width
 
 
+def _basis(method: FlowMap, box: BundleBox, region, h: float) -> ChebyshevBasis:
+    """``method``'s basis over the states ``region`` = (low, high) and the box's parameter ranges."""
+    plo = tuple(a for a, _ in box.params.values())
+    phi = tuple(b for _, b in box.params.values())
+    return ChebyshevBasis(method.time_degree, method.state_degree, method.param_degree, box.state_dim,
+                          tuple(region[0]) + plo, tuple(region[1]) + phi, h)
+
+
 def _n_points(method: FlowMap, box: BundleBox) -> int:
     return int(math.ceil(method.oversampling * method.unknowns(box.state_dim, len(box.params)) / box.state_dim))
 
@@ -241,15 +249,36 @@ def _n_points(method: FlowMap, box: BundleBox) -> int:
 def _fit(method: FlowMap, system, box: BundleBox, physics: _Physics, shell: _Shell, region, h: float,
          rng: np.random.Generator, say, label: str) -> tuple[FlowMapBundle, float]:
     """One map with ``method``'s basis over ``region``: (the bundle, its residual RMS)."""
-    plo = tuple(a for a, _ in box.params.values())
-    phi = tuple(b for _, b in box.params.values())
-    basis = ChebyshevBasis(method.time_degree, method.state_degree, method.param_degree, box.state_dim,
-                           tuple(region[0]) + plo, tuple(region[1]) + phi, h)
+    basis = _basis(method, box, region, h)
     n_points = _n_points(method, box)
     say(f"  flow map ({label}): {box.state_dim * basis.n_features} unknowns, {n_points} points")
     s, z, lam = _draw_points(n_points, region, box, shell, h, rng)
     W, rms = _gauss_newton(basis, physics, s, z, lam, method.iterations, say)
     return FlowMapBundle(basis, W.reshape(box.state_dim, method.time_degree + 1, -1), box, method.windows, {}), rms
+
+
+@dataclass
+class FlowMapProblem:
+    """One least-squares problem of :func:`solve_bundle` (a basis over a region, its collocation
+    points): what the Gauss–Newton step solves, exposed to measure the step against others."""
+
+    basis: ChebyshevBasis
+    physics: _Physics
+    points: tuple[np.ndarray, np.ndarray, np.ndarray]  # s, z, λ
+
+    def solve(self, iterations: int = 8) -> tuple[np.ndarray, float]:
+        """(W (2d, M), residual RMS) by the Gauss–Newton step, from W = 0."""
+        return _gauss_newton(self.basis, self.physics, *self.points, iterations, lambda _line: None)
+
+
+def flowmap_problem(system: HamiltonianSystem, box: BundleBox, method: FlowMap, region, *, seed: int = 0) -> FlowMapProblem:
+    """The problem :func:`solve_bundle` solves for ``method`` over ``region`` = (low, high) states."""
+    rng = np.random.default_rng(seed)
+    physics = _Physics(system, box)
+    shell = _Shell(physics, box, rng, method.shell_margin)
+    h = (box.T - box.t0) / method.windows
+    return FlowMapProblem(_basis(method, box, region, h), physics,
+                          _draw_points(_n_points(method, box), region, box, shell, h, rng))
 
 
 def solve_bundle(system: HamiltonianSystem, box: BundleBox, method: FlowMap = FlowMap(), *, seed: int = 0,
