@@ -176,16 +176,16 @@ def test_an_interrupted_bundle_run_resumes_from_the_seeds_it_finished(tmp_path, 
                     'test_members = 6\ntest_times = 11\n')
     out, real, trained = tmp_path / "run", family_run._bundle_seed, []
 
-    def seed_1_interrupted(cfg, system, box, seed, *rest):
+    def seed_1_interrupted(cfg, test, out, say, seed):
         if seed == 1:
             raise KeyboardInterrupt
         trained.append(seed)
-        return real(cfg, system, box, seed, *rest)
+        return real(cfg, test, out, say, seed)
 
     monkeypatch.setattr(family_run, "_bundle_seed", seed_1_interrupted)
     assert main(["family", str(toml), "--out", str(out), "--no-progress"]) == 130
     kept = json.loads((out / "partial" / "seed0.json").read_text())["record"]
-    monkeypatch.setattr(family_run, "_bundle_seed", lambda *a: (trained.append(a[3]), real(*a))[1])
+    monkeypatch.setattr(family_run, "_bundle_seed", lambda *a: (trained.append(a[-1]), real(*a))[1])
     assert main(["run", "--resume", str(out), "--no-progress"]) == 0  # `run` resumes it as `family` does
     res = json.loads((out / "results.json").read_text())
     assert trained == [0, 1] and res["seeds"]["0"]["test"] == kept["test"] and set(res["seeds"]) == {"0", "1"}

@@ -132,11 +132,11 @@ def test_an_interrupted_family_run_resumes_from_the_seeds_it_finished(tmp_path, 
     out = tmp_path / "run"
     real, fitted = family_run._fit_seed, []
 
-    def interrupted_at_seed_1(cfg, system, obs, t0, seed, *rest):
+    def interrupted_at_seed_1(cfg, truth, say, seed):
         if seed == 1:
             raise KeyboardInterrupt
         fitted.append(seed)
-        return real(cfg, system, obs, t0, seed, *rest)
+        return real(cfg, truth, say, seed)
 
     monkeypatch.setattr(family_run, "_fit_seed", interrupted_at_seed_1)
     assert main(["family", str(path), "--out", str(out), "--no-progress"]) == 130
@@ -144,7 +144,7 @@ def test_an_interrupted_family_run_resumes_from_the_seeds_it_finished(tmp_path, 
     assert not (out / "results.json").exists() and (out / "partial" / "seed0.json").exists()
     kept = json.loads((out / "partial" / "seed0.json").read_text())["records"][0]["estimate"]
 
-    monkeypatch.setattr(family_run, "_fit_seed", lambda *a: (fitted.append(a[4]), real(*a))[1])
+    monkeypatch.setattr(family_run, "_fit_seed", lambda *a: (fitted.append(a[-1]), real(*a))[1])
     assert main(["family", "--resume", str(out), "--no-progress"]) == 0
     assert fitted == [0, 1, 2]  # seed 0 was not fitted again
     records = json.loads((out / "results.json").read_text())["records"]
@@ -153,3 +153,15 @@ def test_an_interrupted_family_run_resumes_from_the_seeds_it_finished(tmp_path, 
     capsys.readouterr()
     assert main(["family", "--resume", str(out)]) == 2
     assert "the run is complete (results.json is written)" in capsys.readouterr().err
+
+
+def test_family_seeds_run_in_worker_processes_with_jobs(tmp_path, capsys):
+    """`family --jobs 2`: the seeds are tasks of the local executor (two processes), the same
+    estimates as in this process; before, --jobs did not exist for family runs."""
+    path = _config(tmp_path, '[fit]\nmethods = ["shooting"]\nstarts = 1\n')
+    path.write_text(path.read_text().replace("seeds = [0]", "seeds = [0, 1]"), encoding="utf-8")
+    assert main(["family", str(path), "--out", str(tmp_path / "one"), "--no-progress"]) == 0
+    assert main(["family", str(path), "--out", str(tmp_path / "two"), "--no-progress", "--jobs", "2"]) == 0
+    one, two = (json.loads((tmp_path / d / "results.json").read_text())["records"] for d in ("one", "two"))
+    assert [r["estimate"] for r in one] == [r["estimate"] for r in two] and len(two) == 2
+    assert "seed 1 shooting: lam = " in capsys.readouterr().out  # the workers' lines, printed here

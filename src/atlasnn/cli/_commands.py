@@ -186,7 +186,7 @@ def _run_family(path, args) -> int:
         cfg = dataclasses.replace(cfg, seeds=_seeds(args))
     if resume is not None:  # the seeds it was started with
         cfg = dataclasses.replace(cfg, seeds=tuple(args.resume_seeds))
-    for flag in ("scheduler", "seed_batch", "profile"):
+    for flag in ("seed_batch", "profile"):
         if getattr(args, flag, None) not in (None, False):
             raise AtlasError(f"--{flag.replace('_', '-')} is not available for bundle and inverse experiments")
     out = Path(resume or args.out or f"runs/{cfg.name}{'-quick' if args.quick else ''}")
@@ -194,7 +194,8 @@ def _run_family(path, args) -> int:
     start = time.perf_counter()
     try:
         run_family(cfg, out, overwrite=args.overwrite, config_text=Path(path).read_text(encoding="utf-8"),
-                   progress=not args.no_progress, resume=resume is not None)
+                   progress=not args.no_progress, resume=resume is not None, jobs=_jobs(args),
+                   scheduler=getattr(args, "scheduler", None))
     except KeyboardInterrupt:
         print(f"interrupted: the seeds finished so far are kept in {out}/partial; finish the run with "
               f"`atlasnn family --resume {out}`", file=sys.stderr)

@@ -79,6 +79,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--overwrite", action="store_true", help="reuse a non-empty run directory")
     s.add_argument("--resume", default=None, metavar="DIR", help="finish an interrupted run in DIR: the seeds it "
                    "finished are kept, the others run (its own config.toml; give no NAME)")
+    s.add_argument("--jobs", type=int, default=1, metavar="J", help="seeds run at once, each in its own process "
+                   "(default 1: in this process, with progress lines)")
+    s.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run the seeds on the workers of this Dask "
+                   "scheduler (default $ATLASNN_SCHEDULER; docs/SCALE.md)")
     s.add_argument("--no-progress", action="store_true", help="print the results only, not the lines said while "
                    "a phase goes (a bundle's epochs and windows, each fit's start)")
     s.set_defaults(func=cmd_family)

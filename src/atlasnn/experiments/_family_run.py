@@ -11,8 +11,8 @@ seed) and records estimate, standard error, error against the truth and time. Bo
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
-import shutil
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -20,8 +20,16 @@ from typing import Any, Callable
 import numpy as np
 
 from atlasnn.checkpoint import save_bundle, save_flowmap
-from atlasnn.errors import AtlasError, ConfigError
+from atlasnn.errors import AtlasError
 from atlasnn.evaluation import reference_members
+from atlasnn.experiments._family_seeds import (
+    check_resumable_family,
+    finish_partial,
+    in_process,
+    jsonable,
+    run_seeds,
+    start_partial,
+)
 from atlasnn.experiments._store import check_run_dir
 from atlasnn.experiments.config._family import FamilyConfig
 from atlasnn.fileio import write_json, write_text
@@ -32,25 +40,26 @@ from atlasnn.solver import solve_bundle
 from atlasnn.training import train_bundle
 from atlasnn.version import __version__
 
-__all__ = ["run_family", "check_resumable_family", "is_unfinished_family_run", "rewrite_family_summary", "EVAL_MEMBERS", "EVAL_TIMES"]
+__all__ = ["run_family", "rewrite_family_summary", "EVAL_MEMBERS", "EVAL_TIMES"]
 
 #: the evaluation-cost measurement: members × times
 EVAL_MEMBERS, EVAL_TIMES = 100_000, 100
 
 
 def run_family(cfg: FamilyConfig, out: str | Path, *, overwrite: bool = False, log: Callable[[str], None] = print,
-               config_text: str | None = None, progress: bool = True, resume: bool = False) -> dict[str, Any]:
+               config_text: str | None = None, progress: bool = True, resume: bool = False, jobs: int = 1,
+               scheduler: str | None = None) -> dict[str, Any]:
     """Run a bundle or inverse experiment into ``out``; returns the results dict. ``progress``:
-    the lines said while a phase goes (a bundle's epochs and windows, "fitting …") are printed;
-    the results' lines are printed either way. Each seed is kept in ``out/partial/`` as it
-    finishes; ``resume``: continue a run in ``out`` that was interrupted, from the seeds it kept
-    (``cfg`` should be the one it ran: ``out/config.toml``)."""
+    the lines said while a phase goes (a bundle's epochs and windows, "fitting …") are printed
+    when the seeds run in this process; the results' lines are printed either way. The seeds run
+    as tasks of the run's executor (``jobs`` local processes, or the Dask ``scheduler``'s
+    workers), each kept in ``out/partial/`` as it finishes; ``resume``: continue a run in ``out``
+    that was interrupted, from the seeds it kept (``cfg`` should be the one it ran)."""
     out = Path(out)
     if resume:
         check_resumable_family(out)
     else:
         check_run_dir(out, overwrite)
-        shutil.rmtree(out / _PARTIAL, ignore_errors=True)  # --overwrite: no seed of an older run is reused
     system = cfg.system.build()
     if cfg.kind == "inverse":  # bad input is refused before anything is written or run
         obs, t0 = _observations(cfg, system, cfg.seeds[0])
@@ -59,39 +68,17 @@ def run_family(cfg: FamilyConfig, out: str | Path, *, overwrite: bool = False, l
     if not resume:
         if config_text is not None:
             write_text(out / "config.toml", config_text)
-        (out / _PARTIAL).mkdir(exist_ok=True)
-        write_json(out / _PARTIAL / "run.json", {"config": str(Path(cfg.source).resolve()), "quick": cfg.quick,
-                                                 "seeds": list(cfg.seeds)})
+        start_partial(out, cfg.source, cfg.quick, cfg.seeds)
+    say = print if progress and in_process(jobs, scheduler) else _silent
     runner = _run_bundle if cfg.kind == "bundle" else _run_inverse
-    results = runner(cfg, system, out, log, log if progress else _silent)
+    results = runner(cfg, system, out, log, say, {"jobs": jobs, "scheduler": scheduler})
     results.update({"kind": cfg.kind, "name": cfg.name, "description": cfg.description, "quick": cfg.quick,
                     "atlasnn_version": __version__, "system": system.describe()})
     write_json(out / "results.json", results)
     write_text(out / "summary.md", _summary(results))
-    shutil.rmtree(out / _PARTIAL, ignore_errors=True)  # every seed is in results.json now
+    finish_partial(out)
     log(f"wrote {out / 'results.json'} and {out / 'summary.md'}")
     return results
-
-
-def is_unfinished_family_run(out: str | Path) -> bool:
-    """Whether ``out`` holds a bundle or inverse run that was started and not finished."""
-    return (Path(out) / _PARTIAL / "run.json").is_file() and not (Path(out) / "results.json").exists()
-
-
-def check_resumable_family(out: str | Path) -> dict[str, Any]:
-    """How the unfinished bundle or inverse run in ``out`` was started (its config file, --quick,
-    its seeds); refused in one line when ``out`` holds no such run."""
-    out = Path(out)
-    if (out / "results.json").is_file():
-        raise ConfigError(f"--resume {out}: the run is complete (results.json is written); nothing to resume")
-    try:
-        started = json.loads((out / _PARTIAL / "run.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        raise ConfigError(f"--resume {out}: no {_PARTIAL}/run.json there, so not an unfinished bundle or inverse "
-                          "run") from None
-    if not Path(started.get("config", "")).is_file():
-        raise ConfigError(f"--resume {out}: the run's config file {started.get('config')!r} is gone")
-    return started
 
 
 # ------------------------------------------------------------------------------ bundles
@@ -104,7 +91,7 @@ def _silent(_line: str) -> None:
     """The progress log of a run with progress off."""
 
 
-def _run_bundle(cfg: FamilyConfig, system, out: Path, log, say) -> dict[str, Any]:
+def _run_bundle(cfg: FamilyConfig, system, out: Path, log, say, executor: dict) -> dict[str, Any]:
     st = cfg.bundle
     box = st.box(system)
     z_test, l_test = box.draw(np.random.default_rng(st.test_seed), st.test_members)
@@ -114,18 +101,10 @@ def _run_bundle(cfg: FamilyConfig, system, out: Path, log, say) -> dict[str, Any
     ref_time = time.perf_counter() - start
     log(f"{cfg.name}: references of {st.test_members} held-out members in {ref_time:.1f} s")
     (out / "models").mkdir(exist_ok=True)
-    z_eval, l_eval = box.draw(np.random.default_rng(st.test_seed + 1), EVAL_MEMBERS)
-    t_eval = np.linspace(box.t0, box.T, EVAL_TIMES)
-    seeds, errors = {}, {}
-    for seed in cfg.seeds:
-        saved = _saved_seed(out, seed)
-        if saved is None:
-            saved = _bundle_seed(cfg, system, box, seed, (t_test, z_test, l_test, ref), (t_eval, z_eval, l_eval),
-                                 out, log, say)
-            _save_seed(out, seed, saved)
-        else:
-            log(f"  seed {seed}: done before (resumed), held-out max error median {saved['record']['test']['median']:.3g}")
-        seeds[str(seed)], errors[seed] = saved["record"], np.asarray(saved["errors"])
+    work = functools.partial(_bundle_seed, cfg, (t_test, z_test, l_test, ref), out, say)
+    outputs = run_seeds(cfg.seeds, work, out, cfg.name, log, **executor)
+    seeds = {str(s): o["record"] for s, o in outputs.items()}
+    errors = {s: np.asarray(o["errors"]) for s, o in outputs.items()}
     labels = [*(f"{n}(0)" for n in system.state_names), *box.param_names]
     inputs = np.concatenate([z_test, l_test], axis=1)
     varying = [i for i in range(inputs.shape[1]) if np.ptp(inputs[:, i]) > 0]
@@ -136,7 +115,7 @@ def _run_bundle(cfg: FamilyConfig, system, out: Path, log, say) -> dict[str, Any
             *plot_bundle_errors(t_test, errors, out / "figures" / "bundle_errors", edges=_edges(st, box))]
     medians = [v["test"]["median"] for v in seeds.values()]
     worsts = [v["test"]["worst"] for v in seeds.values()]
-    return {"box": box.describe(), "settings": _jsonable(dataclasses.asdict(st)), "seeds": seeds,
+    return {"box": box.describe(), "settings": jsonable(dataclasses.asdict(st)), "seeds": seeds,
             "test_members": st.test_members, "test_times": st.test_times, "reference_seconds": ref_time,
             "eval_members": EVAL_MEMBERS, "eval_times": EVAL_TIMES,
             "overall": {"median_of_medians": float(np.median(medians)), "worst_median": float(max(medians)),
@@ -146,14 +125,15 @@ def _run_bundle(cfg: FamilyConfig, system, out: Path, log, say) -> dict[str, Any
             "figures": [str(p.relative_to(out)) for p in figs]}
 
 
-def _jsonable(d: dict) -> dict:
-    return json.loads(json.dumps(d, default=lambda o: list(o) if isinstance(o, tuple) else str(o)))
-
-
-def _bundle_seed(cfg: FamilyConfig, system, box, seed: int, test, timed, out: Path, log, say) -> dict[str, Any]:
-    """Train, save and measure one seed's bundle: its record and its held-out errors."""
+def _bundle_seed(cfg: FamilyConfig, test, out: Path, say, seed: int) -> dict[str, Any]:
+    """Train (or solve), save and measure one seed's bundle: its record, its held-out errors and
+    the line that reports them (a seed task: it may run in another process)."""
     st = cfg.bundle
+    system = cfg.system.build()
+    box = st.box(system)
     t_test, z_test, l_test, ref = test
+    z_eval, l_eval = box.draw(np.random.default_rng(st.test_seed + 1), EVAL_MEMBERS)
+    timed = (np.linspace(box.t0, box.T, EVAL_TIMES), z_eval, l_eval)
 
     def progress(k, epoch, loss):
         if epoch % max(st.epochs // 2, 1) == 0 or epoch == st.epochs:
@@ -192,30 +172,15 @@ def _bundle_seed(cfg: FamilyConfig, system, box, seed: int, test, timed, out: Pa
                  "p90": float(np.quantile(per_member, 0.9)), "per_member": per_member.tolist()},
         "eval_seconds_first": timings[0], "eval_seconds": timings[1], "initial_state_error": exact,
     }
-    log(f"  seed {seed}: {'solved' if st.method == 'flowmap' else 'trained'} in {record['train_time']:.1f} s; "
-        f"held-out max error median "
-        f"{np.median(per_member):.3g}, worst {per_member.max():.3g}; {EVAL_MEMBERS} members x {EVAL_TIMES} "
-        f"times in {timings[1]:.2f} s")
-    return {"record": record, "errors": err.tolist()}
+    line = (f"  seed {seed}: {'solved' if st.method == 'flowmap' else 'trained'} in {record['train_time']:.1f} s; "
+            f"held-out max error median {np.median(per_member):.3g}, worst {per_member.max():.3g}; "
+            f"{EVAL_MEMBERS} members x {EVAL_TIMES} times in {timings[1]:.2f} s")
+    return {"record": record, "errors": err.tolist(), "lines": [line]}
 
 
 def _edges(st, box) -> list[float]:
     """The window edges the figures mark (a flow map's windows are too many to draw)."""
     return [] if st.method == "flowmap" else list(st.train_config().window_edges(box.t0, box.T))
-
-
-# ------------------------------------------------------------------------------ resuming
-_PARTIAL = "partial"  # the finished seeds of a run not yet written whole: partial/seed{S}.json
-
-
-def _saved_seed(out: Path, seed: int) -> dict[str, Any] | None:
-    path = out / _PARTIAL / f"seed{seed}.json"
-    return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else None
-
-
-def _save_seed(out: Path, seed: int, data: dict[str, Any]) -> None:
-    (out / _PARTIAL).mkdir(parents=True, exist_ok=True)
-    write_json(out / _PARTIAL / f"seed{seed}.json", _jsonable(data))
 
 
 # ------------------------------------------------------------------------------ inverse
@@ -258,11 +223,15 @@ def _fit_line(seed: int, method: str, result, rec: dict) -> str:
     return line + ("" if result.trusted else f" — UNTRUSTED: {result.notes[-1]}")
 
 
-def _fit_seed(cfg: FamilyConfig, system, obs, t0: float, seed: int, truth, log, say) -> tuple[list[dict], dict]:
-    """Every method on one seed's data, each through :func:`atlasnn.inverse.fit`: records (a method
-    that fails is a record saying so, and the others go on) and the fits; every fit is cross-checked
-    against the better of the two searches (shooting's multistart, the collocation fit)."""
-    fits, records = {}, []
+def _fit_seed(cfg: FamilyConfig, truth, say, seed: int) -> dict[str, Any]:
+    """Every method on one seed's data, each through :func:`atlasnn.inverse.fit` (a seed task: it
+    may run in another process): the records (a method that fails is a record saying so, and the
+    others go on), the data's description and the lines that report them; every fit is
+    cross-checked against the better of the two searches (shooting's multistart, the collocation fit)."""
+    system = cfg.system.build()
+    obs, t0 = _observations(cfg, system, seed)
+    fits, records, lines = {}, [], []
+    log = lines.append
     for way in cfg.fit.method_objects():
         method = way.name
         say(f"  seed {seed} {method}: fitting ({way.describe(cfg.unknowns)})…")
@@ -282,28 +251,20 @@ def _fit_seed(cfg: FamilyConfig, system, obs, t0: float, seed: int, truth, log, 
         rec = _record(result, method, seed, training, truth)
         records.append(rec)
         log(_fit_line(seed, method, result, rec))
-    return records, {m: r for m, (r, _) in fits.items()}
+    return {"records": records, "observations": obs.describe(), "lines": lines}
 
 
-def _run_inverse(cfg: FamilyConfig, system, out: Path, log, say) -> dict[str, Any]:
+def _run_inverse(cfg: FamilyConfig, system, out: Path, log, say, executor: dict) -> dict[str, Any]:
     truth = _truth(cfg, system)
-    records, seeds, curves, notes = [], {}, {}, []
-    first_obs = None
-    for seed in cfg.seeds:
-        obs, t0 = _observations(cfg, system, seed)
-        first_obs = first_obs or (obs, t0)
-        seeds[str(seed)] = {"observations": obs.describe()}
-        saved = _saved_seed(out, seed)
-        if saved is None:
-            recs, fits = _fit_seed(cfg, system, obs, t0, seed, truth, log, say)
-            _save_seed(out, seed, {"records": recs})
-        else:
-            recs = saved["records"]
-            fits = {r["method"]: FitResult.from_dict({**r, "method": r["fit_method"]}) for r in recs if "failed" not in r}
-            log(f"  seed {seed}: done before (resumed), {len(fits)} fits")
-        records += recs
-        if seed == cfg.seeds[0]:
-            curves = fits
+    outputs = run_seeds(cfg.seeds, functools.partial(_fit_seed, cfg, truth, say), out, cfg.name, log, **executor)
+    records = [r for o in outputs.values() for r in o["records"]]
+    seeds = {str(s): {"observations": o["observations"]} for s, o in outputs.items()}
+    first = cfg.seeds[0]
+    first_obs = _observations(cfg, system, first)
+    # the first seed's fits, read back from its records (they may come from another process)
+    curves = {r["method"]: FitResult.from_dict({**r, "method": r["fit_method"]})
+              for r in outputs[first]["records"] if "failed" not in r}
+    notes: list[str] = []
     figs = _inverse_figures(cfg, system, out, records, truth, first_obs, curves, notes)
     for note in notes:
         log(f"  note: {note}")
