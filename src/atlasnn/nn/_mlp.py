@@ -7,6 +7,8 @@ component.
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -27,6 +29,25 @@ def _activation_with_rate(name: str, a: jax.Array, da: jax.Array) -> tuple[jax.A
         s, c = sin_cos(a)
         return s, c * da
     return jax.jvp(ACTIVATIONS[name], (a,), (da,))
+
+
+@functools.partial(jax.jit, static_argnums=(2, 3))
+def _initial_parameters(key: jax.Array, scale: jax.Array | None, sizes: tuple[int, ...], dtype):
+    """Every layer's (weights, biases), uniform in ±1/sqrt(fan_in), as one compiled program.
+
+    Drawn one by one outside jit, each layer shape and each small operation (split, scale) was a
+    program of its own: about a second of compiling in a cold run. Under jit the draws are the
+    same bits (the same threefry calls on the same keys). ``scale`` (None: 1) multiplies the
+    first layer's weights.
+    """
+    keys = jax.random.split(key, 2 * (len(sizes) - 1))
+    weights, biases = [], []
+    for i, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
+        bound = 1.0 / np.sqrt(fan_in)
+        w = jax.random.uniform(keys[2 * i], (fan_out, fan_in), dtype, -bound, bound)
+        weights.append(w * scale if (i == 0 and scale is not None) else w)
+        biases.append(jax.random.uniform(keys[2 * i + 1], (fan_out,), dtype, -bound, bound))
+    return weights, biases
 
 
 class MLP(eqx.Module):
@@ -53,15 +74,11 @@ class MLP(eqx.Module):
         c = first_layer_scale
         if isinstance(c, bool) or not isinstance(c, (int, float, np.integer, np.floating)) or not np.isfinite(c) or c <= 0:
             raise ConfigError(f"network first_layer_scale must be a finite number > 0, got {c!r}")
-        sizes = [1] + [int(width)] * int(depth) + [int(out_size)]
-        keys = jax.random.split(key, 2 * (len(sizes) - 1))
+        sizes = tuple([1] + [int(width)] * int(depth) + [int(out_size)])
         dtype = default_float()
-        self.weights, self.biases = [], []
-        for i, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
-            bound = 1.0 / np.sqrt(fan_in)
-            w = jax.random.uniform(keys[2 * i], (fan_out, fan_in), dtype, -bound, bound)
-            self.weights.append(w * jnp.asarray(c, dtype) if (i == 0 and c != 1) else w)
-            self.biases.append(jax.random.uniform(keys[2 * i + 1], (fan_out,), dtype, -bound, bound))
+        scale = jnp.asarray(c, dtype) if c != 1 else None
+        weights, biases = _initial_parameters(key, scale, sizes, jnp.dtype(dtype))
+        self.weights, self.biases = list(weights), list(biases)
         self.activation = activation
 
     @property
