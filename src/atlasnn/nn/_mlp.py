@@ -92,7 +92,7 @@ class MLP(eqx.Module):
             raise ConfigError(f"network first_layer_scale must be a finite number > 0, got {c!r}")
         sizes = tuple([1] + [int(width)] * int(depth) + [int(out_size)])
         dtype = default_float()
-        scale = jnp.asarray(c, dtype) if c != 1 else None
+        scale = jax.device_put(np.asarray(c, dtype)) if c != 1 else None
         weights, biases = _initial_parameters(key, scale, sizes, jnp.dtype(dtype), _flat_draws_are_prefixes())
         self.weights, self.biases = list(weights), list(biases)
         self.activation = activation

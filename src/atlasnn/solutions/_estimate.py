@@ -135,7 +135,7 @@ def _sample(windows: list[tuple[TrialSolution, float, float, float]], steps: lis
         s = np.linspace(0.0, length, 2 * n + 1)
         with jax.enable_x64(True):
             # cast on the host: an eager cast compiles a program per leaf shape
-            m64 = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x, np.float64)) if eqx.is_inexact_array(x)
+            m64 = jax.tree_util.tree_map(lambda x: jax.device_put(np.asarray(x, np.float64)) if eqx.is_inexact_array(x)
                                          else x, model)
             # in chunks of a fixed size: one program for windows of any length and every doubling
             z, dz = value_and_rate_chunked(m64, s + offset, jnp.float64, CHUNK)

@@ -70,7 +70,7 @@ def residual_and_jacobian(system: Any, z: Any, dz: Any) -> tuple[np.ndarray, np.
     zp = np.concatenate([z, np.repeat(z[-1:], size - n, axis=0)]) if size > n else z
     field = _compiled_field(system)
     with jax.enable_x64(True), np.errstate(all="ignore"):
-        parts = [field(jnp.asarray(zp[i:i + CHUNK], dtype=jnp.float64)) for i in range(0, size, CHUNK)]
+        parts = [field(jax.device_put(zp[i:i + CHUNK])) for i in range(0, size, CHUNK)]
         f = np.concatenate([np.asarray(p[0], dtype=np.float64) for p in parts])[:n]
         a = np.concatenate([np.asarray(p[1], dtype=np.float64) for p in parts])[:n]
     return dz - f, a
