@@ -7,6 +7,8 @@ component.
 
 from __future__ import annotations
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -27,6 +29,41 @@ def _activation_with_rate(name: str, a: jax.Array, da: jax.Array) -> tuple[jax.A
         s, c = sin_cos(a)
         return s, c * da
     return jax.jvp(ACTIVATIONS[name], (a,), (da,))
+
+
+def _flat_draws_are_prefixes() -> bool:
+    """Whether a uniform draw of n values is the first n of a longer draw with the same key: true of
+    JAX's default threefry with partitionable counters (each value depends on its key and its
+    flat index only), which :func:`_initial_parameters` relies on to draw every layer at once."""
+    return bool(jax.config.jax_threefry_partitionable) and jax.config.jax_default_prng_impl == "threefry2x32"
+
+
+@functools.partial(jax.jit, static_argnums=(2, 3, 4))
+def _initial_parameters(key: jax.Array, scale: jax.Array | None, sizes: tuple[int, ...], dtype, batched: bool):
+    """Every layer's (weights, biases), uniform in ±1/sqrt(fan_in), as one compiled program.
+
+    Drawn one by one outside jit, each layer shape and each small operation (split, scale) was a
+    program of its own. Compiling is dominated by the threefry hash, once per draw, so with
+    ``batched`` all draws are one vmapped draw of the largest size, each layer keeping the first
+    values of its row: the same bits as drawing it alone (see :func:`_flat_draws_are_prefixes`).
+    ``scale`` (None: 1) multiplies the first layer's weights.
+    """
+    keys = jax.random.split(key, 2 * (len(sizes) - 1))
+    shapes, bounds = [], []
+    for fan_in, fan_out in zip(sizes[:-1], sizes[1:]):
+        shapes += [(fan_out, fan_in), (fan_out,)]
+        bounds += [1.0 / np.sqrt(fan_in)] * 2
+    if batched:
+        size = max(int(np.prod(s)) for s in shapes)
+        b = jnp.asarray(bounds, dtype)  # the same rounding of ±bound as a scalar argument gets
+        rows = jax.vmap(lambda k, lo, hi: jax.random.uniform(k, (size,), dtype, lo, hi))(keys, -b, b)
+        draws = [rows[i, : int(np.prod(s))].reshape(s) for i, s in enumerate(shapes)]
+    else:
+        draws = [jax.random.uniform(k, s, dtype, -bd, bd) for k, s, bd in zip(keys, shapes, bounds)]
+    weights, biases = draws[0::2], draws[1::2]
+    if scale is not None:
+        weights[0] = weights[0] * scale
+    return weights, biases
 
 
 class MLP(eqx.Module):
@@ -53,15 +90,11 @@ class MLP(eqx.Module):
         c = first_layer_scale
         if isinstance(c, bool) or not isinstance(c, (int, float, np.integer, np.floating)) or not np.isfinite(c) or c <= 0:
             raise ConfigError(f"network first_layer_scale must be a finite number > 0, got {c!r}")
-        sizes = [1] + [int(width)] * int(depth) + [int(out_size)]
-        keys = jax.random.split(key, 2 * (len(sizes) - 1))
+        sizes = tuple([1] + [int(width)] * int(depth) + [int(out_size)])
         dtype = default_float()
-        self.weights, self.biases = [], []
-        for i, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
-            bound = 1.0 / np.sqrt(fan_in)
-            w = jax.random.uniform(keys[2 * i], (fan_out, fan_in), dtype, -bound, bound)
-            self.weights.append(w * jnp.asarray(c, dtype) if (i == 0 and c != 1) else w)
-            self.biases.append(jax.random.uniform(keys[2 * i + 1], (fan_out,), dtype, -bound, bound))
+        scale = jax.device_put(np.asarray(c, dtype)) if c != 1 else None
+        weights, biases = _initial_parameters(key, scale, sizes, jnp.dtype(dtype), _flat_draws_are_prefixes())
+        self.weights, self.biases = list(weights), list(biases)
         self.activation = activation
 
     @property

@@ -29,8 +29,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.nn import TrialSolution
-from atlasnn.solutions._evaluate import value_and_rate_padded
+from atlasnn.solutions._evaluate import value_and_rate_chunked
 from atlasnn.solutions._linearised import (
+    CHUNK,
     MAX_STEPS_PER_WINDOW,
     MIN_STEPS_PER_WINDOW,
     max_total_steps,
@@ -133,10 +134,11 @@ def _sample(windows: list[tuple[TrialSolution, float, float, float]], steps: lis
     for (model, start, length, offset), n in zip(windows, steps):
         s = np.linspace(0.0, length, 2 * n + 1)
         with jax.enable_x64(True):
-            m64 = jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float64) if eqx.is_inexact_array(x) else x,
-                                         model)
-            # padded to a bucket of times: one program for windows of many lengths
-            z, dz = value_and_rate_padded(m64, s + offset, jnp.float64)
+            # cast on the host: an eager cast compiles a program per leaf shape
+            m64 = jax.tree_util.tree_map(lambda x: jax.device_put(np.asarray(x, np.float64)) if eqx.is_inexact_array(x)
+                                         else x, model)
+            # in chunks of a fixed size: one program for windows of any length and every doubling
+            z, dz = value_and_rate_chunked(m64, s + offset, jnp.float64, CHUNK)
         tk = start + s
         tk[-1] = start + length  # the edge exactly
         out_t.append(tk)

@@ -5,7 +5,6 @@ bundles and the error estimate all evaluate through here)."""
 from __future__ import annotations
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.nn import TrialSolution
@@ -36,5 +35,22 @@ def value_and_rate_padded(model: TrialSolution, times: np.ndarray, dtype) -> tup
     padded[:n] = times
     if n:
         padded[n:] = times[-1]
-    z, dz = _evaluate(model, jnp.asarray(padded, dtype=dtype))
+    # device_put, not jnp.asarray: the latter compiles a small program per shape
+    z, dz = _evaluate(model, jax.device_put(padded.astype(np.dtype(dtype))))
     return np.asarray(z)[:n], np.asarray(dz)[:n]
+
+
+def value_and_rate_chunked(model: TrialSolution, times: np.ndarray, dtype, chunk: int) -> tuple[np.ndarray, np.ndarray]:
+    """(ẑ, dẑ/dt) at the 1-D ``times`` as NumPy arrays, evaluated ``chunk`` times per call (the last
+    chunk padded by repeating the last time): one compiled program for any number of times, where
+    a caller that asks for ever larger grids (the error estimate doubles its grid) would compile
+    a bucket of its own at every size. Each time's row does not depend on the others in its call,
+    so the values equal one call on all the times."""
+    n = times.size
+    padded = np.full(max(-(-n // chunk), 1) * chunk, times[-1] if n else 0.0, dtype=np.float64)
+    padded[:n] = times
+    host = padded.astype(np.dtype(dtype))
+    parts = [_evaluate(model, jax.device_put(host[i:i + chunk])) for i in range(0, padded.size, chunk)]
+    z = np.concatenate([np.asarray(p[0]) for p in parts])
+    dz = np.concatenate([np.asarray(p[1]) for p in parts])
+    return z[:n], dz[:n]

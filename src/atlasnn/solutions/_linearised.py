@@ -35,6 +35,10 @@ __all__ = ["residual_and_jacobian", "propagate", "segments", "steps_for", "resid
            "dense_grid", "MAX_STEPS_PER_WINDOW", "ESTIMATE_MEMORY_BYTES", "max_total_steps"]
 
 
+#: rows per compiled call of the estimate's evaluations (network samples, field and Jacobian)
+CHUNK = 1024
+
+
 @program_cache
 @functools.lru_cache(maxsize=64)
 def _compiled_field(system: Any):
@@ -60,11 +64,15 @@ def residual_and_jacobian(system: Any, z: Any, dz: Any) -> tuple[np.ndarray, np.
     if z.ndim != 2 or z.shape[1] != m or dz.shape != z.shape:
         raise ValueError(f"z and dz must both have shape (N, {m}), got {z.shape} and {dz.shape}")
     n = z.shape[0]
-    size = max(256, 1 << (n - 1).bit_length())  # padded to a power of two: few compiled shapes
+    # CHUNK rows a call, the last chunk padded with the last state: one compiled program for every
+    # grid size (each row is computed on its own, so the values do not depend on the chunking)
+    size = max(-(-n // CHUNK), 1) * CHUNK
     zp = np.concatenate([z, np.repeat(z[-1:], size - n, axis=0)]) if size > n else z
+    field = _compiled_field(system)
     with jax.enable_x64(True), np.errstate(all="ignore"):
-        f, a = _compiled_field(system)(jnp.asarray(zp, dtype=jnp.float64))
-        f, a = np.asarray(f, dtype=np.float64)[:n], np.asarray(a, dtype=np.float64)[:n]
+        parts = [field(jax.device_put(zp[i:i + CHUNK])) for i in range(0, size, CHUNK)]
+        f = np.concatenate([np.asarray(p[0], dtype=np.float64) for p in parts])[:n]
+        a = np.concatenate([np.asarray(p[1], dtype=np.float64) for p in parts])[:n]
     return dz - f, a
 
 

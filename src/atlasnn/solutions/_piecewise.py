@@ -50,7 +50,16 @@ def stack_models(models: list[TrialSolution]) -> TrialSolution:
     """The window models as one pytree whose array leaves have a leading window axis (float64
     models stay float64 whatever JAX's global switch says)."""
     with _float64_if(np.dtype(models[0].z0.dtype) == np.float64):
-        return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *models)
+        return jax.tree_util.tree_map(_stack, *models)
+
+
+def _stack(*xs):
+    """jnp.stack(xs), on the host when every x is a concrete array (eagerly, jnp.stack compiles a
+    few programs per leaf shape; copying the same values is exact; weakly typed leaves keep jnp.stack's
+    typing)."""
+    if all(isinstance(x, jax.Array) and not isinstance(x, jax.core.Tracer) and not x.weak_type for x in xs):
+        return jax.device_put(np.stack([np.asarray(x) for x in xs]))
+    return jnp.stack(xs)
 
 
 def unstack_models(stacked: TrialSolution, n: int) -> list[TrialSolution]:
@@ -172,7 +181,7 @@ class PiecewiseSolution(AbstractSolution):
         grid[k, col] = s
         dtype = self.models[0].z0.dtype
         with _float64_if(self._x64):
-            z, dz = _evaluate_stacked(self.stacked, jnp.asarray(grid, dtype=dtype))
+            z, dz = _evaluate_stacked(self.stacked, jax.device_put(np.asarray(grid, dtype=dtype)))
         z, dz = np.asarray(z)[k, col], np.asarray(dz)[k, col]
         d = self.system.state_dim
         return z.reshape(shape + (d,)), dz.reshape(shape + (d,)), shape

@@ -231,13 +231,14 @@ def next_window_model(start: str, initial: TrialSolution, trained: TrialSolution
 
 @jax.jit
 def _value_at(model: TrialSolution, s: jax.Array) -> jax.Array:
-    return model.value_and_rate(s)[0]
+    return model.value_and_rate(s)[0][0]  # the first row taken inside: eagerly, a program of its own
 
 
 def end_state(model: TrialSolution, length: float) -> jax.Array:
     """ẑ(w): the state the window hands on to the next one (shape (2d,))."""
-    s = jnp.full((8,), length, dtype=model.z0.dtype)  # 8: the piecewise evaluator's smallest width
-    return _value_at(model, s)[0]
+    # 8: the piecewise evaluator's smallest width; filled on the host (jnp.full compiles)
+    s = jax.device_put(np.full((8,), length, dtype=np.dtype(model.z0.dtype)))
+    return _value_at(model, s)
 
 
 # ------------------------------------------------------------- trainer calls
