@@ -95,11 +95,15 @@ def test_a_long_template_is_time_marched_and_solved_and_runs_as_written(tmp_path
     cfg = load_config(path)
     assert cfg.stage.T == 12.0 and cfg.models == () and cfg.march.models == ("atlas_exp",) and cfg.solve.rtol == 1e-12
     out = tmp_path / "run"
-    assert main(["run", str(path), "--quick", "--out", str(out), "--no-progress"]) == 0
+    assert main(["run", str(path), "--quick", "--out", str(out), "--figures", "none"]) == 0
     res = json.loads((out / "results.json").read_text())
     assert {r["column"] for r in res["runs"]} == {"atlas_exp_march", "collocation"}
-    printed = capsys.readouterr().out
-    assert re.search(r"time-marching\) seed 0: \d+ epochs \(budget\), loss \S+, [\d.]+ s \+ [\d.]+ s compiling", printed)
+    printed = capsys.readouterr()
+    assert re.search(r"time-marching\) seed 0: \d+ epochs \(budget\), loss \S+, [\d.]+ s \+ [\d.]+ s compiling", printed.out)
+    # the phases after each window's Adam bar say what they are doing (before, the bar sat at 100 %)
+    assert re.search(r"window 1: Levenberg–Marquardt, at most \d+ steps…", printed.err)
+    assert re.search(r"window 1: local error \S+ \(tol \S+\): (accepted|cut|rejected|forced)", printed.err)
+    assert "atlas_exp_march seed 0: error estimate over the" in printed.err
     solved = next(r for r in res["runs"] if r["column"] == "collocation")
     assert max(solved["metrics"]["max_abs"].values()) < 1e-8  # the float64 solver, against the run's DOP853 reference
 

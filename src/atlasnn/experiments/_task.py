@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import sys
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -358,10 +359,21 @@ class TaskRun:
         self._measured(sol, column, seed, lambda per, energy, est: solve_record(self.task.one(seed), sol, per, rel, stage),
                        lambda rec, energy: solve_verdict(self.cfg, rec, energy, self.e0, stage))
 
+    def _say(self, line: str) -> None:
+        """A phase's line beside the progress bars (when they are on)."""
+        if self.progress:
+            from tqdm.auto import tqdm
+
+            tqdm.write(line, file=sys.stderr)
+
     def _measured(self, sol, column: str, seed: int, make_record, judge) -> None:
         """Measure a piecewise solution on the evaluation grid, estimate its error, keep its record."""
         per, z, energy = measure_solution(sol, self.grids["eval"], self.grids["eval_ref"], self.names, self.e0)
+        clock = time.perf_counter()
+        self._say(f"{column} seed {seed}: error estimate over the {len(sol.edges) - 1} windows…")
         est = sol.estimate(z0=self.z0)
+        self._say(f"{column} seed {seed}: estimated max error {est.relative_max:.2e} of the state's range "
+                  f"({time.perf_counter() - clock:.1f} s)")
         per["estimate_relative"] = est.relative_max
         rec = make_record(per, energy, est)
         rec.estimate = est.summary()
