@@ -1,0 +1,79 @@
+"""The first hour's case: `atlasnn run` of Hénon–Heiles on [0, 24π], the default time-marched
+template (`atlasnn init --system henon_heiles --T "24*pi" --march`), one seed, with an empty
+compilation cache and then with the cache it filled. Each run is a fresh process pinned to one
+core; recorded: its wall time, the training seconds and compile seconds its console line prints,
+and everything outside training (wall − training). The issue's target: outside training ≤
+training, cold; a second run ≤ 0.5 s before training starts.
+
+    python -m benchmarks.cold_start [--src PATH/src] [--core 1] [--figures all] [--out docs/benchmarks/cold_start.json]
+
+``--src``: another checkout's ``src`` (a git worktree of an earlier commit) to measure it the same way.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from benchmarks.common import machine_info
+
+LINE = re.compile(r"seed 0: \d+ epochs \(\w+\), loss \S+, ([\d.]+) s \+ ([\d.]+) s compiling")
+
+
+def one_run(src: str, config: Path, cache: Path, out: Path, core: int, figures: str) -> dict:
+    env = {**os.environ, "ATLASNN_CACHE_DIR": str(cache), "PYTHONPATH": src}
+    cmd = ["taskset", "-c", str(core), sys.executable, "-c",
+           "import sys; from atlasnn.cli import main; sys.exit(main(sys.argv[1:]))",
+           "run", str(config), "--no-progress", "--out", str(out), "--figures", figures]
+    start = time.perf_counter()
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - start
+    if proc.returncode != 0:
+        raise SystemExit(f"cold_start: the run failed:\n{proc.stderr[-2000:]}")
+    m = LINE.search(proc.stdout)
+    if not m:
+        raise SystemExit(f"cold_start: no training line in the run's output:\n{proc.stdout[-2000:]}")
+    training, compiling = float(m.group(1)), float(m.group(2))
+    return {"wall_seconds": wall, "training_seconds": training, "training_compile_seconds": compiling,
+            "outside_training_seconds": wall - training, "outside_over_training": (wall - training) / training}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.cold_start", description=__doc__.split("\n")[0])
+    ap.add_argument("--src", default=str(Path(__file__).resolve().parents[1] / "src"))
+    ap.add_argument("--core", type=int, default=1)
+    ap.add_argument("--figures", default="all")
+    ap.add_argument("--out", default="docs/benchmarks/cold_start.json")
+    args = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        config = tmp / "hhm.toml"
+        init = subprocess.run([sys.executable, "-c", "import sys; from atlasnn.cli import main; sys.exit(main(sys.argv[1:]))",
+                               "init", str(config), "--system", "henon_heiles", "--T", "24*pi", "--march"],
+                              env={**os.environ, "PYTHONPATH": args.src}, capture_output=True, text=True)
+        if init.returncode != 0:
+            raise SystemExit(f"cold_start: init failed: {init.stderr}")
+        cold = one_run(args.src, config, tmp / "cache", tmp / "run1", args.core, args.figures)
+        warm = one_run(args.src, config, tmp / "cache", tmp / "run2", args.core, args.figures)
+    result = {"case": "atlasnn init --system henon_heiles --T 24*pi --march; atlasnn run --no-progress, one seed",
+              "src": args.src, "figures": args.figures, "core": args.core, "cold": cold, "warm": warm,
+              "machine": machine_info(), "command": "python -m benchmarks.cold_start " + " ".join(argv or sys.argv[1:])}
+    for name, r in (("cold", cold), ("warm", warm)):
+        print(f"{name}: {r['wall_seconds']:.1f} s in all, training {r['training_seconds']:.1f} s "
+              f"(+ {r['training_compile_seconds']:.1f} s compiling), outside training {r['outside_training_seconds']:.1f} s "
+              f"= {r['outside_over_training']:.2f} x training")
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(result, indent=1), encoding="utf-8")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
