@@ -10,8 +10,10 @@ on random collocation points (s, z, λ), by Gauss–Newton in float64: the resid
 but for J∇H(ẑ), so the Jacobian is explicit — the features' rate for the first term, −A(ẑ)·s·φ
 for the second (A = ∂(J∇H)/∂z, by autodiff) — and each step is one Cholesky solve of the
 column-scaled normal equations. Written here rather than through Optimistix because that
-structure gives the Jacobian as a few matrix products, where a generic solver would form it
-from one forward-mode pass per unknown (thousands).
+structure gives the Jacobian as a few matrix products, where a generic solver forms it by
+autodiff: on the oscillator bundle's problem (2 700 unknowns) ``optimistix.GaussNewton`` took
+2.9 s a step against 1.75 s, and 58.6 s against 7.0 s to the same residual
+(``benchmarks/flowmap_gauss_newton.py``).
 
 Where the map must hold: at every state a member of the box visits. The collocation states are
 drawn from a bounding box of those states and kept only on the energy shell the box spans (H
