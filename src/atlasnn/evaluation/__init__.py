@@ -54,7 +54,8 @@ from atlasnn.evaluation._quality import (
 from atlasnn.evaluation._record import TABLE_ROLES, MarchSummary, TrainingRecord
 from atlasnn.evaluation._members import reference_members
 from atlasnn.evaluation._vectorised import MemberRun, verlet_members, yoshida4_members
-from atlasnn.evaluation._parametric import ParametricSolveFailed, parametric_field, solve_parametric
+from atlasnn.evaluation._parametric import ParametricSolveFailed, solve_parametric
+from atlasnn.systems import parametric_field  # its home is systems; here for the callers of evaluation
 from atlasnn.evaluation._workprecision import SYMPLECTIC, WorkPoint
 
 __all__ = [

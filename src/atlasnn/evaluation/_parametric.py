@@ -16,21 +16,9 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from atlasnn.compile_cache import program_cache
-from atlasnn.systems import HamiltonianSystem
+from atlasnn.systems import HamiltonianSystem, parametric_field
 
-__all__ = ["solve_parametric", "ParametricSolveFailed", "parametric_field"]
-
-
-def parametric_field(system: HamiltonianSystem):
-    """f(z, θ) = J∇_z H(z; θ) for one state z (2d,) and parameter vector θ, from
-    ``system.parametric`` (traceable, not jitted: callers put it in their own programs)."""
-    fn, d = system.parametric, system.dim
-
-    def field(z, theta):
-        grad = jax.grad(lambda zz: jnp.asarray(fn(zz[:d], zz[d:], theta)).reshape(()))(z)
-        return jnp.concatenate([grad[d:], -grad[:d]])
-
-    return field
+__all__ = ["solve_parametric", "ParametricSolveFailed"]
 
 
 @program_cache

@@ -46,14 +46,13 @@ from scipy.interpolate import CubicSpline
 
 from atlasnn.compile_cache import program_cache
 from atlasnn.errors import AtlasError, ConfigError
-from atlasnn.evaluation import parametric_field
 from atlasnn.inverse._base import AbstractFitMethod
 from atlasnn.inverse._field import field_scale
 from atlasnn.inverse._fit_result import FitResult, distrust, flag_misfit
 from atlasnn.inverse._shooting import check_shooting_inputs, fit_shooting
 from atlasnn.observations import INITIAL_STATE_PREFIX, Observations, Unknown
 from atlasnn.solver import RandomFeatures, collocation_nodes, require_float64
-from atlasnn.systems import HamiltonianSystem
+from atlasnn.systems import HamiltonianSystem, parametric_field
 
 __all__ = ["CollocationFit", "fit_collocation"]
 

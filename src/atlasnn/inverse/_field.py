@@ -8,9 +8,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from atlasnn.evaluation import parametric_field
 from atlasnn.observations import INITIAL_STATE_PREFIX, Unknown
-from atlasnn.systems import HamiltonianSystem
+from atlasnn.systems import HamiltonianSystem, parametric_field
 
 __all__ = ["field_scale"]
 

@@ -40,9 +40,8 @@ import numpy as np
 import scipy.linalg as sla
 
 from atlasnn.errors import ConfigError
-from atlasnn.evaluation import parametric_field
 from atlasnn.solutions import ChebyshevBasis, FlowMapBundle
-from atlasnn.systems import BundleBox, HamiltonianSystem
+from atlasnn.systems import BundleBox, HamiltonianSystem, parametric_field
 
 __all__ = ["FlowMap", "solve_bundle", "flowmap_problem", "FlowMapProblem"]
 

@@ -248,3 +248,15 @@ def _energy_rows(n: int) -> int:
     if n <= 4096:
         return max(8, 1 << max(n - 1, 0).bit_length())
     return -(-n // 4096) * 4096
+
+
+def parametric_field(system: HamiltonianSystem):
+    """f(z, θ) = J∇_z H(z; θ) for one state z (2d,) and parameter vector θ, from
+    ``system.parametric`` (traceable, not jitted: callers put it in their own programs)."""
+    fn, d = system.parametric, system.dim
+
+    def field(z, theta):
+        grad = jax.grad(lambda zz: jnp.asarray(fn(zz[:d], zz[d:], theta)).reshape(()))(z)
+        return jnp.concatenate([grad[d:], -grad[:d]])
+
+    return field
