@@ -152,13 +152,37 @@ class FlowMapBundle:
         """States at times ``t`` (sorted, in [t0, T]) of members z0 (N, 2d), λ (N, P): (N, len(t), 2d).
 
         One evaluation of the spatial basis per member and window: the window's coefficients
-        C(z_k, λ) give every time in the window and the next window's start z_k + h Σ_i C_i."""
+        C(z_k, λ) give every time in the window and the next window's start z_k + h Σ_i C_i.
+        Members outside the region the map was fitted on, and times outside [t0, T], are refused
+        (the Chebyshev basis does not extrapolate)."""
+        t, z0, lam = self._checked(t, z0, lam)
+        return self.compose(t, z0, lam)
+
+    def _checked(self, t: Any, z0: Any, lam: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        d, n_p = self.basis.state_dim, self.basis.n_params
         t = np.asarray(t, np.float64).reshape(-1)
-        z0 = np.asarray(z0, np.float64).reshape(-1, self.basis.state_dim)
-        lam = np.asarray(lam, np.float64).reshape(len(z0), -1)
+        z0, lam = np.atleast_2d(np.asarray(z0, np.float64)), np.asarray(lam, np.float64)
+        lam = lam.reshape(-1, n_p) if lam.size or n_p == 0 else lam.reshape(len(z0), 0)
+        if z0.ndim != 2 or z0.shape[1] != d or lam.shape != (len(z0), n_p):
+            raise ConfigError(f"members must be z0 of shape (N, {d}) and lam of shape (N, {n_p}); got "
+                              f"{np.shape(z0)} and {np.shape(lam)}")
         t0, T = self.box.t0, self.box.T
+        if not np.all(np.isfinite(t)):
+            raise ConfigError("times must be finite numbers")
         if t.size and (t.min() < t0 - 1e-12 * max(1.0, abs(t0)) or t.max() > T + 1e-12 * max(1.0, abs(T))):
             raise ConfigError(f"times must lie in the bundle's interval [{t0:g}, {T:g}]; got [{t.min():g}, {t.max():g}]")
+        inside = self.basis.contains(np.concatenate([z0, lam], axis=1))
+        if not np.all(inside):
+            i = int(np.nonzero(~inside)[0][0])
+            raise ConfigError(f"member {i} (z0 = {z0[i].tolist()}, lam = {lam[i].tolist()}) lies outside the region the "
+                              f"flow map was fitted on (states {list(self.basis.low[:d])} to {list(self.basis.high[:d])}, "
+                              f"parameters {list(self.basis.low[d:])} to {list(self.basis.high[d:])})")
+        return t, z0, lam
+
+    def compose(self, t: np.ndarray, z0: np.ndarray, lam: np.ndarray) -> np.ndarray:
+        """The composed map at sorted times t, without :meth:`__call__`'s checks (the solver's
+        scouting carries members past the region on purpose, to find where they go)."""
+        t0 = self.box.t0
         h = self.basis.h
         k_of_t = np.clip(np.floor((t - t0) / h).astype(np.int64), 0, self.windows - 1)
         last = int(k_of_t.max()) if t.size else -1
