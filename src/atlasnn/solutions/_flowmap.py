@@ -139,14 +139,18 @@ class FlowMapBundle:
             out[rows] = (R @ flat).reshape(-1, z.shape[1], self.W.shape[1])
         return out
 
-    def advance(self, s: np.ndarray, z: np.ndarray, lam: np.ndarray, rate: bool = False):
-        """ẑ(s; z, λ) for rows of s (n,), z (n, 2d), λ (n, P): (n, 2d); with ``rate`` also ∂ẑ/∂s."""
-        s, z = np.asarray(s, np.float64).reshape(-1), np.asarray(z, np.float64)
-        C = self.coefficients(z, lam)
+    def from_coefficients(self, C: np.ndarray, z: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(ẑ(s), ∂ẑ/∂s) of rows whose window starts at z with coefficients C (:meth:`coefficients`)."""
+        s = np.asarray(s, np.float64).reshape(-1)
         T, D = self.basis.time(s, rate=True)
         G = np.einsum("nci,ni->nc", C, T)
-        out = z + s[:, None] * G
-        return (out, G + s[:, None] * np.einsum("nci,ni->nc", C, D)) if rate else out
+        return z + s[:, None] * G, G + s[:, None] * np.einsum("nci,ni->nc", C, D)
+
+    def advance(self, s: np.ndarray, z: np.ndarray, lam: np.ndarray, rate: bool = False):
+        """ẑ(s; z, λ) for rows of s (n,), z (n, 2d), λ (n, P): (n, 2d); with ``rate`` also ∂ẑ/∂s."""
+        z = np.asarray(z, np.float64)
+        out, speed = self.from_coefficients(self.coefficients(z, lam), z, s)
+        return (out, speed) if rate else out
 
     def __call__(self, t: Any, z0: Any, lam: Any) -> np.ndarray:
         """States at times ``t`` (sorted, in [t0, T]) of members z0 (N, 2d), λ (N, P): (N, len(t), 2d).
