@@ -351,32 +351,16 @@ def flowmap_problem(system: HamiltonianSystem, box: BundleBox, method: FlowMap, 
                           _draw_points(_n_points(method, box), region, box, shell, h, rng))
 
 
-def solve_bundle(system: HamiltonianSystem, box: BundleBox, method: FlowMap = FlowMap(), *, seed: int = 0,
-                 progress: Callable[[str], None] | None = None) -> FlowMapBundle:
-    """The bundle over ``box`` as one float64 flow map (module docstring). ``seed`` draws the
-    collocation points; ``progress`` is told each round and Gauss–Newton step."""
-    if not isinstance(method, FlowMap):
-        raise ConfigError(f"method must be a FlowMap, got {type(method).__name__}")
-    box.check_system(system)
-    n_unknowns = method.unknowns(box.state_dim, len(box.params))
-    if n_unknowns > method.max_unknowns:
-        raise ConfigError(f"flow map: {n_unknowns} unknowns exceed max_unknowns={method.max_unknowns} (2d = "
-                          f"{box.state_dim}, {len(box.params)} parameters); lower state_degree/param_degree/time_degree")
-    say = progress or (lambda _line: None)
-    start = time.perf_counter()
-    rng = np.random.default_rng(seed)
-    physics = _Physics(system, box)
-    shell = _Shell(physics, box, rng, method.shell_margin)
-    h = (box.T - box.t0) / method.windows
+def _scouted_region(method: FlowMap, system, box: BundleBox, physics: _Physics, shell: _Shell, h: float,
+                    rng: np.random.Generator, say, history: list) -> tuple[np.ndarray, np.ndarray]:
+    """The region of states the members visit, found by a cheap map (degrees at most 3/5/2)
+    carried over [t0, T], refitted on what it visited until the region stops growing."""
     lo, hi = np.asarray(box.z0_low, float), np.asarray(box.z0_high, float)
     width = np.maximum(hi - lo, 1e-3 * np.maximum(1.0, np.abs(hi)))
     region = (lo - 0.1 * width, hi + 0.1 * width)
     scout = FlowMap(windows=method.windows, time_degree=min(method.time_degree, 3),
                     state_degree=min(method.state_degree, 5), param_degree=min(method.param_degree, 2),
                     oversampling=method.oversampling, iterations=method.iterations)
-    history = []
-    # scouting: a cheap map finds the box its members visit; then the full map is fitted there
-    change = math.inf
     for round_ in range(1, method.region_rounds + 1):
         bundle, rms = _fit(scout, system, box, physics, shell, region, h, rng, say, f"scout {round_}")
         visited = _sample(bundle, box, rng).visited()
@@ -387,11 +371,16 @@ def solve_bundle(system: HamiltonianSystem, box: BundleBox, method: FlowMap = Fl
         change = max(np.max(np.abs(new[0] - region[0]) / span), np.max(np.abs(new[1] - region[1]) / span))
         region = new
         if change < 0.02:
-            break
-    if change >= 0.02:
-        raise ConfigError(f"flow map: the states the members visit kept growing over {method.region_rounds} scout "
-                          "fits (an unbounded coordinate, e.g. a rotating pendulum's angle, or a map unstable at "
-                          "this window length): a flow map needs a bounded region; try more windows")
+            return region
+    raise ConfigError(f"flow map: the states the members visit kept growing over {method.region_rounds} scout "
+                      "fits (an unbounded coordinate, e.g. a rotating pendulum's angle, or a map unstable at "
+                      "this window length): a flow map needs a bounded region; try more windows")
+
+
+def _final_fit(method: FlowMap, system, box: BundleBox, physics: _Physics, shell: _Shell, region, h: float,
+               rng: np.random.Generator, say, history: list):
+    """The full map over the region (widened once if its members leave it): (bundle, residual RMS,
+    the sample members' run, the region, whether it contains them)."""
     for attempt in ("final", "final, region widened"):
         bundle, rms = _fit(method, system, box, physics, shell, region, h, rng, say, attempt)
         sample = _sample(bundle, box, rng)
@@ -405,16 +394,41 @@ def solve_bundle(system: HamiltonianSystem, box: BundleBox, method: FlowMap = Fl
         if contained:
             break
         region = (np.minimum(region[0], _widened(visited)[0]), np.maximum(region[1], _widened(visited)[1]))
+    return bundle, rms, sample, region, contained
+
+
+def solve_bundle(system: HamiltonianSystem, box: BundleBox, method: FlowMap = FlowMap(), *, seed: int = 0,
+                 progress: Callable[[str], None] | None = None) -> FlowMapBundle:
+    """The bundle over ``box`` as one float64 flow map (module docstring). ``seed`` draws the
+    collocation points; ``progress`` is told each fit and Gauss–Newton step."""
+    if not isinstance(method, FlowMap):
+        raise ConfigError(f"method must be a FlowMap, got {type(method).__name__}")
+    box.check_system(system)
+    n_unknowns = method.unknowns(box.state_dim, len(box.params))
+    if n_unknowns > method.max_unknowns:
+        raise ConfigError(f"flow map: {n_unknowns} unknowns exceed max_unknowns={method.max_unknowns} (2d = "
+                          f"{box.state_dim}, {len(box.params)} parameters); lower state_degree/param_degree/time_degree")
+    say = progress or (lambda _line: None)
+    start = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    physics = _Physics(system, box)
+    shell = _Shell(physics, box, rng, method.shell_margin)
+    h = (box.T - box.t0) / method.windows
+    history: list[dict] = []
+    region = _scouted_region(method, system, box, physics, shell, h, rng, say, history)
+    bundle, rms, sample, region, contained = _final_fit(method, system, box, physics, shell, region, h, rng, say,
+                                                        history)
     s, z, lam = _draw_points(max(_n_points(method, box) // 4, 64), region, box, shell, h, rng)
     zh, rate = bundle.advance(s, z, lam, rate=True)
     held_out = np.abs(rate - physics.field(zh, lam)[0])
-    bundle.info = {"seconds": time.perf_counter() - start, "residual_rms": rms, "unknowns": n_unknowns,
-                   "points": _n_points(method, box), "fits": history, "region_contains_the_members": contained,
+    bundle.info = {"residual_rms": rms, "unknowns": n_unknowns, "points": _n_points(method, box), "fits": history,
+                   "region_contains_the_members": contained,
                    "held_out_residual_rms": float(np.sqrt(np.mean(held_out ** 2))),
                    "held_out_residual_max": float(held_out.max()), **_energy_drift(sample, physics),
-                   "estimated_error": _linearised_error(bundle, physics, sample)}
-    bundle.info["seconds"] = time.perf_counter() - start
+                   "estimated_error": _linearised_error(bundle, physics, sample),
+                   "seconds": time.perf_counter() - start}
     say(f"  flow map: estimated worst error {bundle.info['estimated_error']:.2g} (no reference: the linearised error "
-        f"equation along 512 sample members); residual RMS {rms:.3g} on its points, {bundle.info['held_out_residual_rms']:.3g} on fresh "
-        f"ones; energy drift {bundle.info['energy_drift_relative']:.2g} of |H|; {bundle.info['seconds']:.1f} s")
+        f"equation along 512 sample members); residual RMS {rms:.3g} on its points, "
+        f"{bundle.info['held_out_residual_rms']:.3g} on fresh ones; energy drift "
+        f"{bundle.info['energy_drift_relative']:.2g} of |H|; {bundle.info['seconds']:.1f} s")
     return bundle
