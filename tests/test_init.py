@@ -104,6 +104,11 @@ def test_a_long_template_is_time_marched_and_solved_and_runs_as_written(tmp_path
     assert re.search(r"window 1: Levenberg–Marquardt, at most \d+ steps…", printed.err)
     assert re.search(r"window 1: local error \S+ \(tol \S+\): (accepted|cut|rejected|forced)", printed.err)
     assert "atlas_exp_march seed 0: error estimate over the" in printed.err
+    # JAX's own tracing and compiling, in the record and on the console (before: only each training's compile)
+    spent = res["jax_time"]
+    assert spent["programs"] > 0 and spent["trace_seconds"] > 0 and spent["compile_or_load_seconds"] > 0
+    assert re.search(r"JAX in this process: tracing [\d.]+ s, lowering [\d.]+ s, compiling or loading [\d.]+ s "
+                     r"\(\d+ programs, \d+ from the cache\)", printed.out)
     solved = next(r for r in res["runs"] if r["column"] == "collocation")
     assert max(solved["metrics"]["max_abs"].values()) < 1e-8  # the float64 solver, against the run's DOP853 reference
 

@@ -17,12 +17,14 @@ and write, and evicts the least recently used entries past it.
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 
 import jax
 
-__all__ = ["cache_dir", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES", "program_cache", "clear_programs"]
+__all__ = ["cache_dir", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES", "program_cache", "clear_programs",
+           "jax_time", "JaxTime"]
 
 CACHE_ENV = "ATLASNN_CACHE_DIR"
 #: the cache's size limit (least recently used entries go past it); with it, JAX locks the cache
@@ -88,3 +90,66 @@ def clear_programs() -> None:
         else:
             cache.cache_clear()
     jax.clear_caches()
+
+
+# ----------------------------------------------------------------- JAX's own time
+_TRACE = "/jax/core/compile/jaxpr_trace_duration"
+_LOWER = "/jax/core/compile/jaxpr_to_mlir_module_duration"
+_BACKEND = "/jax/core/compile/backend_compile_duration"
+_HITS = "/jax/compilation_cache/cache_hits"
+_ACTIVE: list["JaxTime"] = []  # the collectors open now (the listeners feed each)
+_LISTENING = False
+
+
+class JaxTime:
+    """Seconds JAX spent in this process while it was open (:func:`jax_time`): tracing, lowering,
+    and compiling or loading from the persistent cache, with the count of programs and of cache hits."""
+
+    def __init__(self) -> None:
+        self.trace = self.lower = self.compile = 0.0
+        self.programs = self.cache_hits = 0
+
+    def _duration(self, event: str, seconds: float) -> None:
+        if event == _TRACE:
+            self.trace += seconds
+        elif event == _LOWER:
+            self.lower += seconds
+        elif event == _BACKEND:
+            self.compile += seconds
+            self.programs += 1
+
+    def summary(self) -> dict:
+        return {"trace_seconds": self.trace, "lower_seconds": self.lower, "compile_or_load_seconds": self.compile,
+                "programs": self.programs, "cache_hits": self.cache_hits}
+
+    def line(self) -> str:
+        return (f"JAX in this process: tracing {self.trace:.1f} s, lowering {self.lower:.1f} s, compiling or loading "
+                f"{self.compile:.1f} s ({self.programs} programs, {self.cache_hits} from the cache)")
+
+
+def _on_duration(event: str, seconds: float, **_kw) -> None:
+    for collector in _ACTIVE:
+        collector._duration(event, seconds)
+
+
+def _on_event(event: str, **_kw) -> None:
+    if event == _HITS:
+        for collector in _ACTIVE:
+            collector.cache_hits += 1
+
+
+@contextlib.contextmanager
+def jax_time():
+    """``with jax_time() as t:`` — ``t`` (a :class:`JaxTime`) sums JAX's monitoring events inside
+    (JAX reports them per process: work in other processes is not counted)."""
+    global _LISTENING
+    if not _LISTENING:  # JAX keeps listeners for the life of the process: registered once
+        jax.monitoring.register_event_duration_secs_listener(_on_duration)
+        jax.monitoring.register_event_listener(_on_event)
+        _LISTENING = True
+    collector = JaxTime()
+    _ACTIVE.append(collector)
+    try:
+        yield collector
+    finally:
+        _ACTIVE.remove(collector)

@@ -40,6 +40,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from atlasnn.compile_cache import jax_time
 from atlasnn.errors import ConfigError
 from atlasnn.evaluation import REFERENCE_DESCRIPTION, TrainingRecord, energy_drift
 from atlasnn.experiments._executor import Executor
@@ -339,11 +340,15 @@ class _Run:
         self.record_start(overwrite, config_text, quick, config_source, reference)
         all_trainings = trainings(self.tasks)
         try:
-            self.train(grids)
-            results = self.collect(system, e0, grids, arrays, int_rows, quick, reference)
-            if cfg.evaluation.work_precision:
-                results["work_precision"] = work_precision(cfg, system, z0, grids,
-                                                           results["runs"], self.out, self.log)
+            with jax_time() as spent:  # JAX's tracing and compiling in this process, in the record
+                self.train(grids)
+                results = self.collect(system, e0, grids, arrays, int_rows, quick, reference)
+                if cfg.evaluation.work_precision:
+                    results["work_precision"] = work_precision(cfg, system, z0, grids,
+                                                               results["runs"], self.out, self.log)
+            results["jax_time"] = {**spent.summary(), "scope": "this process (the trainings' own compile seconds are "
+                                   "in each run's record; with --jobs or a scheduler they ran elsewhere)"}
+            self.log(f"{cfg.name}: {spent.line()}")
             write_npz(self.out / "arrays.npz", arrays)
             write_json(self.out / "results.json", results)
             self.log(f"{cfg.name}: trainings done in {results['wall_time_total']:.1f} s; results in {self.out}")
