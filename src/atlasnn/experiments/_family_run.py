@@ -36,6 +36,7 @@ from atlasnn.fileio import write_json, write_text
 from atlasnn.inverse import FitResult, check_shooting_inputs, fit, judge_fit, predict_fit, synthetic_observations
 from atlasnn.observations import Observations, load_observations
 from atlasnn.report import plot_bundle_errors, plot_bundle_map, plot_estimates, plot_fit_trajectory
+from atlasnn.solutions import window_edges
 from atlasnn.solver import solve_bundle
 from atlasnn.training import train_bundle
 from atlasnn.version import __version__
@@ -180,7 +181,7 @@ def _bundle_seed(cfg: FamilyConfig, test, out: Path, say, seed: int) -> dict[str
 
 def _edges(st, box) -> list[float]:
     """The window edges the figures mark (a flow map's windows are too many to draw)."""
-    return [] if st.method == "flowmap" else list(st.train_config().window_edges(box.t0, box.T))
+    return [] if st.method == "flowmap" else list(window_edges(box.t0, box.T, st.windows))
 
 
 # ------------------------------------------------------------------------------ inverse

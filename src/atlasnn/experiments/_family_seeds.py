@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from atlasnn.errors import ConfigError
-from atlasnn.experiments._executors import open_executor
+from atlasnn.experiments._executors import open_executor, scheduler_address
 from atlasnn.fileio import write_json
 
 __all__ = ["SeedTask", "run_seeds", "start_partial", "finish_partial", "is_unfinished_family_run",
@@ -112,6 +112,4 @@ def run_seeds(seeds: tuple[int, ...], work: Callable[[int], dict], out: Path, ki
 
 def in_process(jobs: int, scheduler: str | None) -> bool:
     """Whether the seeds run in this process (so a phase's progress lines can be shown live)."""
-    from atlasnn.experiments._executors import scheduler_address
-
     return jobs == 1 and scheduler_address(scheduler) is None

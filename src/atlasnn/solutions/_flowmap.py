@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from atlasnn.errors import ConfigError
+from atlasnn.solutions._piecewise import window_edges
 from atlasnn.systems import BundleBox
 
 __all__ = ["ChebyshevBasis", "FlowMapBundle", "chebyshev"]
@@ -123,10 +124,7 @@ class FlowMapBundle:
 
     @property
     def edges(self) -> np.ndarray:
-        t0, T = self.box.t0, self.box.T
-        edges = t0 + (T - t0) * np.arange(self.windows + 1) / self.windows
-        edges[-1] = T
-        return edges
+        return window_edges(self.box.t0, self.box.T, self.windows)
 
     def coefficients(self, z: np.ndarray, lam: np.ndarray) -> np.ndarray:
         """C(z, λ) with ẑ(s) = z + s Σ_i C_i T_i(2s/h − 1): (n, 2d, S + 1), rows in chunks."""

@@ -379,8 +379,8 @@ def _scouted_region(method: FlowMap, system, box: BundleBox, physics: _Physics, 
 
 def _final_fit(method: FlowMap, system, box: BundleBox, physics: _Physics, shell: _Shell, region, h: float,
                rng: np.random.Generator, say, history: list):
-    """The full map over the region (widened once if its members leave it): (bundle, residual RMS,
-    the sample members' run, the region, whether it contains them)."""
+    """The full map over the region (widened once if its members leave it; refused if they still
+    do): (bundle, residual RMS, the sample members' run, the region, True: they stay inside it)."""
     for attempt in ("final", "final, region widened"):
         bundle, rms = _fit(method, system, box, physics, shell, region, h, rng, say, attempt)
         sample = _sample(bundle, box, rng)
@@ -392,9 +392,11 @@ def _final_fit(method: FlowMap, system, box: BundleBox, physics: _Physics, shell
         history.append({"fit": attempt, "residual_rms": rms, "region": _listed(region), "visited": _listed(visited)})
         contained = bool(np.all(visited[0] >= region[0]) and np.all(visited[1] <= region[1]))
         if contained:
-            break
+            return bundle, rms, sample, region, contained
         region = (np.minimum(region[0], _widened(visited)[0]), np.maximum(region[1], _widened(visited)[1]))
-    return bundle, rms, sample, region, contained
+    # members that leave the region the map was fitted on are extrapolated by the basis: not a result
+    raise ConfigError(f"flow map: sample members leave the region the map was fitted on even after widening it "
+                      f"(states {_listed(visited)}, region {_listed(region)}); use more windows or higher degrees")
 
 
 def solve_bundle(system: HamiltonianSystem, box: BundleBox, method: FlowMap = FlowMap(), *, seed: int = 0,

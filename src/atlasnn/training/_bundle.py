@@ -29,7 +29,7 @@ from jax.flatten_util import ravel_pytree
 
 from atlasnn.errors import ConfigError
 from atlasnn.nn import BundleTrial, make_bundle_model
-from atlasnn.solutions import BundleSolution, bundle_start
+from atlasnn.solutions import BundleSolution, bundle_start, window_edges
 from atlasnn.systems import BundleBox, HamiltonianSystem
 from atlasnn.training._lm import LMConfig, lm_minimise
 from atlasnn.training._loss import energy_and_vector_field
@@ -99,12 +99,6 @@ class BundleTrainConfig:
             raise ConfigError(f"bundle training retry_factor must be a number >= 1 (inf: never retry), got {r!r}")
         if self.epochs == 0 and self.lm_steps == 0:
             raise ConfigError("bundle training needs epochs > 0 or lm_steps > 0")
-
-    def window_edges(self, t0: float, T: float) -> np.ndarray:
-        """The ``windows + 1`` edges of the equal windows over [t0, T] (the last exactly T)."""
-        edges = t0 + (T - t0) * np.arange(self.windows + 1) / self.windows
-        edges[-1] = T
-        return edges
 
 
 @dataclass
@@ -306,7 +300,7 @@ def train_bundle(system: HamiltonianSystem, box: BundleBox, config: BundleTrainC
     its neighbours (measured: window 7 of 8 of the oscillator bundle at 2.3e-4 between 2.8e-6 and
     1.8e-5; its members' errors then reached 0.5)."""
     box.check_system(system)
-    edges = config.window_edges(box.t0, box.T)
+    edges = window_edges(box.t0, box.T, config.windows)
     model = make_bundle_model(box.centre(), box.half_width(), box.state_dim, scaling=scaling, width=width,
                               depth=depth, t0=box.t0, seed=seed)
     key = jax.random.PRNGKey(seed + 7919)
