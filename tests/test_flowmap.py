@@ -109,7 +109,7 @@ def test_a_config_with_method_flowmap_runs_as_a_family(tmp_path):
 
 
 def test_the_estimated_error_needs_no_reference_and_is_not_below_the_true_one(small, held_out):
-    """The linearised error equation along sample members (measured 0.98–2.7× the true worst
+    """The linearised error equation along sample members (measured 0.98–2.8× the true worst
     member on the oscillator bundle); here on the small test bundle."""
     t, z, lam, ref = held_out
     true_worst = np.abs(small(t, z, lam) - ref).max()

@@ -25,7 +25,7 @@ until the region stops growing; then the full map is fitted there.
 
 How accurate it is, without a reference (``info``): ``estimated_error``, the largest error of
 512 sample members and the box's corners over [t0, T] by the linearised error equation integrated
-along the map (0.98–2.7× the true worst held-out member in the measurements of docs/FAMILIES.md);
+along the map (0.98–2.8× the true worst held-out member in the measurements of docs/FAMILIES.md);
 ``energy_drift_relative``, the change of the conserved H along them; the residual on fresh points
 (one window's defect only: it does not see the error that accumulates over many windows).
 
