@@ -190,6 +190,32 @@ def test_plot_scaling_families(tmp_path):
     assert h == pytest.approx(fig_h * plotkit.DPI, abs=2)
 
 
+def test_scaling_families_is_drawn_once_then_copied(tmp_path, monkeypatch):
+    """The figure depends on no run: kept beside the compilation cache after its first drawing
+    and copied after; the copy is the bytes a fresh drawing gives, per format."""
+    import atlasnn.report._plots as plots_module
+    from atlasnn.report import figure_formats
+
+    monkeypatch.setenv("ATLASNN_CACHE_DIR", "off")
+    fresh = [p.read_bytes() for p in plot_scaling_families(tmp_path / "fresh")]
+    monkeypatch.setenv("ATLASNN_CACHE_DIR", str(tmp_path / "cache" / "jax"))
+    first = plot_scaling_families(tmp_path / "a" / "s")
+    assert [p.read_bytes() for p in first] == fresh
+    assert len(list((tmp_path / "cache" / "figures").glob("*.png"))) == 1
+    drawn = []
+    real = plots_module._draw_scaling_families
+    monkeypatch.setattr(plots_module, "_draw_scaling_families", lambda *a: drawn.append(1) or real(*a))
+    again = plot_scaling_families(tmp_path / "b" / "s")
+    assert not drawn and [p.read_bytes() for p in again] == fresh
+    with figure_formats("png"):  # another format set: another key, drawn once more
+        plot_scaling_families(tmp_path / "c" / "s")
+    with figure_formats("png", "pdf"):
+        plot_scaling_families(tmp_path / "c2" / "s")
+    assert len(drawn) == 1
+    plot_scaling_families(tmp_path / "d" / "s", t_max=5.0)  # another t_max: drawn, not copied
+    assert len(drawn) == 2
+
+
 def test_plot_loss_curves_single_and_multi_seed(tmp_path):
     ep = np.arange(3000)
     hist = {

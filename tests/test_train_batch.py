@@ -116,9 +116,31 @@ def test_a_batch_of_one_is_train(ho):
     assert _trees_equal(a.model, b.model) and "batch_size" not in b.info
 
 
+def test_runs_with_gamma_frozen_and_learned_share_a_batch(ho):
+    """γ frozen is a traced flag of the one program: a batch may mix it, each run as alone, its
+    γ bit for bit its initial one when frozen and its saved state in its own layout."""
+    configs = [CFG, CFG.replace(seed=1, freeze_gamma=True)]
+    models = [_model(0), _model(1)]
+    batch = train_batch(models, ho, T_END, configs)
+    for m, c, b in zip(models, configs, batch):
+        _same_as_alone(b, train(m, ho, T_END, c))
+    np.testing.assert_array_equal(batch[1].model.scaling.gamma_array(), models[1].scaling.gamma_array())
+    assert not np.array_equal(batch[0].model.scaling.gamma_array(), models[0].scaling.gamma_array())
+    mu = [b.opt_state.inner_state[0].mu for b in batch]
+    assert all(x is None for x in jax.tree_util.tree_leaves(mu[1].scaling, is_leaf=lambda x: x is None))
+    assert any(x is not None for x in jax.tree_util.tree_leaves(mu[0].scaling, is_leaf=lambda x: x is None))
+
+
+def test_gamma_frozen_and_learned_are_one_compiled_program(ho):
+    """A march's first window (γ learned) and its later ones (γ frozen) compile one chunk."""
+    cfg = CFG.replace(epochs=80, n_points=64, chunk=40)  # a shape no other test compiles
+    learned = train(_model(0), ho, T_END, cfg)
+    frozen = train(_model(0), ho, T_END, cfg.replace(freeze_gamma=True))
+    assert learned.compile_time > 0.0 and frozen.compile_time == 0.0
+
+
 @pytest.mark.parametrize("change,match", [({"n_points": 50}, "n_points"), ({"chunk": 40}, "chunk"),
-                                          ({"best_rule": "lowest"}, "best_rule"),
-                                          ({"freeze_gamma": True}, "freeze_gamma")])
+                                          ({"best_rule": "lowest"}, "best_rule")])
 def test_runs_that_cannot_share_a_program_are_refused(ho, change, match):
     with pytest.raises(ConfigError, match=match):
         train_batch([_model(0), _model(1)], ho, T_END, [CFG, CFG.replace(seed=1, **change)])

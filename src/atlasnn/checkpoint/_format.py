@@ -40,8 +40,9 @@ import hmac
 import json
 import math
 import re
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -50,7 +51,7 @@ from atlasnn.version import __version__
 from atlasnn.errors import AtlasError, CheckpointError
 from atlasnn.fileio import write_atomic
 from atlasnn.checkpoint._identity import record_probes, system_mismatch
-from atlasnn.nn import TrialSolution
+from atlasnn.nn import TrialSolution, make_model
 from atlasnn.systems import HamiltonianSystem, system_from_spec
 
 FORMAT = "atlasnn-checkpoint"
@@ -132,6 +133,21 @@ def _leaf_arrays(tree: Any, prefix: str) -> tuple[dict[str, np.ndarray], dict[st
     return arrays, info
 
 
+def model_skeleton(arch: Mapping[str, Any], z0: Any = None, stack: Callable[[list], Any] | None = None) -> Any:
+    """The structure, shapes and dtypes of the model ``arch`` describes (``stack`` of n copies
+    for a stacked one), without drawing or computing its initial weights: the leaves are
+    ``jax.ShapeDtypeStruct``s for :func:`_restore_leaves` to fill. Call under the x64 setting
+    of the stored dtype."""
+    z0 = [0.0] * int(arch["state_dim"]) if z0 is None else z0
+
+    def build():
+        m = make_model(z0, scaling=arch["scaling"], width=int(arch["width"]), depth=int(arch["depth"]),
+                       t0=float(arch["t0"]), activation=arch["activation"])
+        return m if stack is None else stack(m)
+
+    return eqx.filter_eval_shape(build)
+
+
 def _restore_leaves(path: str, arrays: Mapping[str, np.ndarray], prefix: str, template: Any, what: str) -> Any:
     """Put the stored ``prefix_###`` arrays into the structure of ``template``, after checking
     their number, shapes and dtypes. Call under the x64 setting of the stored dtype."""
@@ -144,7 +160,9 @@ def _restore_leaves(path: str, arrays: Mapping[str, np.ndarray], prefix: str, te
     new = []
     for i, (name, t) in enumerate(zip(expected, t_leaves)):
         a = arrays[name]
-        t_shape, t_dtype = tuple(np.shape(t)), np.dtype(jnp.asarray(t).dtype)
+        if not hasattr(t, "dtype"):  # a Python number among the leaves
+            t = jnp.asarray(t)
+        t_shape, t_dtype = tuple(t.shape), np.dtype(t.dtype)
         if tuple(a.shape) != t_shape:
             raise _fail(path, f"leaf mismatch: {what} leaf {i} has shape {tuple(a.shape)}, expected {t_shape}")
         if a.dtype != t_dtype:

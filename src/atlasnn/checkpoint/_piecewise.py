@@ -23,6 +23,7 @@ from atlasnn.checkpoint._format import (
     _describe_exc,
     _fail,
     _leaf_arrays,
+    model_skeleton,
     _read,
     _resolve_system,
     _restore_leaves,
@@ -33,7 +34,6 @@ from atlasnn.checkpoint._format import (
 from atlasnn.errors import AtlasError, CheckpointError
 from atlasnn.checkpoint._identity import interval_mismatch, system_mismatch
 from atlasnn.solutions import PiecewiseSolution, WindowRecord, stack_models, unstack_models
-from atlasnn.nn import make_model
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["KIND_PIECEWISE", "save_piecewise", "load_piecewise", "piecewise_payload", "piecewise_from",
@@ -164,9 +164,8 @@ def piecewise_from(p: str, arrays: Mapping[str, np.ndarray], meta: Mapping[str, 
         if dtype not in _FLOAT_DTYPES:
             raise _fail(p, f"unsupported dtype {dtype!r}")
         with _x64(dtype):
-            skeleton = make_model([0.0] * int(arch["state_dim"]), scaling=arch["scaling"], width=int(arch["width"]),
-                                  depth=int(arch["depth"]), t0=float(arch["t0"]), activation=arch["activation"])
-            stacked = _restore_leaves(p, arrays, "param", stack_models([skeleton] * n), "stacked model")
+            skeleton = model_skeleton(arch, stack=lambda m: stack_models([m] * n))
+            stacked = _restore_leaves(p, arrays, "param", skeleton, "stacked model")
         sys_ = _resolve_system(p, meta, system)
         records = _window_records(p, pw.get("windows") or [], arrays)
         info = dict(pw.get("info") or {})

@@ -7,8 +7,9 @@ exactly; :class:`Checkpoint` is what :func:`load_checkpoint` returns. The file f
 a content hash, atomic writes) is described and implemented in :mod:`atlasnn.checkpoint._format`;
 piecewise (time-marching) solutions are saved by :mod:`atlasnn.checkpoint._piecewise`.
 
-The model is rebuilt from its architecture with :func:`~atlasnn.nn._trial.make_model` (under the
-stored float type) and the stored leaves are put into that skeleton, after checking their
+The model's skeleton is its architecture through :func:`~atlasnn.nn._trial.make_model` under
+``equinox.filter_eval_shape`` (shapes and dtypes of the stored float type, no initial weights
+drawn or compiled) and the stored leaves are put into that skeleton, after checking their
 number, shapes and dtypes. A system defined by a Python function cannot be stored as data; it
 has to be passed again when loading. Built-in and expression systems are rebuilt from their
 ``spec``.
@@ -33,6 +34,7 @@ from atlasnn.checkpoint._format import (
     _describe_exc,
     _fail,
     _leaf_arrays,
+    model_skeleton,
     _read,
     _resolve_system,
     _restore_leaves,
@@ -43,7 +45,7 @@ from atlasnn.errors import AtlasError, CheckpointError
 from atlasnn.checkpoint._identity import interval_mismatch, system_mismatch
 from atlasnn.checkpoint._piecewise import KIND_PIECEWISE
 from atlasnn.training import History, TrainConfig, TrainState, state_template
-from atlasnn.nn import TrialSolution, make_model
+from atlasnn.nn import TrialSolution
 from atlasnn.solutions import Solution
 from atlasnn.systems import HamiltonianSystem
 
@@ -167,15 +169,7 @@ def _rebuild_model(path: str, meta: Mapping[str, Any], arrays: Mapping[str, np.n
         if not (isinstance(z0, list) and len(z0) == state_dim and all(isinstance(x, (int, float)) for x in z0)):
             z0 = [0.0] * state_dim
         with _x64(dtype):
-            skeleton = make_model(
-                z0,
-                scaling=arch["scaling"],
-                width=int(arch["width"]),
-                depth=int(arch["depth"]),
-                t0=float(arch["t0"]),
-                activation=arch["activation"],
-            )
-            return _restore_leaves(path, arrays, "param", skeleton, "model")
+            return _restore_leaves(path, arrays, "param", model_skeleton(arch, z0), "model")
     except CheckpointError:
         raise
     except (KeyError, TypeError, ValueError, AtlasError) as exc:

@@ -15,13 +15,16 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import hashlib
 import math
+import os
 import re
+import shutil
 import zlib
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -29,6 +32,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from atlasnn.errors import ConfigError
+from atlasnn.version import __version__
 from atlasnn.nn import MODELS
 
 __all__ = ["DPI", "Series", "model_style", "pi_ticks", "figure_formats", "FIGURE_FORMATS"]
@@ -316,6 +320,36 @@ def _save(fig: Figure, stem: str | Path) -> list[Path]:
         else:
             fig.savefig(path, format="pdf", metadata={"CreationDate": None})
         paths.append(path)
+    return paths
+
+
+def _drawn_once(stem: str | Path, key: Sequence[Any], draw: Callable[[], list[Path]]) -> list[Path]:
+    """A figure that depends on nothing but ``key`` (not on a run): drawn by ``draw`` once per
+    machine and key, kept beside the compilation cache (``<cache>/../figures``), copied after.
+    Without a cache directory, or when it cannot be written, it is simply drawn."""
+    from atlasnn.compile_cache import cache_dir
+    import matplotlib
+
+    where = cache_dir()
+    formats = _FORMATS.get()
+    if where is None:
+        return draw()
+    digest = hashlib.sha256(repr((__version__, matplotlib.__version__, DPI, formats, *key)).encode()).hexdigest()[:24]
+    kept = {fmt: where.parent / "figures" / f"{digest}.{fmt}" for fmt in formats}
+    base = Path(stem)
+    if all(k.is_file() for k in kept.values()):
+        base.parent.mkdir(parents=True, exist_ok=True)
+        paths = [Path(f"{base}.{fmt}") for fmt in formats]
+        for fmt, path in zip(formats, paths):
+            shutil.copyfile(kept[fmt], path)
+        return paths
+    paths = draw()
+    with contextlib.suppress(OSError):
+        for fmt, path in zip(formats, paths):
+            kept[fmt].parent.mkdir(parents=True, exist_ok=True)
+            tmp = kept[fmt].with_name(f".{kept[fmt].name}.{os.getpid()}")
+            shutil.copyfile(path, tmp)
+            os.replace(tmp, kept[fmt])
     return paths
 
 

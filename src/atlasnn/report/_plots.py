@@ -44,6 +44,7 @@ from atlasnn.report._plotkit import (
     _components_note,
     _color,
     _delta_label,
+    _drawn_once,
     _figure_legend,
     _float_array,
     _log_floor,
@@ -85,9 +86,17 @@ def plot_scaling_families(stem: str | Path, t_max: float = 10.0, *,
     t_max = float(t_max)
     if not (math.isfinite(t_max) and t_max > 0):
         raise ConfigError(f"t_max must be a positive number, got {t_max}")
-    t = np.linspace(0.0, t_max, 600)
     learnable = [k for k in MODELS.values() if k.gamma_names and k.examples]
     fixed = [k for k in MODELS.values() if not k.gamma_names]
+    # the same in every run: drawn once per machine (and per registry of scalings), then copied
+    key = ("scaling_families", t_max, title,
+           [(k.label, k.scaling.formula, repr(k.examples)) for k in learnable],
+           [(k.label, k.scaling.formula) for k in fixed])
+    return _drawn_once(stem, key, lambda: _draw_scaling_families(stem, t_max, title, learnable, fixed))
+
+
+def _draw_scaling_families(stem, t_max, title, learnable, fixed) -> list[Path]:
+    t = np.linspace(0.0, t_max, 600)
     fig = _new_figure((5.5 * max(len(learnable), 1), 4.2))
     axes = np.atleast_1d(fig.subplots(1, max(len(learnable), 1), sharey=True))
     cycle = mpl.colormaps["viridis"]

@@ -20,7 +20,7 @@ from atlasnn.training._marching import (
 from atlasnn.training._progress import MarchProgress
 from atlasnn.training._polish import PRECISIONS, PolishConfig, PolishResult, polish
 from atlasnn.training._refine import RefineConfig, refine
-from atlasnn.training._step import init_opt_state, trainable_filter
+from atlasnn.training._step import init_opt_state, restrict_opt_state, trainable_filter
 from atlasnn.training._records import (
     BEST_RULES,
     LR_SCHEDULES,
@@ -33,7 +33,6 @@ from atlasnn.training._records import (
 from atlasnn.training._train import train, train_batch
 from atlasnn.training._transfer import (
     check_same_architecture,
-    restrict_opt_state,
     transfer,
     transfer_batch,
     transfer_from,

@@ -49,7 +49,7 @@ from atlasnn.training._marching import (
 )
 from atlasnn.training._lm import LMConfig
 from atlasnn.training._progress import MarchProgress
-from atlasnn.training._transfer import restrict_opt_state
+from atlasnn.training._step import restrict_opt_state
 
 __all__ = ["march", "march_adaptive", "first_window", "SAFETY", "GROWTH", "SHRINK", "EXPONENT", "CUT_FRACTION"]
 

@@ -117,9 +117,10 @@ class LMState(NamedTuple):
 
     x: jax.Array  # flat trainable parameters
     R: jax.Array  # residual vector at x (m,)
-    Js: jax.Array  # column-scaled Jacobian at x (m, n)
+    Js: jax.Array  # column-scaled Jacobian at x (m, n), when not ``stale``
     scale: jax.Array  # D^{-1/2} (n,)
     gram: jax.Array  # Js Jsᵀ (m ≤ n) or Jsᵀ Js (m > n)
+    stale: jax.Array  # x moved (or the loop starts): the next trial forms Js, scale, gram first
     loss: jax.Array  # ‖R‖²
     mu: jax.Array
     nu: jax.Array
@@ -254,6 +255,12 @@ def _make_step(res, jac, config: LMConfig, n_hist: int):
         return Js, scale, _gram(Js, x.dtype)
 
     def step(s: LMState, data) -> LMState:
+        # the Jacobian is formed here only, at the start of the trial after an accepted one (and
+        # of the first): one copy of its code in the program, not a second in the initial state
+        Js, scale, gram = jax.lax.cond(s.stale, fresh, lambda _: (s.Js, s.scale, s.gram), s.x)
+        # μ0 = τ · max diag(JsᵀJs) on the first trial
+        mu = jnp.where(s.step == 0, config.mu_init * jnp.max(jnp.sum(Js * Js, axis=0)).astype(s.x.dtype), s.mu)
+        s = s._replace(Js=Js, scale=scale, gram=gram, mu=mu)
         ds, pred, solve = _solve(s.Js, s.gram, s.R, s.mu)
         scale = s.scale.astype(s.x.dtype)
         v = scale * ds
@@ -274,7 +281,6 @@ def _make_step(res, jac, config: LMConfig, n_hist: int):
         x = jnp.where(accept, x_new, s.x)
         R = jnp.where(accept, R_new, s.R)
         loss = jnp.where(accept, loss_new, s.loss)
-        Js, scale, gram = jax.lax.cond(accept, fresh, lambda _: (s.Js, s.scale, s.gram), x)
         real = loss < s.ref_loss * (1 - data["min_rel"])
         ref_loss = jnp.where(real, loss, s.ref_loss)
         since = jnp.where(real, 0, s.since + 1)
@@ -285,7 +291,7 @@ def _make_step(res, jac, config: LMConfig, n_hist: int):
                                    jnp.where(stalled, 3, jnp.where(n >= data["budget"], 4, 0))))
         history = s.history.at[jnp.minimum(n, n_hist - 1)].set(loss)
         # (under vmap, lax.while_loop itself holds the members that have stopped)
-        return LMState(x, R, Js, scale, gram, loss, mu_new, nu_new, ref_loss, since, n,
+        return LMState(x, R, s.Js, s.scale, s.gram, accept, loss, mu_new, nu_new, ref_loss, since, n,
                        s.accepted + accept.astype(jnp.int32), stop.astype(jnp.int32), history)
 
     return step
@@ -293,15 +299,15 @@ def _make_step(res, jac, config: LMConfig, n_hist: int):
 
 def _init_state(x, res, jac, config: LMConfig, n_hist: int, data) -> LMState:
     R = res(x)
-    Js, scale = _scaled(jac(x), config.diag_floor)
-    gram = _gram(Js, x.dtype)
+    J = jax.eval_shape(jac, x)  # placeholders of Js, scale and gram: the first trial forms them
+    k = min(J.shape)
+    Js, scale, gram = jnp.zeros(J.shape, J.dtype), jnp.zeros((J.shape[1],), J.dtype), jnp.zeros((k, k), x.dtype)
     loss = jnp.dot(R, R)
-    mu = config.mu_init * jnp.max(jnp.sum(Js * Js, axis=0)).astype(x.dtype)  # τ · max diag(JsᵀJs)
     i32 = lambda v: jnp.asarray(v, jnp.int32)  # noqa: E731
     hist = jnp.full((n_hist,), jnp.nan, x.dtype).at[0].set(loss)
     stop = jnp.where(loss <= data["loss_tol"], 1, 0).astype(jnp.int32)
-    return LMState(x, R, Js, scale, gram, loss, mu, jnp.asarray(2.0, x.dtype), loss, i32(0), i32(0),
-                   i32(0), stop, hist)
+    return LMState(x, R, Js, scale, gram, jnp.asarray(True), loss, jnp.zeros((), x.dtype),
+                   jnp.asarray(2.0, x.dtype), loss, i32(0), i32(0), i32(0), stop, hist)
 
 
 def _data(config: LMConfig, dtype) -> dict[str, jax.Array]:

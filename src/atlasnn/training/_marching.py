@@ -50,7 +50,7 @@ from atlasnn.training._refine import refine
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._records import TrainConfig, TrainResult
 from atlasnn.training._train import train_batch
-from atlasnn.training._transfer import restrict_opt_state
+from atlasnn.training._step import restrict_opt_state
 
 __all__ = ["MarchConfig", "march_batch", "n_windows_for", "window_model", "end_state", "window_seed"]
 

@@ -11,8 +11,10 @@ bookkeeping, exactly as if it ran alone; a model that has stopped is carried alo
 
 What is compiled depends only on the system, the :class:`Mode` (best rule, schedule, causal
 weighting, fixed point), the batch size and the shapes; learning rate, epochs, tolerance, jitter,
-λ_reg, interval, E0 and seed are traced values, so another run of the same shape reuses the
-compiled program.
+λ_reg, interval, E0, seed and whether γ is frozen are traced values, so another run of the same
+shape reuses the compiled program. γ is always among the program's trainable leaves; a frozen γ
+gets a zero gradient and keeps its value (selected, so bit for bit), which makes a first window
+with γ learned and the later ones with γ frozen one program, not two.
 """
 
 from __future__ import annotations
@@ -48,6 +50,28 @@ def trainable_filter(model: TrialSolution, freeze_gamma: bool) -> TrialSolution:
             lambda m: m.scaling, spec, jax.tree_util.tree_map(eqx.is_inexact_array, model.scaling)
         )
     return spec
+
+
+def gamma_filter(model: TrialSolution) -> TrialSolution:
+    """A bool tree true at γ's leaves only (the time scaling's arrays)."""
+    spec = jax.tree_util.tree_map(lambda _: False, model)
+    return eqx.tree_at(lambda m: m.scaling, spec, jax.tree_util.tree_map(eqx.is_inexact_array, model.scaling))
+
+
+def _gamma_where(flag, a, b):
+    """``a`` with its γ leaves taken from ``b`` where ``flag`` is false (trees shaped as the
+    trainable parameters, γ included)."""
+    return eqx.tree_at(lambda m: m.scaling, a,
+                       jax.tree_util.tree_map(lambda x, y: jnp.where(flag, x, y), a.scaling, b.scaling))
+
+
+def restrict_opt_state(opt_state: Any, model: TrialSolution, freeze_gamma: bool) -> Any:
+    """Adam's state of a run, keeping only the moments of the leaves trainable under
+    ``freeze_gamma`` (a transfer's target, a frozen-γ window, the saved state of a frozen run)."""
+    spec = trainable_filter(model, freeze_gamma)
+    adam, *others = opt_state.inner_state
+    adam = adam._replace(mu=eqx.filter(adam.mu, spec), nu=eqx.filter(adam.nu, spec))
+    return opt_state._replace(inner_state=(adam, *others))
 
 
 def set_hyperparams(opt_state, cfg, dtype):
@@ -147,6 +171,9 @@ def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, mo
         p, o, tr = carry
         t = _collocation(settings, key, epoch, mode)
         (_, (loss, res, en)), grads = grad_fn(p, t)
+        # γ is a trainable leaf in every run; frozen, its gradient is zero and its value held
+        # (selected, not multiplied: the value stays bit for bit whatever the gradient)
+        grads = _gamma_where(settings["train_gamma"], grads, jax.tree_util.tree_map(jnp.zeros_like, grads))
         gamma = eqx.combine(p, rest).scaling.gamma_array()
         if mode.schedule != "constant":
             progress = epoch.astype(dtype) / settings["budget"].astype(dtype)
@@ -154,7 +181,7 @@ def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, mo
             hp["learning_rate"] = settings["lr"] * mode.lr_factor(progress).astype(dtype)
             o = o._replace(hyperparams=hp)
         updates, o_new = _ADAM.update(grads, o, p)
-        p_new = eqx.apply_updates(p, updates)
+        p_new = _gamma_where(settings["train_gamma"], eqx.apply_updates(p, updates), p)
         finite = jnp.isfinite(loss)
         # bookkeeping: the loss was measured on p (before this epoch's update)
         better_any = finite & (loss < tr["any_loss"])
@@ -241,4 +268,5 @@ def run_settings(cfg, model: TrialSolution, system: HamiltonianSystem, T: float,
         "best_start": jnp.asarray(int(start), jnp.int32),
         "lr": jnp.asarray(cfg.lr, dtype),
         "causal_eps": jnp.asarray(cfg.causal_eps, dtype),
+        "train_gamma": jnp.asarray(not cfg.freeze_gamma),
     }

@@ -29,8 +29,12 @@ Options that change what one epoch does (all off by default):
   the recorded loss, the tolerance and the best rule use the unweighted physics loss;
 - ``release_fixed_point``: one collocation time pinned at t0 + 1 every epoch, as in the release.
 
-Freezing γ uses Equinox partitioning: a frozen γ is not a trainable leaf at all, so it cannot
-change (bit-identical after training).
+Freezing γ: the compiled chunk has γ among its trainable leaves in every run and a traced flag
+that zeroes its gradient and holds its value (bit for bit), so γ learned and γ frozen are one
+program. Outside the loop a run's state keeps its own layout: with γ frozen, γ is not a
+trainable leaf of the Adam state or the bookkeeping that a :class:`TrainState` holds, saves and
+resumes from (Equinox partitioning, :func:`~atlasnn.training._step.trainable_filter`); it is
+widened into the program's layout on entry and restricted again on the way out.
 
 The run is deterministic: the network initialisation is the model's; the jitter of epoch e uses
 ``fold_in(PRNGKey(seed), e)``, so the same seed and config give the same losses, and a run
@@ -57,8 +61,10 @@ from atlasnn.training._records import History, TrainConfig, TrainResult, TrainSt
 from atlasnn.training._step import (
     Mode,
     compiled_chunk,
+    gamma_filter,
     init_opt_state,
     initial_track,
+    restrict_opt_state,
     run_settings,
     set_hyperparams,
     trainable_filter,
@@ -101,6 +107,34 @@ class _Run:
     active: bool
 
 
+def _widen(tree, model, zeros: bool):
+    """A parameter-shaped tree of a run's own layout in the program's (γ a trainable leaf):
+    γ's missing leaves are the model's γ, or zeros (Adam's moments)."""
+    gamma = eqx.filter(model, gamma_filter(model))
+    if zeros:
+        gamma = jax.tree_util.tree_map(lambda x: np.zeros(x.shape, x.dtype), gamma)
+    return eqx.combine(tree, gamma)
+
+
+def _widen_state(opt_state, track, model):
+    adam, *others = opt_state.inner_state
+    adam = adam._replace(mu=_widen(adam.mu, model, True), nu=_widen(adam.nu, model, True))
+    track = {**track, "best_params": _widen(track["best_params"], model, False),
+             "any_params": _widen(track["any_params"], model, False)}
+    return opt_state._replace(inner_state=(adam, *others)), track
+
+
+def _own_state(opt_state, track, model, freeze_gamma: bool):
+    """The inverse of :func:`_widen_state`: Adam's state and the bookkeeping in the run's own
+    layout (γ's leaves dropped when it is frozen)."""
+    if not freeze_gamma:
+        return opt_state, track
+    spec = trainable_filter(model, True)
+    track = {**track, "best_params": eqx.filter(track["best_params"], spec),
+             "any_params": eqx.filter(track["any_params"], spec)}
+    return restrict_opt_state(opt_state, model, True), track
+
+
 def _start(model, system, T, cfg, opt_state, resume, energy0, index, memo):
     """(params, rest, opt_state, track, settings, key, _Run) of one run, checked. ``memo`` holds
     what runs of one batch can share (a fresh Adam state per parameter layout, H(z0) per z0): each
@@ -114,9 +148,11 @@ def _start(model, system, T, cfg, opt_state, resume, energy0, index, memo):
     dtype = model.z0.dtype
     if resume is not None:
         model = resume.model
-    params, rest = eqx.partition(model, trainable_filter(model, cfg.freeze_gamma))
+    own, _ = eqx.partition(model, trainable_filter(model, cfg.freeze_gamma))
+    params, rest = eqx.partition(model, trainable_filter(model, False))  # the program's layout
     if resume is not None:
-        opt_state, track, epoch, history = resume.opt_state, resume.track, resume.epoch, resume.history
+        opt_state, track = _widen_state(resume.opt_state, resume.track, model)
+        epoch, history = resume.epoch, resume.history
     else:
         if opt_state is None:
             layout = (jax.tree_util.tree_structure(params),
@@ -127,11 +163,12 @@ def _start(model, system, T, cfg, opt_state, resume, energy0, index, memo):
         else:
             try:
                 opt_state = set_hyperparams(opt_state, cfg, dtype)
-                if jax.tree_util.tree_structure(opt_state.inner_state[0].mu) != jax.tree_util.tree_structure(params):
+                if jax.tree_util.tree_structure(opt_state.inner_state[0].mu) != jax.tree_util.tree_structure(own):
                     raise ValueError
             except (AttributeError, ValueError, IndexError, TypeError):
                 where = "" if index is None else f" (run {index} of the batch)"
                 raise ConfigError(f"opt_state does not match the trainable parameters of this model{where}") from None
+            opt_state = _widen_state(opt_state, {"best_params": own, "any_params": own}, model)[0]
         track = initial_track(params, dtype, 1.0 if cfg.best_rule == "release_exact" else math.inf)
         epoch, history = 0, History.empty(tuple(model.scaling.gamma_names))
     if energy0 is None:  # H(z0) once per distinct z0 of the batch
@@ -150,7 +187,7 @@ def _check_batch(runs: list[_Run], rests: list[Any]) -> None:
     """Runs trained as one program must agree on what is compiled and on the host loop."""
     first = runs[0].cfg
     for i, r in enumerate(runs[1:], 1):
-        for name in ("n_points", "chunk", "freeze_gamma"):
+        for name in ("n_points", "chunk"):
             if getattr(r.cfg, name) != getattr(first, name):
                 raise ConfigError(f"runs trained as one batch must share train.{name}: run {i} has "
                                   f"{getattr(r.cfg, name)!r}, run 0 has {getattr(first, name)!r}")
@@ -171,7 +208,8 @@ def _result(run: _Run, params, rest, opt_state, track, interrupted: bool, wall: 
     cfg = run.cfg
     stop = int(track["stop"])
     final_model = eqx.combine(params, rest)
-    state = TrainState(final_model, opt_state, track, run.epoch, run.history)
+    state = TrainState(final_model, *_own_state(opt_state, track, final_model, cfg.freeze_gamma),
+                       run.epoch, run.history)
     diverged_epoch = None
     if interrupted and run.active:
         reason, chosen, best_epoch = "interrupted", final_model, -1
@@ -275,9 +313,9 @@ def train_batch(
 
     Typically the S models are S seeds of one config (``configs[i] = cfg.replace(seed=i)``), but
     any runs that share the compiled program can be batched: same architecture, scaling and t0,
-    the same ``n_points``, ``chunk``, ``freeze_gamma`` and :class:`~atlasnn.training._step.Mode`
-    (best rule, schedule, causal weighting, fixed point); epochs, lr, betas, tolerance, jitter,
-    λ_reg, seed, the interval end T, z0 and E0 may differ per run. Every run stops, keeps its
+    the same ``n_points``, ``chunk`` and :class:`~atlasnn.training._step.Mode` (best rule,
+    schedule, causal weighting, fixed point); epochs, lr, betas, tolerance, jitter, λ_reg, seed,
+    ``freeze_gamma``, the interval end T, z0 and E0 may differ per run. Every run stops, keeps its
     best parameters and diverges on its own, exactly as :func:`train` would do it alone (the
     batched arithmetic may differ from a lone run in the last bits). ``T``, ``energy0``,
     ``opt_states`` and ``resumes`` are one value for all or one per run. ``on_chunk`` receives
@@ -312,11 +350,13 @@ def train_batch(
                                             system, Mode.of(cfg0), batched)
 
     def states() -> list[TrainState]:
+        def one(r, model, o, tr):
+            return TrainState(model, *_own_state(o, tr, model, r.cfg.freeze_gamma), r.epoch, r.history)
+
         if not batched:
-            return [TrainState(eqx.combine(params, rest), opt_state, track, runs[0].epoch, runs[0].history)]
+            return [one(runs[0], eqx.combine(params, rest), opt_state, track)]
         each = zip(_unstack_all(params, n), _unstack_all(opt_state, n), _unstack_all(track, n))
-        return [TrainState(eqx.combine(p, rests[i]), o, tr, r.epoch, r.history)
-                for i, (r, (p, o, tr)) in enumerate(zip(runs, each))]
+        return [one(r, eqx.combine(p, rests[i]), o, tr) for i, (r, (p, o, tr)) in enumerate(zip(runs, each))]
 
     bar = _progress_bar(cfg0.progress, max(r.cfg.epochs for r in runs), epoch, desc)
     interrupted = False

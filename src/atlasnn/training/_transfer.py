@@ -11,13 +11,11 @@ from __future__ import annotations
 
 from typing import Any, Callable, Sequence
 
-import equinox as eqx
-
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._records import TrainConfig, TrainResult, TrainState
-from atlasnn.training._step import trainable_filter
+from atlasnn.training._step import restrict_opt_state
 from atlasnn.training._train import train_batch
 
 
@@ -29,14 +27,6 @@ def check_same_architecture(source: TrialSolution, architecture: dict[str, Any])
             raise ConfigError(
                 f"target architecture differs from the source: {key} = {want!r} but the source has {have[key]!r}"
             )
-
-
-def restrict_opt_state(opt_state: Any, model: TrialSolution, freeze_gamma: bool) -> Any:
-    """Adam's state of a source run, keeping only the moments of the target's trainable leaves."""
-    spec = trainable_filter(model, freeze_gamma)
-    adam, *others = opt_state.inner_state
-    adam = adam._replace(mu=eqx.filter(adam.mu, spec), nu=eqx.filter(adam.nu, spec))
-    return opt_state._replace(inner_state=(adam, *others))
 
 
 def transfer(

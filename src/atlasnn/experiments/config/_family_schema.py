@@ -13,7 +13,7 @@ there, so the config parser, the reference and the Python API agree by construct
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Mapping
 
 from atlasnn.experiments.config._types import (
     Choice,
