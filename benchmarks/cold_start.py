@@ -2,11 +2,12 @@
 template (`atlasnn init --system henon_heiles --T "24*pi" --march`), one seed, with an empty
 compilation cache and then with the cache it filled. Each run is a fresh process pinned to one
 core; recorded: its wall time, the training seconds and compile seconds its console line prints,
-and everything outside training (wall − training), and the seconds from the process's start
-until the first training's compiled chunk is ready. The issue's targets: outside training ≤
-training, cold; a second run ≤ 0.5 s before training starts.
+and everything outside training (wall − training), the seconds from the process's start until
+the first training's compiled chunk is ready, the seconds of atlasnn's imports, and XLA's
+compiling (or loading from the cache) per jitted function, from JAX's monitoring events. The
+issue's targets: outside training ≤ training, cold; a second run ≤ 0.5 s before training starts.
 
-    python -m benchmarks.cold_start [--src PATH/src] [--core 1] [--figures all] [--out docs/benchmarks/cold_start.json]
+    python -m benchmarks.cold_start [--src PATH/src] [--core 1] [--figures all] [--xla-flags FLAGS] [--out docs/benchmarks/cold_start.json]
 
 ``--src``: another checkout's ``src`` (a git worktree of an earlier commit) to measure it the same way.
 """
@@ -32,8 +33,19 @@ READY = re.compile(r"first training program ready after ([\d.]+) s")
 # atlasnn.training._train.compiled_chunk, so the moment the first one returns is when training
 # can start (everything before it: imports, the config, the checks, the program's load or build).
 _PROGRAM = """
-import sys, time
+import atexit, json, os, sys, time
 start = time.perf_counter()
+from jax import monitoring
+compile_by_function = {}
+def duration(event, secs, **kw):  # backend compile (or cache load) seconds per jitted function
+    if event.endswith("backend_compile_duration"):
+        name = kw.get("fun_name", "?").removeprefix("jit(").removesuffix(")")
+        row = compile_by_function.setdefault(name, [0, 0.0])
+        row[0] += 1
+        row[1] += secs
+monitoring.register_event_duration_secs_listener(duration)
+import atlasnn.cli, atlasnn.experiments, atlasnn.report  # what every run imports
+imports = time.perf_counter() - start
 import atlasnn.training._train as train_module
 build, seen = train_module.compiled_chunk, []
 def timed(*args, **kwargs):
@@ -43,13 +55,21 @@ def timed(*args, **kwargs):
         print(f"first training program ready after {time.perf_counter() - start:.2f} s", file=sys.stderr)
     return out
 train_module.compiled_chunk = timed
+def dump():
+    rows = sorted(compile_by_function.items(), key=lambda kv: -kv[1][1])
+    json.dump({"import_seconds": imports, "compile_by_function": {k: {"programs": n, "seconds": t} for k, (n, t) in rows}},
+              open(os.environ["COLD_START_PARTS"], "w"))
+atexit.register(dump)
 from atlasnn.cli import main
 sys.exit(main(sys.argv[1:]))
 """
 
 
-def one_run(src: str, config: Path, cache: Path, out: Path, core: int, figures: str) -> dict:
-    env = {**os.environ, "ATLASNN_CACHE_DIR": str(cache), "PYTHONPATH": src}
+def one_run(src: str, config: Path, cache: Path, out: Path, core: int, figures: str, xla_flags: str | None) -> dict:
+    parts = out.with_name(out.name + "-parts.json")
+    env = {**os.environ, "ATLASNN_CACHE_DIR": str(cache), "PYTHONPATH": src, "COLD_START_PARTS": str(parts)}
+    if xla_flags is not None:
+        env["XLA_FLAGS"] = xla_flags
     cmd = ["taskset", "-c", str(core), sys.executable, "-c", _PROGRAM,
            "run", str(config), "--no-progress", "--out", str(out), "--figures", figures]
     start = time.perf_counter()
@@ -64,7 +84,8 @@ def one_run(src: str, config: Path, cache: Path, out: Path, core: int, figures: 
     ready = READY.search(proc.stderr)
     return {"wall_seconds": wall, "training_seconds": training, "training_compile_seconds": compiling,
             "outside_training_seconds": wall - training, "outside_over_training": (wall - training) / training,
-            "before_training_seconds": float(ready.group(1)) if ready else None}
+            "before_training_seconds": float(ready.group(1)) if ready else None,
+            **json.loads(parts.read_text(encoding="utf-8"))}
 
 
 def main(argv=None) -> int:
@@ -72,6 +93,7 @@ def main(argv=None) -> int:
     ap.add_argument("--src", default=str(Path(__file__).resolve().parents[1] / "src"))
     ap.add_argument("--core", type=int, default=1)
     ap.add_argument("--figures", default="all")
+    ap.add_argument("--xla-flags", default=None, help="XLA_FLAGS for both runs (e.g. --xla_backend_optimization_level=0)")
     ap.add_argument("--out", default="docs/benchmarks/cold_start.json")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
@@ -82,16 +104,19 @@ def main(argv=None) -> int:
                               env={**os.environ, "PYTHONPATH": args.src}, capture_output=True, text=True)
         if init.returncode != 0:
             raise SystemExit(f"cold_start: init failed: {init.stderr}")
-        cold = one_run(args.src, config, tmp / "cache", tmp / "run1", args.core, args.figures)
-        warm = one_run(args.src, config, tmp / "cache", tmp / "run2", args.core, args.figures)
+        cold = one_run(args.src, config, tmp / "cache", tmp / "run1", args.core, args.figures, args.xla_flags)
+        warm = one_run(args.src, config, tmp / "cache", tmp / "run2", args.core, args.figures, args.xla_flags)
     result = {"case": "atlasnn init --system henon_heiles --T 24*pi --march; atlasnn run --no-progress, one seed",
-              "src": args.src, "figures": args.figures, "core": args.core, "cold": cold, "warm": warm,
+              "src": args.src, "figures": args.figures, "core": args.core, "xla_flags": args.xla_flags,
+              "cold": cold, "warm": warm,
               "machine": machine_info(), "command": "python -m benchmarks.cold_start " + " ".join(argv or sys.argv[1:])}
     for name, r in (("cold", cold), ("warm", warm)):
         print(f"{name}: {r['wall_seconds']:.1f} s in all, training {r['training_seconds']:.1f} s "
               f"(+ {r['training_compile_seconds']:.1f} s compiling), outside training {r['outside_training_seconds']:.1f} s "
               f"= {r['outside_over_training']:.2f} x training; first training program ready after "
-              f"{r['before_training_seconds']} s")
+              f"{r['before_training_seconds']} s; imports {r['import_seconds']:.2f} s")
+        top = list(r["compile_by_function"].items())[:4]
+        print("  compiling or loading, costliest: " + "; ".join(f"{k} {v['programs']}x {v['seconds']:.2f} s" for k, v in top))
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=1), encoding="utf-8")
     print(f"wrote {args.out}")

@@ -21,7 +21,8 @@ for side in before after; do
     "import sys; from atlasnn.cli import main; sys.exit(main(sys.argv[1:]))" \
     run "$work/case.toml" --no-progress --out "$work/$side" --figures none > "$work/$side.log"
 done
-echo "# bash benchmarks/seed_compare.sh $1 ${2:-}  (before: $before, after: $after)"
+rev() { git -C "$1" rev-parse --short HEAD 2>/dev/null || echo "not a git checkout"; }
+echo "# bash benchmarks/seed_compare.sh $*  (before: $before at $(rev "$before"); after: $after at $(rev "$after"))"
 "$python" - "$work" <<'PY'
 import json, statistics, sys
 for side in ("before", "after"):

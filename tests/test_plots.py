@@ -201,7 +201,7 @@ def test_scaling_families_is_drawn_once_then_copied(tmp_path, monkeypatch):
     monkeypatch.setenv("ATLASNN_CACHE_DIR", str(tmp_path / "cache" / "jax"))
     first = plot_scaling_families(tmp_path / "a" / "s")
     assert [p.read_bytes() for p in first] == fresh
-    assert len(list((tmp_path / "cache" / "figures").glob("*.png"))) == 1
+    assert len(list((tmp_path / "cache" / "jax" / "figures").glob("*.png"))) == 1  # inside the cache's folder
     drawn = []
     real = plots_module._draw_scaling_families
     monkeypatch.setattr(plots_module, "_draw_scaling_families", lambda *a: drawn.append(1) or real(*a))
@@ -214,6 +214,31 @@ def test_scaling_families_is_drawn_once_then_copied(tmp_path, monkeypatch):
     assert len(drawn) == 1
     plot_scaling_families(tmp_path / "d" / "s", t_max=5.0)  # another t_max: drawn, not copied
     assert len(drawn) == 2
+    import atlasnn.report._plotkit as plotkit
+
+    monkeypatch.setattr(plotkit, "_drawing_code_digest", lambda: "the drawing code changed")
+    plot_scaling_families(tmp_path / "e" / "s")  # changed code: drawn, not an old image copied
+    assert len(drawn) == 3
+    monkeypatch.undo()
+
+
+def test_an_unreadable_figure_cache_draws_instead(tmp_path, monkeypatch):
+    import shutil
+
+    import atlasnn.report._plotkit as plotkit
+
+    monkeypatch.setenv("ATLASNN_CACHE_DIR", str(tmp_path / "cache"))
+    plot_scaling_families(tmp_path / "a" / "s")  # fills the cache
+    real = shutil.copyfile
+
+    def refuse(src, dst, *a, **k):
+        if str(src).startswith(str(tmp_path / "cache")):
+            raise PermissionError(13, "Permission denied", str(src))
+        return real(src, dst, *a, **k)
+
+    monkeypatch.setattr(plotkit.shutil, "copyfile", refuse)
+    paths = plot_scaling_families(tmp_path / "b" / "s")
+    assert all(p.stat().st_size > 1000 for p in paths)
 
 
 def test_plot_loss_curves_single_and_multi_seed(tmp_path):

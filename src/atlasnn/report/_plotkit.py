@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import functools
 import hashlib
 import math
 import os
@@ -323,26 +324,44 @@ def _save(fig: Figure, stem: str | Path) -> list[Path]:
     return paths
 
 
-def _drawn_once(stem: str | Path, key: Sequence[Any], draw: Callable[[], list[Path]]) -> list[Path]:
-    """A figure that depends on nothing but ``key`` (not on a run): drawn by ``draw`` once per
-    machine and key, kept beside the compilation cache (``<cache>/../figures``), copied after.
-    Without a cache directory, or when it cannot be written, it is simply drawn."""
-    from atlasnn.compile_cache import cache_dir
+@functools.lru_cache(maxsize=1)
+def _drawing_code_digest() -> str:
+    """A hash of the code a figure of nothing but constants comes from: the versions, and the
+    source of the report and network packages (the figures' code and the scalings they draw)."""
     import matplotlib
+
+    h = hashlib.sha256(f"{__version__} {matplotlib.__version__}".encode())
+    root = Path(__file__).resolve().parents[1]  # the atlasnn package
+    for package in ("report", "nn"):
+        for path in sorted((root / package).glob("*.py")):
+            h.update(path.name.encode())
+            h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def _drawn_once(stem: str | Path, key: Sequence[Any], draw: Callable[[], list[Path]]) -> list[Path]:
+    """A figure that depends on nothing but ``key`` and the code (not on a run): drawn by ``draw``
+    once per machine, kept in the compilation cache's folder (``<cache>/figures``, beside JAX's
+    entries, which it does not touch), copied after. Without a cache, or where the cache cannot
+    be read or written, it is simply drawn."""
+    from atlasnn.compile_cache import cache_dir
 
     where = cache_dir()
     formats = _FORMATS.get()
     if where is None:
         return draw()
-    digest = hashlib.sha256(repr((__version__, matplotlib.__version__, DPI, formats, *key)).encode()).hexdigest()[:24]
-    kept = {fmt: where.parent / "figures" / f"{digest}.{fmt}" for fmt in formats}
+    digest = hashlib.sha256(repr((_drawing_code_digest(), DPI, formats, *key)).encode()).hexdigest()[:24]
+    kept = {fmt: where / "figures" / f"{digest}.{fmt}" for fmt in formats}
     base = Path(stem)
-    if all(k.is_file() for k in kept.values()):
-        base.parent.mkdir(parents=True, exist_ok=True)
-        paths = [Path(f"{base}.{fmt}") for fmt in formats]
-        for fmt, path in zip(formats, paths):
-            shutil.copyfile(kept[fmt], path)
-        return paths
+    paths = [Path(f"{base}.{fmt}") for fmt in formats]
+    try:
+        if all(k.is_file() for k in kept.values()):
+            base.parent.mkdir(parents=True, exist_ok=True)
+            for fmt, path in zip(formats, paths):
+                shutil.copyfile(kept[fmt], path)
+            return paths
+    except OSError:  # an unreadable cache (another user's): draw instead
+        pass
     paths = draw()
     with contextlib.suppress(OSError):
         for fmt, path in zip(formats, paths):
