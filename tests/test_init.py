@@ -102,6 +102,8 @@ def test_a_long_template_is_time_marched_and_solved_and_runs_as_written(tmp_path
     assert re.search(r"time-marching\) seed 0: \d+ epochs \(budget\), loss \S+, [\d.]+ s \+ [\d.]+ s compiling", printed.out)
     # the phases after each window's Adam bar say what they are doing (before, the bar sat at 100 %)
     assert re.search(r"window 1: Levenberg–Marquardt, at most \d+ steps…", printed.err)
+    # and the seconds before the first bar, compiling the epoch loop, too (before: silent)
+    assert re.search(r"window 1 \[0, [\d.]+\]: compiling the epoch loop \(or loading it from the cache\)…", printed.err)
     assert re.search(r"window 1: local error \S+ \(tol \S+\): (accepted|cut|rejected|forced)", printed.err)
     assert "atlas_exp_march seed 0: error estimate over the" in printed.err
     # JAX's own tracing and compiling, in the record and on the console (before: only each training's compile)

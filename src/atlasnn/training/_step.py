@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 import equinox as eqx
 import jax
@@ -224,16 +224,20 @@ def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, mo
 _CHUNK_CACHE: dict[Any, Any] = program_cache({})
 
 
-def compiled_chunk(args: tuple, system: HamiltonianSystem, mode: Mode, batched: bool = False):
+def compiled_chunk(args: tuple, system: HamiltonianSystem, mode: Mode, batched: bool = False,
+                   announce: Callable[[], None] | None = None):
     """``_run_chunk`` compiled once per (system, mode, batched, argument structure and shapes);
     with ``batched`` every argument but the epochs has a leading batch axis. Returns
-    (compiled function, seconds spent compiling: 0 on a cache hit)."""
+    (compiled function, seconds spent compiling: 0 on a cache hit). ``announce`` is called before
+    a program is traced and compiled (or loaded from the persistent cache), not on a hit."""
     leaves, treedef = jax.tree_util.tree_flatten(args)
     sig = tuple((tuple(x.shape), str(x.dtype)) for x in leaves)
     key = (id(system), mode, batched, treedef, sig, trace_settings())
     hit = _CHUNK_CACHE.get(key)
     if hit is not None and hit[0] is system:
         return hit[1], 0.0
+    if announce is not None:
+        announce()
     start = time.perf_counter()
 
     def chunk(params, rest, opt_state, track, epochs, settings, key):

@@ -44,6 +44,7 @@ resumed from a saved :class:`TrainState` continues exactly where it stopped.
 from __future__ import annotations
 
 import math
+import sys
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
@@ -77,6 +78,16 @@ def _progress_bar(enabled: bool, total: int, initial: int, desc: str):
     from tqdm.auto import tqdm
 
     return tqdm(total=total, initial=initial, desc=desc, unit="ep", dynamic_ncols=True, leave=True)
+
+
+def _announcer(enabled: bool, desc: str) -> Callable[[], None] | None:
+    """A line before the epoch loop is compiled (seconds cold, more on a GPU), with progress on:
+    without it nothing moves between the run's first line and the bar."""
+    if not enabled:
+        return None
+    from tqdm.auto import tqdm
+
+    return lambda: tqdm.write(f"{desc}: compiling the epoch loop (or loading it from the cache)…", file=sys.stderr)
 
 
 def _stack(trees: Sequence[Any]) -> Any:
@@ -347,7 +358,7 @@ def train_batch(
     epoch = max((r.epoch for r in runs if r.active), default=max(r.epoch for r in runs))
     epochs0 = jnp.arange(cfg0.chunk, dtype=jnp.int32)
     compiled, compile_time = compiled_chunk((params, rest, opt_state, track, epochs0, settings, key),
-                                            system, Mode.of(cfg0), batched)
+                                            system, Mode.of(cfg0), batched, announce=_announcer(cfg0.progress, desc))
 
     def states() -> list[TrainState]:
         def one(r, model, o, tr):
