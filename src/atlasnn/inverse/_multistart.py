@@ -28,6 +28,7 @@ import time
 from typing import Any, Sequence
 
 import numpy as np
+
 from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.inverse._fit_result import FitResult, distrust
 from atlasnn.inverse._shooting import fit_shooting, shooting_misfit
