@@ -18,18 +18,33 @@ and write, and evicts the least recently used entries past it.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 from pathlib import Path
 
 import jax
 
-__all__ = ["cache_dir", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES", "program_cache", "clear_programs",
+__all__ = ["cache_dir", "code_digest", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES", "program_cache", "clear_programs",
            "jax_time", "JaxTime"]
 
 CACHE_ENV = "ATLASNN_CACHE_DIR"
 #: the cache's size limit (least recently used entries go past it); with it, JAX locks the cache
 CACHE_MAX_BYTES = 4 << 30
 _OFF = ("", "0", "off", "none", "false")
+
+
+def code_digest(packages: tuple[str, ...], versions: str) -> str:
+    """A hash of ``versions`` (a text naming the library versions that matter) and of the source
+    of atlasnn's ``packages`` (e.g. ``("solver", "systems")``): the key part that makes anything
+    kept on disk from atlasnn's own code (an exported program, a drawn figure) stale when that
+    code changes."""
+    h = hashlib.sha256(versions.encode())
+    root = Path(__file__).resolve().parent  # the atlasnn package
+    for package in packages:
+        for path in sorted((root / package).glob("*.py")):
+            h.update(path.name.encode())
+            h.update(path.read_bytes())
+    return h.hexdigest()
 
 
 def cache_dir() -> Path | None:

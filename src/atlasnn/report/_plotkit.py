@@ -330,13 +330,9 @@ def _drawing_code_digest() -> str:
     source of the report and network packages (the figures' code and the scalings they draw)."""
     import matplotlib
 
-    h = hashlib.sha256(f"{__version__} {matplotlib.__version__}".encode())
-    root = Path(__file__).resolve().parents[1]  # the atlasnn package
-    for package in ("report", "nn"):
-        for path in sorted((root / package).glob("*.py")):
-            h.update(path.name.encode())
-            h.update(path.read_bytes())
-    return h.hexdigest()
+    from atlasnn.compile_cache import code_digest
+
+    return code_digest(("report", "nn"), f"{__version__} {matplotlib.__version__}")
 
 
 def _drawn_once(stem: str | Path, key: Sequence[Any], draw: Callable[[], list[Path]]) -> list[Path]:

@@ -27,7 +27,7 @@ from typing import Any, Callable
 
 import jax
 
-from atlasnn.compile_cache import cache_dir, program_cache
+from atlasnn.compile_cache import cache_dir, code_digest, program_cache
 from atlasnn.version import __version__
 
 __all__ = ["exported_program", "EXPORTABLE_SPECS"]
@@ -41,13 +41,7 @@ def _source_digest() -> str:
     """A hash of the source of the packages the program is built from, and of the versions."""
     import jaxlib
 
-    h = hashlib.sha256(f"{__version__} {jax.__version__} {jaxlib.__version__}".encode())
-    root = Path(__file__).resolve().parents[1]  # the atlasnn package
-    for package in ("solver", "systems"):
-        for path in sorted((root / package).glob("*.py")):
-            h.update(path.name.encode())
-            h.update(path.read_bytes())
-    return h.hexdigest()
+    return code_digest(("solver", "systems"), f"{__version__} {jax.__version__} {jaxlib.__version__}")
 
 
 def _flat(jitted: Callable, treedef) -> Callable:
