@@ -58,11 +58,12 @@ def gamma_filter(model: TrialSolution) -> TrialSolution:
     return eqx.tree_at(lambda m: m.scaling, spec, jax.tree_util.tree_map(eqx.is_inexact_array, model.scaling))
 
 
-def _gamma_where(flag, a, b):
-    """``a`` with its γ leaves taken from ``b`` where ``flag`` is false (trees shaped as the
-    trainable parameters, γ included)."""
+def _gamma_where(flag, a, b=None):
+    """``a`` with its γ leaves taken from ``b`` (zeros when ``b`` is None) where ``flag`` is false
+    (trees shaped as the trainable parameters, γ included)."""
+    other = jax.tree_util.tree_map(jnp.zeros_like, a.scaling) if b is None else b.scaling
     return eqx.tree_at(lambda m: m.scaling, a,
-                       jax.tree_util.tree_map(lambda x, y: jnp.where(flag, x, y), a.scaling, b.scaling))
+                       jax.tree_util.tree_map(lambda x, y: jnp.where(flag, x, y), a.scaling, other))
 
 
 def restrict_opt_state(opt_state: Any, model: TrialSolution, freeze_gamma: bool) -> Any:
@@ -173,7 +174,7 @@ def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, mo
         (_, (loss, res, en)), grads = grad_fn(p, t)
         # γ is a trainable leaf in every run; frozen, its gradient is zero and its value held
         # (selected, not multiplied: the value stays bit for bit whatever the gradient)
-        grads = _gamma_where(settings["train_gamma"], grads, jax.tree_util.tree_map(jnp.zeros_like, grads))
+        grads = _gamma_where(settings["train_gamma"], grads)
         gamma = eqx.combine(p, rest).scaling.gamma_array()
         if mode.schedule != "constant":
             progress = epoch.astype(dtype) / settings["budget"].astype(dtype)
