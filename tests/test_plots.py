@@ -193,7 +193,7 @@ def test_plot_scaling_families(tmp_path):
 def test_scaling_families_is_drawn_once_then_copied(tmp_path, monkeypatch):
     """The figure depends on no run: kept beside the compilation cache after its first drawing
     and copied after; the copy is the bytes a fresh drawing gives, per format."""
-    import atlasnn.report._plots as plots_module
+    import atlasnn.report._scaling_plot as plots_module
     from atlasnn.report import figure_formats
 
     monkeypatch.setenv("ATLASNN_CACHE_DIR", "off")
@@ -366,3 +366,15 @@ def test_large_states_draw_the_components_with_the_largest_errors(tmp_path):
     for fn in (plot_trajectories, plot_errors):
         paths = fn(tmp_path / fn.__name__, [s], names)
         assert all(p.exists() for p in paths)
+
+
+def test_matplotlib_loads_with_the_first_figure_not_with_atlasnn():
+    """A run's imports (the CLI, the experiments, the report's tables) do not load matplotlib
+    (a quarter of a second before training could start); a figure function's first lookup does."""
+    import subprocess
+    import sys
+
+    code = ("import sys, atlasnn.cli, atlasnn.experiments, atlasnn.report as r; print('matplotlib' in sys.modules); "
+            "r.plot_overview; print('matplotlib' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["False", "True"]

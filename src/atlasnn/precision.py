@@ -65,6 +65,17 @@ def x64_enabled() -> bool:
     return bool(jax.config.read("jax_enable_x64"))
 
 
+def on_device(value, dtype) -> jax.Array:
+    """``jnp.asarray(value, dtype)`` for a value on the host (a number, a NumPy array), made by a plain
+    copy to the device: done eagerly, ``jnp.asarray`` and friends run a small program, compiled (or
+    loaded from the cache) once per new shape and dtype — a few hundredths of a second each, dozens
+    of them in a run. The value is rounded to ``dtype`` as ``jnp.asarray`` rounds it; float64 needs
+    JAX's float64 mode in force, as it does for ``jnp.asarray``."""
+    import numpy as np
+
+    return jax.device_put(np.asarray(value, dtype=dtype))
+
+
 def default_float():
     """The float dtype JAX uses now (float32 or float64)."""
     import jax.numpy as jnp

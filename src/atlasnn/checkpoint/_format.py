@@ -167,7 +167,7 @@ def _restore_leaves(path: str, arrays: Mapping[str, np.ndarray], prefix: str, te
             raise _fail(path, f"leaf mismatch: {what} leaf {i} has shape {tuple(a.shape)}, expected {t_shape}")
         if a.dtype != t_dtype:
             raise _fail(path, f"leaf mismatch: {what} leaf {i} has dtype {a.dtype}, expected {t_dtype}")
-        new.append(jnp.asarray(a))
+        new.append(jax.device_put(a))  # a plain copy: jnp.asarray compiles a program per leaf shape
     return jax.tree_util.tree_unflatten(treedef, new)
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -29,6 +29,7 @@ from scipy.integrate import solve_ivp
 
 from atlasnn.compile_cache import program_cache
 from atlasnn.errors import AtlasError, ConfigError
+from atlasnn.precision import on_device
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = [
@@ -142,7 +143,7 @@ def _run(method: str, system: HamiltonianSystem, z0: Any, t0: Any, T: Any, n_ste
     dt = (Tf - t0f) / n
     fn = _compiled_stepper(system, method, n)
     with jax.enable_x64(True):
-        Z = fn(jnp.asarray(z_init, dtype=jnp.float64), jnp.asarray(dt, dtype=jnp.float64))
+        Z = fn(on_device(z_init, np.float64), on_device(dt, np.float64))
         Z = np.asarray(Z, dtype=np.float64)
     return t, Z
 
@@ -322,6 +323,24 @@ def reference_solution(
     if t.size == 1:
         return z_init[None, :].copy()
     return dop853(system, z_init, t, float(rtol), float(atol))[0]
+
+
+def reference_solutions(system: HamiltonianSystem, z0: Any, grids: Sequence[Any],
+                        rtol: float = REFERENCE_RTOL, atol: float = REFERENCE_ATOL) -> list[np.ndarray]:
+    """:func:`reference_solution` on each of several grids, with one DOP853 solve for all the grids
+    that share their first and last times (on the union of their times). The solver's steps do not
+    depend on the times it reports, so each grid gets the values a solve of its own gives, bit for bit."""
+    grids = [_check_t_eval(g) for g in grids]
+    out: list[np.ndarray | None] = [None] * len(grids)
+    spans: dict[tuple[float, float], list[int]] = {}
+    for i, g in enumerate(grids):
+        spans.setdefault((float(g[0]), float(g[-1])), []).append(i)
+    for members in spans.values():
+        union = np.unique(np.concatenate([grids[i] for i in members]))
+        Z = reference_solution(system, z0, union, rtol, atol)
+        for i in members:
+            out[i] = Z[np.searchsorted(union, grids[i])]
+    return out
 
 
 def dop853(system: HamiltonianSystem, z_init: np.ndarray, t: np.ndarray, rtol: float,

@@ -35,7 +35,7 @@ from atlasnn.experiments.config._family import FamilyConfig
 from atlasnn.fileio import write_json, write_text
 from atlasnn.inverse import FitResult, check_shooting_inputs, fit, judge_fit, predict_fit, synthetic_observations
 from atlasnn.observations import Observations, load_observations
-from atlasnn.report import plot_bundle_errors, plot_bundle_map, plot_estimates, plot_fit_trajectory
+import atlasnn.report as report  # its figure functions load matplotlib when first used
 from atlasnn.solutions import window_edges
 from atlasnn.solver import solve_bundle
 from atlasnn.training import train_bundle
@@ -111,9 +111,9 @@ def _run_bundle(cfg: FamilyConfig, system, out: Path, log, say, executor: dict) 
     varying = [i for i in range(inputs.shape[1]) if np.ptp(inputs[:, i]) > 0]
     order = sorted(varying, key=lambda i: -np.ptp(inputs[:, i]) / max(np.abs(inputs[:, i]).max(), 1e-300))
     first = cfg.seeds[0]
-    figs = [*plot_bundle_map(inputs[:, order[:2]], [labels[i] for i in order[:2]], errors[first].max(axis=1),
+    figs = [*report.plot_bundle_map(inputs[:, order[:2]], [labels[i] for i in order[:2]], errors[first].max(axis=1),
                              out / "figures" / "bundle_map", f"seed {first}: held-out max error per member"),
-            *plot_bundle_errors(t_test, errors, out / "figures" / "bundle_errors", edges=_edges(st, box))]
+            *report.plot_bundle_errors(t_test, errors, out / "figures" / "bundle_errors", edges=_edges(st, box))]
     medians = [v["test"]["median"] for v in seeds.values()]
     worsts = [v["test"]["worst"] for v in seeds.values()]
     return {"box": box.describe(), "settings": jsonable(dataclasses.asdict(st)), "seeds": seeds,
@@ -284,7 +284,7 @@ def _inverse_figures(cfg, system, out: Path, records, truth, first_obs, curves, 
         rows = [{"seed": r["seed"], "method": r["method"], "estimate": r["estimate"][j], "std": r["std"][j],
                  "trusted": r.get("trusted", True)} for r in done]
         try:
-            figs += plot_estimates(rows, u.name, None if truth is None else truth[u.name],
+            figs += report.plot_estimates(rows, u.name, None if truth is None else truth[u.name],
                                    out / "figures" / f"estimates_{u.name.replace('.', '_')}")
         except Exception as exc:  # noqa: BLE001 - the fits are kept whatever a figure does
             notes.append(f"figure estimates_{u.name} not drawn: {exc}")
@@ -298,7 +298,7 @@ def _inverse_figures(cfg, system, out: Path, records, truth, first_obs, curves, 
         except AtlasError as exc:
             notes.append(f"the {m} fit's trajectory is not drawn: {exc}")
     try:
-        figs += plot_fit_trajectory(obs.t, obs.values, obs.names, t, traj, out / "figures" / "fit_trajectory")
+        figs += report.plot_fit_trajectory(obs.t, obs.values, obs.names, t, traj, out / "figures" / "fit_trajectory")
     except Exception as exc:  # noqa: BLE001
         notes.append(f"figure fit_trajectory not drawn: {exc}")
     return figs

@@ -11,29 +11,30 @@ from typing import Any, Callable
 
 import numpy as np
 
-from atlasnn.evaluation import TrainingRecord, blow_up_index, error_metrics, integrate, reference_solution, workprecision as wp
+from atlasnn.evaluation import TrainingRecord, blow_up_index, error_metrics, integrate, reference_solutions
+from atlasnn.evaluation import workprecision as wp
 from atlasnn.checkpoint import load_checkpoint, load_piecewise
 from atlasnn.experiments.config import ExperimentConfig
 from atlasnn.experiments._plan import eval_grid
 
 
-def reference_grids(cfg: ExperimentConfig, system, z0: np.ndarray) -> dict[str, np.ndarray]:
+def reference_grids(cfg: ExperimentConfig, system, z0: np.ndarray,
+                    also: list[np.ndarray] = ()) -> tuple[dict[str, np.ndarray], list[np.ndarray]]:
     """The evaluation grid of the table (``eval``; target interval for transfer) and, for a
     transfer experiment, of the source interval (``source``, as many points per unit time), each
-    with the reference solution on it (``eval_ref``, ``source_ref``)."""
+    with the reference solution on it (``eval_ref``, ``source_ref``); and the reference on each
+    grid of ``also`` (the integrators' own). One DOP853 solve per interval serves every grid on it."""
     st, ev = cfg.eval_stage, cfg.evaluation
-
-    def ref(t):
-        return reference_solution(system, z0, t, rtol=ev.reference_rtol, atol=ev.reference_atol)
-
-    t_eval = eval_grid(st, ev.eval_points)
-    grids = {"eval": t_eval, "eval_ref": ref(t_eval)}
+    grids = {"eval": eval_grid(st, ev.eval_points)}
     if cfg.kind == "transfer":
         src = cfg.source
         points = ev.eval_points and max(2, round(ev.eval_points * (src.T - src.t0) / (st.T - st.t0)))
         grids["source"] = eval_grid(src, points)
-        grids["source_ref"] = ref(grids["source"])
-    return grids
+    names = list(grids)
+    refs = reference_solutions(system, z0, [grids[k] for k in names] + list(also),
+                               rtol=ev.reference_rtol, atol=ev.reference_atol)
+    grids.update({f"{k}_ref": z for k, z in zip(names, refs)})
+    return grids, refs[len(names):]
 
 
 def _quiet_metrics(t, z, z_ref, names, energy, e0) -> dict:
@@ -43,14 +44,13 @@ def _quiet_metrics(t, z, z_ref, names, energy, e0) -> dict:
         return error_metrics(t, z, z_ref, names, energy, e0)
 
 
-def integrator_rows(cfg: ExperimentConfig, system, z0: np.ndarray, e0: float,
-                    log: Callable[[str], None]) -> tuple[list[dict], dict[str, np.ndarray]]:
-    """The classical integrators of the table: SE with K − 1 steps, the fine SE, and any extra
-    ones the config names; their metrics (rows) and trajectories (arrays for the figures).
+def integrator_runs(cfg: ExperimentConfig, system, z0: np.ndarray,
+                    log: Callable[[str], None]) -> list[tuple[str, str, int, np.ndarray, np.ndarray]]:
+    """The classical integrators of the table, run: SE with K − 1 steps, the fine SE, and any
+    extra ones the config names, as (column, method, steps, t, z).
 
     A Hamiltonian not declared separable gets none of them, and one line saying so."""
     st, ev = cfg.eval_stage, cfg.evaluation
-    names = list(system.state_names)
     steps = ev.se_steps or (st.train.n_points - 1)
     methods = [("se", "symplectic_euler", steps),
                (f"se_{ev.fine_factor}", "symplectic_euler", steps * ev.fine_factor)]
@@ -58,11 +58,18 @@ def integrator_rows(cfg: ExperimentConfig, system, z0: np.ndarray, e0: float,
     if not system.separable:
         log(f"skipping the classical integrators ({', '.join(sorted({m for _, m, _ in methods}))}): "
             "the Hamiltonian is not declared separable")
-        return [], {}
+        return []
+    return [(column, method, n, *integrate(method, system, z0, st.t0, st.T, n)) for column, method, n in methods]
+
+
+def integrator_rows(cfg: ExperimentConfig, system, runs, refs: list[np.ndarray], e0: float,
+                    log: Callable[[str], None]) -> tuple[list[dict], dict[str, np.ndarray]]:
+    """The metrics (rows) and trajectories (arrays for the figures) of :func:`integrator_runs`'
+    runs against the reference on their grids (``refs``, in the same order)."""
+    st, ev = cfg.eval_stage, cfg.evaluation
+    names = list(system.state_names)
     rows, arrays = [], {}
-    for column, method, n in methods:
-        t, z = integrate(method, system, z0, st.t0, st.T, n)
-        z_ref = reference_solution(system, z0, t, rtol=ev.reference_rtol, atol=ev.reference_atol)
+    for (column, method, n, t, z), z_ref in zip(runs, refs):
         energy = system.energy64(z)
         label = "SE" if column == "se" else (f"SE-{ev.fine_factor}" if column.startswith("se_") else column)
         bad = blow_up_index(z, z_ref)

@@ -45,7 +45,7 @@ from atlasnn.errors import ConfigError
 from atlasnn.evaluation import REFERENCE_DESCRIPTION, TrainingRecord, energy_drift
 from atlasnn.experiments._executor import Executor
 from atlasnn.experiments._executors import open_executor
-from atlasnn.experiments._measure import integrator_rows, reference_grids, work_precision
+from atlasnn.experiments._measure import integrator_rows, integrator_runs, reference_grids, work_precision
 from atlasnn.experiments._plan import check_memory, plan_tasks, trainings
 from atlasnn.experiments._schemes import baseline_column, column_labels, table_columns
 from atlasnn.experiments._signals import NoGuard, SignalGuard
@@ -332,8 +332,9 @@ class _Run:
         system = system_of(cfg)
         z0 = system.initial_state(cfg.system.z0)
         e0 = float(system.energy64(z0))
-        grids = reference_grids(cfg, system, z0)
-        int_rows, arrays = integrator_rows(cfg, system, z0, e0, self.log)
+        runs = integrator_runs(cfg, system, z0, self.log)
+        grids, int_refs = reference_grids(cfg, system, z0, [r[3] for r in runs])
+        int_rows, arrays = integrator_rows(cfg, system, runs, int_refs, e0, self.log)
         arrays.update({"t_eval": grids["eval"], "z_ref": grids["eval_ref"],
                        "energy_ref": system.energy64(grids["eval_ref"])})
         reference = REFERENCE_DESCRIPTION.replace("1e-12", f"{cfg.evaluation.reference_rtol:g}")

@@ -51,7 +51,8 @@ from atlasnn.experiments._executors import open_executor
 from atlasnn.experiments._runner import resume_experiment, run_experiment
 from atlasnn.experiments._store import RunLock, check_run_dir, one_line, run_state, write_json
 from atlasnn.experiments.config import ExperimentConfig, apply_profile, parse_config
-from atlasnn.report import format_number, plot_sweep
+import atlasnn.report as report  # its figure functions load matplotlib when first used
+from atlasnn.report import format_number
 
 SWEEP_FILE = "sweep.json"
 #: what the summary can tabulate: a per-state metric (of the first state) or a scalar one
@@ -422,5 +423,5 @@ def write_summary(out: Path, spec: dict) -> list[dict]:
         for r in rows:
             stats = [repr(r["columns"][c].get(s, "")) if c in r["columns"] else "" for c in cols for s in _CSV_STATS]
             w.writerow([r["point"], r["dir"], *(_value_text(r["set"][k]) for k in keys), r["seeds"], *stats])
-    plot_sweep(out / "sweep", spec, rows, labels, what)
+    report.plot_sweep(out / "sweep", spec, rows, labels, what)
     return rows

@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.precision import default_float
+from atlasnn.precision import default_float, on_device
 
 
 def softplus(x: jax.Array) -> jax.Array:
@@ -96,7 +96,7 @@ class Tanh(TimeScaling):
     raw_m: jax.Array
 
     def __init__(self, m: float = 1.0):
-        self.raw_m = jnp.asarray(inverse_softplus(m), dtype=default_float())
+        self.raw_m = on_device(inverse_softplus(m), default_float())
 
     @property
     def m(self) -> jax.Array:
@@ -128,8 +128,8 @@ class RationalExp(TimeScaling):
     raw_beta: jax.Array
 
     def __init__(self, alpha: float = 1.0, beta: float = 1.0):
-        self.raw_alpha = jnp.asarray(inverse_softplus(alpha), dtype=default_float())
-        self.raw_beta = jnp.asarray(inverse_softplus(beta), dtype=default_float())
+        self.raw_alpha = on_device(inverse_softplus(alpha), default_float())
+        self.raw_beta = on_device(inverse_softplus(beta), default_float())
 
     @property
     def alpha(self) -> jax.Array:

@@ -23,7 +23,7 @@ from atlasnn.errors import ConfigError
 from atlasnn.nn._mlp import MLP
 from atlasnn.nn._models import make_scaling
 from atlasnn.nn._scaling import TimeScaling
-from atlasnn.precision import default_float
+from atlasnn.precision import default_float, on_device
 
 __all__ = ["TrialSolution", "make_model"]
 
@@ -105,4 +105,4 @@ def make_model(
         raise ConfigError("give gamma only together with a scaling name, not with a scaling instance")
     key = seed if isinstance(seed, jax.Array) else jax.random.PRNGKey(int(seed))
     net = MLP(z0.size, width, depth, key, activation, first_layer_scale)
-    return TrialSolution(net, scaling, jnp.asarray(z0, dtype=default_float()), float(t0))
+    return TrialSolution(net, scaling, on_device(z0, default_float()), float(t0))

@@ -25,16 +25,17 @@ import zlib
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
 
 import numpy as np
-from matplotlib.axes import Axes
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from atlasnn.errors import ConfigError
 from atlasnn.version import __version__
 from atlasnn.nn import MODELS
+
+if TYPE_CHECKING:  # matplotlib itself loads with the first figure (0.25 s: a run's training does not wait for it)
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 __all__ = ["DPI", "Series", "model_style", "pi_ticks", "figure_formats", "FIGURE_FORMATS"]
 
@@ -289,6 +290,15 @@ def _state_math(name: str) -> str | None:
     return None
 
 
+_GREEK = {"alpha": "\\alpha", "beta": "\\beta", "gamma": "\\gamma", "omega": "\\omega", "α": "\\alpha",
+          "β": "\\beta"}
+
+
+def _greek(name: str) -> str:
+    """A γ name in LaTeX (alpha → \\alpha); other names as they are."""
+    return _GREEK.get(name, name)
+
+
 def _state_label(name: str) -> str:
     body = _state_math(name)
     return f"${body}$" if body is not None else name
@@ -302,6 +312,9 @@ def _delta_label(name: str, absolute: bool = False) -> str:
 
 
 def _new_figure(figsize: tuple[float, float]) -> Figure:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=figsize, layout="constrained")
     FigureCanvasAgg(fig)
     return fig

@@ -27,7 +27,6 @@ import warnings
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-import matplotlib as mpl
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.ticker import NullLocator
@@ -44,9 +43,9 @@ from atlasnn.report._plotkit import (
     _components_note,
     _color,
     _delta_label,
-    _drawn_once,
     _figure_legend,
     _float_array,
+    _greek,
     _log_floor,
     _new_figure,
     _pad,
@@ -59,12 +58,10 @@ from atlasnn.report._plotkit import (
     _time_axis,
     _window_ticks,
     model_style,
-    pi_ticks,
 )
 
 __all__ = [
     "first_epoch_below",
-    "plot_scaling_families",
     "plot_loss_curves",
     "plot_gamma_evolution",
     "plot_trajectories",
@@ -76,63 +73,6 @@ __all__ = [
 
 
 # ------------------------------------------------------------------------------ figures
-def plot_scaling_families(stem: str | Path, t_max: float = 10.0, *,
-                          title: str = "Temporal scaling functions f(t; γ)") -> list[Path]:
-    """One panel per registered model with learnable γ: f(t; γ) for the γ values its registry
-    entry lists as ``examples`` (e.g. tanh(m t) for m ∈ {0.25, …, 4}; the rational-exp form with
-    β = 1, equal to tanh(αt/2), and β → 0, close to 1 − e^{−αt}), each with the fixed HNN-like
-    scalings (no γ) dashed for comparison. The curves are the scalings' own code, evaluated.
-    """
-    t_max = float(t_max)
-    if not (math.isfinite(t_max) and t_max > 0):
-        raise ConfigError(f"t_max must be a positive number, got {t_max}")
-    learnable = [k for k in MODELS.values() if k.gamma_names and k.examples]
-    fixed = [k for k in MODELS.values() if not k.gamma_names]
-    # the same in every run: drawn once per machine (and per registry of scalings), then copied
-    key = ("scaling_families", t_max, title,
-           [(k.label, k.scaling.formula, repr(k.examples)) for k in learnable],
-           [(k.label, k.scaling.formula) for k in fixed])
-    return _drawn_once(stem, key, lambda: _draw_scaling_families(stem, t_max, title, learnable, fixed))
-
-
-def _draw_scaling_families(stem, t_max, title, learnable, fixed) -> list[Path]:
-    t = np.linspace(0.0, t_max, 600)
-    fig = _new_figure((5.5 * max(len(learnable), 1), 4.2))
-    axes = np.atleast_1d(fig.subplots(1, max(len(learnable), 1), sharey=True))
-    cycle = mpl.colormaps["viridis"]
-    for ax, kind in zip(axes, learnable):
-        shades = np.linspace(0.0, 0.85, len(kind.examples))
-        for gamma, shade in zip(kind.examples, shades):
-            f = np.asarray(kind.make_scaling(gamma)(t))
-            text = ", ".join(f"{_greek(n)}={v:g}" for n, v in gamma.items())
-            ax.plot(t, f, color=cycle(shade), lw=1.8, label=f"${text}$")
-        for other in fixed:
-            style = model_style(other.label)
-            ax.plot(t, np.asarray(other.make_scaling()(t)), color=style["color"], ls="--", lw=1.6,
-                    label=f"{other.label}: {other.scaling.formula.removeprefix('f(t) = ')}")
-        ax.set_title(f"{kind.label}: {kind.scaling.formula}")
-        ax.set_xlim(0.0, t_max)
-        pi_ticks(ax, t_max)
-        ax.set_xlabel("$t$")
-        ax.axhline(1.0, color="0.7", lw=0.8, zorder=0)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize="small", loc="lower right")
-    axes[0].set_ylabel("$f(t;\\gamma)$")
-    axes[0].set_ylim(-0.02, 1.08)
-    if title:
-        fig.suptitle(title)
-    return _save(fig, stem)
-
-
-_GREEK = {"alpha": "\\alpha", "beta": "\\beta", "gamma": "\\gamma", "omega": "\\omega", "α": "\\alpha",
-          "β": "\\beta"}
-
-
-def _greek(name: str) -> str:
-    """A γ name in LaTeX (alpha → \\alpha); other names as they are."""
-    return _GREEK.get(name, name)
-
-
 def _owner(name: str) -> Any:
     """The registered model whose scaling has a γ called ``name`` (α, β spelt in Greek count), or None."""
     plain = {"α": "alpha", "β": "beta"}.get(name, name)

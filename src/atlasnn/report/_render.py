@@ -16,14 +16,11 @@ import numpy as np
 from atlasnn.checkpoint import load_checkpoint, load_piecewise
 from atlasnn.errors import AtlasError, CheckpointError, ConfigError
 from atlasnn.evaluation import TrainingRecord, WorkPoint, blow_up_index
-from atlasnn.report import _plots as plots
 from atlasnn.report._caveats import QUICK_BANNER, column_verdicts, figure_title, is_quick, verdict_detail, verdict_status_text
 from atlasnn.report._plotkit import Series
 from atlasnn.report._stats import column_label, load_paper, load_results, summarize
-from atlasnn.report._summary_plots import plot_overview
 from atlasnn.report._tables import write_tables
 from atlasnn.report._text import format_number
-from atlasnn.report._workprecision_plot import plot_work_precision
 
 
 def _paper_name(results: dict) -> str:
@@ -91,6 +88,11 @@ def write_figures(run_dir: Path, results: dict, figures: str = "all") -> list[Pa
         return []
     if figures == "overview":
         return _overview_only(run_dir, results)
+    # the figure modules load matplotlib (0.25 s): imported when a figure is drawn, not with atlasnn
+    from atlasnn.report import _plots as plots
+    from atlasnn.report._scaling_plot import plot_scaling_families
+    from atlasnn.report._workprecision_plot import plot_work_precision
+
     fig_dir = run_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
     arrays = dict(np.load(run_dir / "arrays.npz", allow_pickle=False))
@@ -103,7 +105,7 @@ def write_figures(run_dir: Path, results: dict, figures: str = "all") -> list[Pa
     hist = _histories(run_dir, results)
     written: list[Path] = []
 
-    written += plots.plot_scaling_families(fig_dir / "scaling_families")
+    written += plot_scaling_families(fig_dir / "scaling_families")
 
     # ---- loss curves (median over seeds) and γ evolution (first seed)
     def loss_runs(column):
@@ -189,6 +191,8 @@ def _state_series(results: dict, arrays: dict, runs: list[TrainingRecord]) -> tu
 
 
 def _draw_overview(fig_dir: Path, results: dict, ref: Series, series: list[Series]) -> list[Path]:
+    from atlasnn.report._summary_plots import plot_overview
+
     src_iv = tuple(results["source_interval"]) if results.get("source_interval") else None
     return plot_overview(fig_dir / "overview", [ref] + series, results["state_names"], results["energy0"], src_iv,
                          title=figure_title(results, f"{results['experiment']}: overview (seed {results['seeds'][0]})"))

@@ -57,13 +57,23 @@ def _stack(*xs):
     """jnp.stack(xs), on the host when every x is a concrete array (eagerly, jnp.stack compiles a
     few programs per leaf shape; copying the same values is exact; weakly typed leaves keep jnp.stack's
     typing)."""
-    if all(isinstance(x, jax.Array) and not isinstance(x, jax.core.Tracer) and not x.weak_type for x in xs):
+    if all(_concrete(x) for x in xs):
         return jax.device_put(np.stack([np.asarray(x) for x in xs]))
     return jnp.stack(xs)
 
 
 def unstack_models(stacked: TrialSolution, n: int) -> list[TrialSolution]:
-    return [jax.tree_util.tree_map(lambda x, i=i: x[i], stacked) for i in range(n)]
+    """The window models of :func:`stack_models`' pytree: each stacked leaf copied to the host once,
+    window i's rows copied back (indexed eagerly, each leaf shape compiled a program or two)."""
+    leaves, treedef = jax.tree_util.tree_flatten(stacked)
+    host = [np.asarray(x) if _concrete(x) else None for x in leaves]
+    with _float64_if(any(h is not None and h.dtype == np.float64 for h in host)):
+        return [treedef.unflatten([x[i] if h is None else jax.device_put(h[i]) for x, h in zip(leaves, host)])
+                for i in range(n)]
+
+
+def _concrete(x) -> bool:
+    return isinstance(x, jax.Array) and not isinstance(x, jax.core.Tracer) and not x.weak_type
 
 
 def _float64_if(on: bool):

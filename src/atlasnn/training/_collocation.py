@@ -7,6 +7,8 @@ back (t < t0 → 2t0 − t, t > T → 2T − t), repeatedly if the jitter is lar
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jnp
 
@@ -15,7 +17,7 @@ from atlasnn.errors import ConfigError
 
 def check_interval(t0: float, T: float, n_points: int) -> None:
     """One-line errors for a bad interval or point count."""
-    if not (jnp.isfinite(t0) and jnp.isfinite(T)) or T <= t0:
+    if not (math.isfinite(t0) and math.isfinite(T)) or T <= t0:
         raise ConfigError(f"interval must satisfy t0 < T (finite), got t0={t0!r}, T={T!r}")
     if isinstance(n_points, bool) or not isinstance(n_points, int) or n_points < 2:
         raise ConfigError(f"number of collocation points K must be an integer >= 2, got {n_points!r}")

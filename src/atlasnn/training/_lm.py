@@ -46,10 +46,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.flatten_util import ravel_pytree
 
 from atlasnn.compile_cache import program_cache
-from atlasnn.precision import trace_settings
+from atlasnn.precision import on_device, trace_settings
+from atlasnn.training._flat import cast_floats, ravel, unravel_on_host
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
 from atlasnn.systems import HamiltonianSystem
@@ -311,20 +311,16 @@ def _init_state(x, res, jac, config: LMConfig, n_hist: int, data) -> LMState:
 
 
 def _data(config: LMConfig, dtype) -> dict[str, jax.Array]:
-    return {"loss_tol": jnp.asarray(config.loss_tol, dtype), "patience": jnp.asarray(config.patience, jnp.int32),
-            "min_rel": jnp.asarray(config.min_rel_improvement, dtype),
-            "budget": jnp.asarray(config.steps, jnp.int32)}
-
-
-def _cast(tree, dtype):
-    return jax.tree_util.tree_map(lambda v: jnp.asarray(v, dtype) if eqx.is_inexact_array(v) else v, tree)
+    return {"loss_tol": on_device(config.loss_tol, dtype), "patience": on_device(config.patience, jnp.int32),
+            "min_rel": on_device(config.min_rel_improvement, dtype),
+            "budget": on_device(config.steps, jnp.int32)}
 
 
 def _energy0(model, system, energy0):
     if energy0 is not None:
         return float(energy0)
     with jax.enable_x64(True):
-        return float(system.energy(jnp.asarray(np.asarray(model.z0, np.float64))))
+        return float(system.energy(on_device(model.z0, np.float64)))
 
 
 
@@ -349,7 +345,7 @@ def _functions(config: LMConfig, system, unravel, unravel_jac, rest, t, e0, lam,
     res = residual_fn(rest, unravel, system, t, e0, lam)
     if jac_dtype == t.dtype:
         return res, jacobian_fn(rest, unravel, system, t, e0, lam)
-    inner = jacobian_fn(_cast(rest, jac_dtype), unravel_jac, system, t.astype(jac_dtype), e0.astype(jac_dtype),
+    inner = jacobian_fn(cast_floats(rest, jac_dtype), unravel_jac, system, t.astype(jac_dtype), e0.astype(jac_dtype),
                         lam.astype(jac_dtype))
     return res, lambda x: inner(x.astype(jac_dtype))
 
@@ -407,22 +403,22 @@ def lm_batch(models: Sequence[TrialSolution], system: HamiltonianSystem, T: floa
         jac_dtype = jnp.float32 if config.precision == "mixed" else dtype
         parts = []
         for m in models:
-            params, rest = eqx.partition(_cast(m, dtype), trainable_filter(m, config.freeze_gamma))
-            x, unravel = ravel_pytree(params)
-            parts.append((x, rest, unravel, ravel_pytree(_cast(params, jac_dtype))[1]))
+            params, rest = eqx.partition(cast_floats(m, dtype), trainable_filter(m, config.freeze_gamma))
+            x, unravel = ravel(params)
+            parts.append((x, rest, unravel, ravel(cast_floats(params, jac_dtype))[1], params))
         unravel, unravel_jac = parts[0][2], parts[0][3]
         dim = system.dim
         points = {config.n_points or lm_points(float(t) - float(m.t0), dim) for m, t in zip(models, Ts)}
         if len(points) > 1:  # one program: every member of a batch on the largest K
             config = config.replace(n_points=max(points))
-        times = [jnp.asarray(lm_nodes(config, float(m.t0), float(t), dim), dtype) for m, t in zip(models, Ts)]
+        times = [on_device(lm_nodes(config, float(m.t0), float(t), dim), dtype) for m, t in zip(models, Ts)]
         if n > 1:
             x = jnp.stack([p[0] for p in parts])
             rest = jax.tree_util.tree_map(lambda *v: jnp.stack(v), *[p[1] for p in parts])
             t, e0 = jnp.stack(times), jnp.asarray(e0s, dtype)
         else:
-            x, rest, t, e0 = parts[0][0], parts[0][1], times[0], jnp.asarray(e0s[0], dtype)
-        args = (x, rest, t, e0, jnp.asarray(config.lam_reg, dtype), _data(config, dtype))
+            x, rest, t, e0 = parts[0][0], parts[0][1], times[0], on_device(e0s[0], dtype)
+        args = (x, rest, t, e0, on_device(config.lam_reg, dtype), _data(config, dtype))
         compiled, compile_time = _compiled_loop(config, system, unravel, unravel_jac, jac_dtype, args, n > 1)
         start = time.perf_counter()
         state = compiled(*args)
@@ -431,7 +427,7 @@ def lm_batch(models: Sequence[TrialSolution], system: HamiltonianSystem, T: floa
         out = []
         for i, part in enumerate(parts):
             si = jax.tree_util.tree_map(lambda v: v[i], state) if n > 1 else state
-            model = _cast(eqx.combine(unravel(si.x), part[1]), in_dtype)
+            model = cast_floats(eqx.combine(unravel_on_host(si.x, part[4]), part[1]), in_dtype)
             hist = np.asarray(si.history, np.float64)
             hist = hist[np.isfinite(hist)]
             out.append(LMResult(model, hist, float(hist[0]), float(si.loss), int(si.step), int(si.accepted),

@@ -45,6 +45,7 @@ from jax.flatten_util import ravel_pytree
 
 from atlasnn.compile_cache import program_cache
 from atlasnn.precision import trace_settings
+from atlasnn.training._flat import cast_floats
 from atlasnn.training._collocation import check_interval, uniform_grid
 from atlasnn.errors import ConfigError
 from atlasnn.training._loss import physics_loss
@@ -291,8 +292,8 @@ def polish(
     if config.precision == "model" or dtype == jnp.float64:
         return _polish(model, system, T, config, e0)
     with jax.enable_x64(True):
-        res = _polish(_cast(model, jnp.float64), system, T, config, e0)
-    polished = _cast(res.model, dtype)
+        res = _polish(cast_floats(model, jnp.float64), system, T, config, e0)
+    polished = cast_floats(res.model, dtype)
     # rounded back to the model's type: keep it only if it is still better there
     data = polish_data(config, float(model.t0), float(T), e0, dtype)
     before, after = (float(physics_loss(m, system, data["t"], data["energy0"], data["lam_reg"])[0])
@@ -300,10 +301,6 @@ def polish(
     better = after < before
     return dataclasses.replace(res, model=polished if better else model, initial_loss=before,
                                final_loss=after if better else before)
-
-
-def _cast(model: TrialSolution, dtype) -> TrialSolution:
-    return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype) if eqx.is_inexact_array(x) else x, model)
 
 
 def _polish(model: TrialSolution, system: HamiltonianSystem, T: float, config: PolishConfig,

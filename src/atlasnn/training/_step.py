@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import optax
 
 from atlasnn.compile_cache import program_cache
-from atlasnn.precision import trace_settings
+from atlasnn.precision import on_device, trace_settings
 from atlasnn.training._collocation import jittered, uniform_grid, with_release_fixed_point
 from atlasnn.training._loss import causal_physics_loss, physics_loss
 from atlasnn.nn import TrialSolution
@@ -39,6 +39,7 @@ from atlasnn.systems import HamiltonianSystem
 # One Adam transformation for every run; lr and betas live in its state (inject_hyperparams),
 # so runs with other hyperparameters reuse the same compiled step.
 _ADAM = optax.inject_hyperparams(optax.adam)(learning_rate=1e-3, b1=0.9, b2=0.999, eps=1e-8)
+_adam_init = jax.jit(_ADAM.init)  # one program; eagerly, optax's init runs one per leaf shape and op
 
 
 def trainable_filter(model: TrialSolution, freeze_gamma: bool) -> TrialSolution:
@@ -77,30 +78,30 @@ def restrict_opt_state(opt_state: Any, model: TrialSolution, freeze_gamma: bool)
 
 def set_hyperparams(opt_state, cfg, dtype):
     hp = dict(opt_state.hyperparams)
-    hp["learning_rate"] = jnp.asarray(cfg.lr, dtype)
-    hp["b1"] = jnp.asarray(cfg.betas[0], dtype)
-    hp["b2"] = jnp.asarray(cfg.betas[1], dtype)
+    hp["learning_rate"] = on_device(cfg.lr, dtype)
+    hp["b1"] = on_device(cfg.betas[0], dtype)
+    hp["b2"] = on_device(cfg.betas[1], dtype)
     return opt_state._replace(hyperparams=hp)
 
 
 def init_opt_state(params, cfg, dtype):
     """Adam's state for ``params`` with the config's lr and betas."""
-    return set_hyperparams(_ADAM.init(params), cfg, dtype)
+    return set_hyperparams(_adam_init(params), cfg, dtype)
 
 
 def initial_track(params, dtype, threshold: float = math.inf) -> dict[str, Any]:
     """The trainer's device-side bookkeeping; ``threshold`` is the best rule's starting loss
     (∞, or 1 for ``release_exact``, whose ``best_params`` then start as the initial ones)."""
-    inf = jnp.asarray(jnp.inf, dtype)
+    inf = on_device(math.inf, dtype)
     return {
         "best_params": params,  # per best_rule
-        "best_loss": jnp.asarray(threshold, dtype),
-        "best_epoch": jnp.asarray(-1, jnp.int32),
+        "best_loss": on_device(threshold, dtype),
+        "best_epoch": on_device(-1, jnp.int32),
         "any_params": params,  # lowest finite loss over the whole run (divergence fallback)
         "any_loss": inf,
-        "any_epoch": jnp.asarray(-1, jnp.int32),
-        "stop": jnp.asarray(0, jnp.int32),  # 0 running, 1 tolerance met, 2 diverged
-        "stop_epoch": jnp.asarray(-1, jnp.int32),
+        "any_epoch": on_device(-1, jnp.int32),
+        "stop": on_device(0, jnp.int32),  # 0 running, 1 tolerance met, 2 diverged
+        "stop_epoch": on_device(-1, jnp.int32),
     }
 
 
@@ -263,15 +264,15 @@ def run_settings(cfg, model: TrialSolution, system: HamiltonianSystem, T: float,
         start += 1
     return {
         "grid": uniform_grid(t0, T, cfg.n_points, dtype),
-        "t0": jnp.asarray(t0, dtype),
-        "T": jnp.asarray(T, dtype),
-        "sigma": jnp.asarray(cfg.sigma, dtype),
-        "energy0": jnp.asarray(system.energy(model.z0) if energy0 is None else energy0, dtype),
-        "lam_reg": jnp.asarray(cfg.lam_reg, dtype),
-        "tolerance": jnp.asarray(tol, dtype),
-        "budget": jnp.asarray(cfg.epochs, jnp.int32),
-        "best_start": jnp.asarray(int(start), jnp.int32),
-        "lr": jnp.asarray(cfg.lr, dtype),
-        "causal_eps": jnp.asarray(cfg.causal_eps, dtype),
-        "train_gamma": jnp.asarray(not cfg.freeze_gamma),
+        "t0": on_device(t0, dtype),
+        "T": on_device(T, dtype),
+        "sigma": on_device(cfg.sigma, dtype),
+        "energy0": on_device(system.energy(model.z0) if energy0 is None else energy0, dtype),
+        "lam_reg": on_device(cfg.lam_reg, dtype),
+        "tolerance": on_device(tol, dtype),
+        "budget": on_device(cfg.epochs, jnp.int32),
+        "best_start": on_device(int(start), jnp.int32),
+        "lr": on_device(cfg.lr, dtype),
+        "causal_eps": on_device(cfg.causal_eps, dtype),
+        "train_gamma": on_device(not cfg.freeze_gamma, bool),
     }

@@ -57,6 +57,7 @@ import numpy as np
 from atlasnn.training._collocation import check_interval
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
+from atlasnn.precision import on_device
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._records import History, TrainConfig, TrainResult, TrainState
 from atlasnn.training._step import (
@@ -356,7 +357,7 @@ def train_batch(
     params, rest, opt_state, track, settings, key = (_stack(a) if batched else a[0] for a in args)
     cfg0 = runs[0].cfg
     epoch = max((r.epoch for r in runs if r.active), default=max(r.epoch for r in runs))
-    epochs0 = jnp.arange(cfg0.chunk, dtype=jnp.int32)
+    epochs0 = on_device(np.arange(cfg0.chunk), np.int32)
     compiled, compile_time = compiled_chunk((params, rest, opt_state, track, epochs0, settings, key),
                                             system, Mode.of(cfg0), batched, announce=_announcer(cfg0.progress, desc))
 
@@ -374,7 +375,7 @@ def train_batch(
     start = time.perf_counter()
     try:
         while any(r.active for r in runs):
-            epochs = jnp.arange(epoch, epoch + cfg0.chunk, dtype=jnp.int32)
+            epochs = on_device(np.arange(epoch, epoch + cfg0.chunk), np.int32)
             params, opt_state, track, hist = compiled(params, rest, opt_state, track, epochs, settings, key)
             step = _advance(runs, jax.device_get(hist), track, epoch, batched)
             epoch += step

@@ -10,12 +10,11 @@ from pathlib import Path
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.experiments.config._types import _fail, _fmt, _one_line
-from atlasnn.precision import x64_enabled
+from atlasnn.precision import on_device, x64_enabled
 
 
 def check_system_builds(system: Any) -> None:
@@ -41,7 +40,7 @@ def _check_finite_at_z0(sysm, z0, system: Any) -> None:
     non-finite losses from the first epoch and a reference solver that cannot start."""
     at_z0 = jax.jit(lambda z: (sysm.energy(z), sysm.vector_field(z)))  # one program, not op by op
     with jax.enable_x64(True):
-        energy, field = at_z0(jnp.asarray(z0, jnp.float64))
+        energy, field = at_z0(on_device(z0, np.float64))
         energy, field = float(energy), np.asarray(field, dtype=np.float64)
     own = "system.python" if system.python else "system.hamiltonian"
     where = "system.z0" if system.z0 is not None else (own if not system.is_builtin else "system.params")
@@ -53,7 +52,7 @@ def _check_finite_at_z0(sysm, z0, system: Any) -> None:
         _fail(where, value, f"the Hamiltonian or its gradient is not finite {at} "
               f"(H = {energy:g}, J∇H = {[float(x) for x in field]})")
     if not x64_enabled():  # training runs in float32, and its loss squares H − E0 and J∇H
-        energy32, field32 = at_z0(jnp.asarray(z0, jnp.float32))
+        energy32, field32 = at_z0(on_device(z0, np.float32))
         energy32, field32 = float(energy32), np.asarray(field32, dtype=np.float64)
         size = max(abs(energy32), float(np.abs(field32).max()))
         if not size <= FLOAT32_SQUARE_LIMIT:
@@ -72,7 +71,7 @@ def _check_separable(sysm, z0) -> None:
     shifts = [np.zeros_like(z0), np.full_like(z0, 0.1), np.resize([0.3, -0.2], z0.shape), np.full_like(z0, -0.25)]
     with jax.enable_x64(True):
         hessians = jax.jit(jax.vmap(jax.hessian(lambda z: sysm.energy(z))))
-        stack = np.asarray(hessians(jnp.asarray(z0 + np.stack(shifts), jnp.float64)), dtype=np.float64)
+        stack = np.asarray(hessians(on_device(z0 + np.stack(shifts), np.float64)), dtype=np.float64)
         for shift, h in zip(shifts, stack):
             cross = np.abs(h[:d, d:])
             if not np.all(np.isfinite(h)):
