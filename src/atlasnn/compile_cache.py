@@ -18,14 +18,17 @@ and write, and evicts the least recently used entries past it.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
+import json
 import os
 from pathlib import Path
+from typing import Any, Callable
 
 import jax
 
 __all__ = ["cache_dir", "code_digest", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES", "program_cache", "clear_programs",
-           "jax_time", "JaxTime"]
+           "jax_time", "JaxTime", "EXPORTABLE_SPECS", "exportable", "compiled_from_disk"]
 
 CACHE_ENV = "ATLASNN_CACHE_DIR"
 #: the cache's size limit (least recently used entries go past it); with it, JAX locks the cache
@@ -168,3 +171,111 @@ def jax_time():
         yield collector
     finally:
         _ACTIVE.remove(collector)
+
+
+# ------------------------------------------------------------ programs kept on disk (jax.export)
+# JAX's persistent cache spares a second run the XLA compilation, not the tracing and lowering of
+# the Python function, which is most of a warm start for atlasnn's large programs (the Adam chunk,
+# the Levenberg–Marquardt loop, the solver's march). Such a program is exported once (jax.export: its
+# StableHLO, for this backend) into <cache>/exported/; a later process deserializes it
+# (milliseconds), and the compiled code comes from the persistent cache. A stored program is right
+# only for the exact computation it was made from, so its file name is a hash of everything the
+# trace depends on: the system's definition (only systems defined by data qualify, see
+# :func:`exportable`), the program's own settings (the caller's ``key``), the structure, shapes and
+# dtypes of its arguments, JAX's settings that change a trace, the versions of atlasnn, JAX, jaxlib,
+# Equinox and Optax, the backend, and the source text of every module of the packages the program
+# is built from. A file that cannot be read back is made again.
+
+#: system definitions that fix the computation (a Python file's content could change under its name)
+EXPORTABLE_SPECS = ("builtin", "expression")
+_TRACE_FLAGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_threefry_partitionable",
+                "jax_default_prng_impl", "jax_numpy_dtype_promotion", "jax_numpy_rank_promotion")
+
+
+def exportable(system: Any) -> bool:
+    """Whether programs of ``system`` may be kept on disk: the cache is on and the system is
+    defined by data (a built-in by name and parameters, or an expression)."""
+    spec = getattr(system, "spec", None)
+    return cache_dir() is not None and isinstance(spec, dict) and spec.get("kind") in EXPORTABLE_SPECS
+
+
+@functools.lru_cache(maxsize=8)
+def _source_digest(packages: tuple[str, ...]) -> str:
+    import equinox
+    import jaxlib
+    import optax
+
+    root = Path(__file__).resolve().parent  # atlasnn's version and its top-level modules (precision, ...)
+    top = b"".join(path.read_bytes() for path in sorted(root.glob("*.py")))
+    return code_digest(packages, f"{hashlib.sha256(top).hexdigest()} jax {jax.__version__} "
+                                 f"jaxlib {jaxlib.__version__} equinox {equinox.__version__} optax {optax.__version__}")
+
+
+def _trace_flags() -> dict[str, str]:
+    flags = {}
+    for name in _TRACE_FLAGS:
+        try:
+            flags[name] = str(jax.config.read(name))
+        except (AttributeError, KeyError, ValueError):  # not a setting of this JAX
+            pass
+    return flags
+
+
+def _kept_path(prefix: str, key: dict, packages: tuple[str, ...], leaves, treedef) -> Path:
+    text = json.dumps({**key, "args": [[list(x.shape), str(x.dtype)] for x in leaves], "tree": str(treedef),
+                       "source": _source_digest(packages), "flags": _trace_flags(), "backend": jax.default_backend()},
+                      sort_keys=True, default=str)
+    return cache_dir() / "exported" / f"{prefix}-{hashlib.sha256(text.encode()).hexdigest()[:32]}.bin"
+
+
+def _export(fn: Callable, leaves, treedef, out_tree, path: Path):
+    """``fn`` exported as a function of the flat arguments returning its flat result, and kept at
+    ``path``; None when it cannot be exported or its result's structure is not ``out_tree``."""
+    seen = []
+
+    def flat(*xs):
+        out = jax.tree_util.tree_flatten(fn(*jax.tree_util.tree_unflatten(treedef, xs)))
+        seen.append(out[1])
+        return out[0]
+
+    try:
+        exp = jax.export.export(jax.jit(flat))(*leaves)
+    except Exception:  # noqa: BLE001 - an operation export does not take: the caller traces as usual
+        return None
+    if seen[-1] != out_tree:  # the caller's out_tree would put the results in the wrong places
+        return None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_bytes(exp.serialize())
+        os.replace(tmp, path)  # whole or not at all, for a process reading beside this one
+    except (OSError, ImportError):
+        pass  # a read-only cache (or no flatbuffers): the program runs, next time traced again
+    return exp
+
+
+def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[str, ...], out_tree,
+                       prefix: str) -> Callable | None:
+    """``fn`` compiled for ``args`` (their structure, shapes and dtypes) from its exported form on
+    disk: read back, or exported now and kept; a function of the same arguments returning ``fn``'s
+    result (whose tree the caller gives: ``out_tree``). None when the cache is off or the program
+    cannot be exported: the caller traces ``fn`` as usual. ``key``: what else the trace depends on
+    (the system's definition, the program's settings); ``packages``: atlasnn's packages its code
+    comes from (``("training", "nn", "systems")``)."""
+    if cache_dir() is None:
+        return None
+    leaves, treedef = jax.tree_util.tree_flatten(args)
+    path = _kept_path(prefix, key, packages, leaves, treedef)
+    try:
+        exp = jax.export.deserialize(bytearray(path.read_bytes()))
+    except Exception:  # noqa: BLE001 - none yet, or a damaged or foreign file: made (again) below
+        exp = _export(fn, leaves, treedef, out_tree, path)
+    if exp is None:
+        return None
+    program = jax.jit(exp.call).lower(*leaves).compile()
+
+    def run(*call_args):
+        return jax.tree_util.tree_unflatten(out_tree, program(*jax.tree_util.tree_leaves(call_args)))
+
+    return run
+

@@ -47,14 +47,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from atlasnn.compile_cache import program_cache
+from atlasnn.compile_cache import compiled_from_disk, exportable, program_cache
 from atlasnn.precision import on_device, trace_settings
 from atlasnn.training._flat import cast_floats, ravel, unravel_on_host
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._loss import energy_and_vector_field
-from atlasnn.training._step import trainable_filter
+from atlasnn.training._step import TRAINING_PACKAGES, trainable_filter
 
 __all__ = ["LMConfig", "LMResult", "LMOutcome", "levenberg_marquardt", "lm_batch", "lm_minimise", "lm_nodes", "lm_points"]
 
@@ -131,6 +131,9 @@ class LMState(NamedTuple):
     stop: jax.Array  # 0 running, else a key of _STOP
     history: jax.Array  # loss after each trial (NaN where none)
 
+
+#: the tree of an LMState (a program's result), for its exported form
+_STATE_TREE = jax.tree_util.tree_structure(LMState(*([0] * len(LMState._fields))))
 
 #: the K a phase picks (see :func:`lm_points`): few distinct shapes, so few compiled programs
 _POINT_BUCKETS = (32, 48, 64, 100)
@@ -353,13 +356,14 @@ def _functions(config: LMConfig, system, unravel, unravel_jac, rest, t, e0, lam,
 _COMPILED: dict[Any, Any] = program_cache({})
 
 
-def _compiled_loop(config: LMConfig, system, unravel, unravel_jac, jac_dtype, args, batched: bool):
-    """The whole phase as one compiled program per (system, config, shapes); the collocation times,
-    E0 and λ_reg are arguments, so windows of other lengths reuse it."""
+def _compiled_loop(config: LMConfig, system, unravel, unravel_jac, jac_dtype, args, batched: bool, layout: str):
+    """The whole phase as one compiled program per (system, config, shapes, parameter layout); the
+    collocation times, E0 and λ_reg are arguments, so windows of other lengths reuse it. Kept on
+    disk in its exported form where the system qualifies (:func:`atlasnn.compile_cache.compiled_from_disk`)."""
     leaves, treedef = jax.tree_util.tree_flatten(args)
     sig = tuple((tuple(np.shape(v)), str(jnp.asarray(v).dtype)) for v in leaves)
     key = (id(system), batched, config.replace(lam_reg=0.0, loss_tol=0.0, patience=1, min_rel_improvement=0.0),
-           treedef, sig, str(jac_dtype), trace_settings())
+           treedef, sig, str(jac_dtype), trace_settings(), layout)
     hit = _COMPILED.get(key)
     if hit is not None and hit[0] is system:
         return hit[1], 0.0
@@ -371,9 +375,15 @@ def _compiled_loop(config: LMConfig, system, unravel, unravel_jac, jac_dtype, ar
         s0 = _init_state(x, res, jac, config, n_hist, data)
         return jax.lax.while_loop(lambda s: s.stop == 0, lambda s: body(s, data), s0)
 
-    fn = jax.vmap(run, in_axes=(0, 0, 0, 0, None, None)) if batched else run
+    fn = jax.jit(jax.vmap(run, in_axes=(0, 0, 0, 0, None, None)) if batched else run)
     start = time.perf_counter()
-    compiled = jax.jit(fn).lower(*args).compile()
+    compiled = None
+    if exportable(system):  # kept on disk: a later process neither traces nor lowers it
+        settings = {"config": repr(key[2]), "jac_dtype": str(jac_dtype), "parameters": layout}
+        compiled = compiled_from_disk(fn, args, key={"system": system.describe(), "batched": batched, **settings},
+                                      packages=TRAINING_PACKAGES, out_tree=_STATE_TREE, prefix="lm")
+    if compiled is None:
+        compiled = fn.lower(*args).compile()
     _COMPILED[key] = (system, compiled)
     return compiled, time.perf_counter() - start
 
@@ -419,7 +429,9 @@ def lm_batch(models: Sequence[TrialSolution], system: HamiltonianSystem, T: floa
         else:
             x, rest, t, e0 = parts[0][0], parts[0][1], times[0], on_device(e0s[0], dtype)
         args = (x, rest, t, e0, on_device(config.lam_reg, dtype), _data(config, dtype))
-        compiled, compile_time = _compiled_loop(config, system, unravel, unravel_jac, jac_dtype, args, n > 1)
+        layout = str([jax.tree_util.tree_structure(parts[0][4])]
+                     + [(np.shape(v), str(v.dtype)) for v in jax.tree_util.tree_leaves(parts[0][4])])
+        compiled, compile_time = _compiled_loop(config, system, unravel, unravel_jac, jac_dtype, args, n > 1, layout)
         start = time.perf_counter()
         state = compiled(*args)
         jax.block_until_ready(state.x)

@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from atlasnn.compile_cache import program_cache
+from atlasnn.compile_cache import compiled_from_disk, exportable, program_cache
 from atlasnn.precision import on_device, trace_settings
 from atlasnn.training._collocation import jittered, uniform_grid, with_release_fixed_point
 from atlasnn.training._loss import causal_physics_loss, physics_loss
@@ -220,10 +220,13 @@ def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, mo
     (params, opt_state, track), (loss, res, en, gamma) = jax.lax.scan(
         body, (params, opt_state, track), epochs
     )
-    return params, opt_state, track, {"loss": loss, "residual": res, "energy": en, "gamma": gamma}
+    return params, opt_state, track, dict(zip(_CHUNK_OUTPUTS, (loss, res, en, gamma)))
 
 
 _CHUNK_CACHE: dict[Any, Any] = program_cache({})
+#: atlasnn's packages the training programs are built from (the key of their exported forms on disk)
+TRAINING_PACKAGES = ("training", "nn", "systems", "solutions")
+_CHUNK_OUTPUTS = ("loss", "residual", "energy", "gamma")  # the per-epoch series a chunk returns
 
 
 def compiled_chunk(args: tuple, system: HamiltonianSystem, mode: Mode, batched: bool = False,
@@ -231,7 +234,9 @@ def compiled_chunk(args: tuple, system: HamiltonianSystem, mode: Mode, batched: 
     """``_run_chunk`` compiled once per (system, mode, batched, argument structure and shapes);
     with ``batched`` every argument but the epochs has a leading batch axis. Returns
     (compiled function, seconds spent compiling: 0 on a cache hit). ``announce`` is called before
-    a program is traced and compiled (or loaded from the persistent cache), not on a hit."""
+    a program is traced and compiled (or loaded from the persistent cache), not on a hit. Kept on
+    disk in its exported form where the system qualifies (:func:`atlasnn.compile_cache.compiled_from_disk`):
+    a later process loads it instead of tracing and lowering it again."""
     leaves, treedef = jax.tree_util.tree_flatten(args)
     sig = tuple((tuple(x.shape), str(x.dtype)) for x in leaves)
     key = (id(system), mode, batched, treedef, sig, trace_settings())
@@ -248,7 +253,15 @@ def compiled_chunk(args: tuple, system: HamiltonianSystem, mode: Mode, batched: 
     if batched:
         chunk = jax.vmap(chunk, in_axes=(0, 0, 0, 0, None, 0, 0))
     fn = jax.jit(chunk)
-    compiled = fn.lower(*args).compile()
+    compiled = None
+    if exportable(system):  # kept on disk: a later process neither traces nor lowers it
+        params, _, opt_state, track = args[:4]
+        out_tree = jax.tree_util.tree_structure((params, opt_state, track, dict.fromkeys(_CHUNK_OUTPUTS, 0)))
+        compiled = compiled_from_disk(fn, args, key={"system": system.describe(), "mode": repr(mode),
+                                                     "batched": batched}, packages=TRAINING_PACKAGES,
+                                      out_tree=out_tree, prefix="adam")
+    if compiled is None:
+        compiled = fn.lower(*args).compile()
     elapsed = time.perf_counter() - start
     _CHUNK_CACHE[key] = (system, compiled)
     return compiled, elapsed

@@ -1,0 +1,101 @@
+"""The Adam chunk and the Levenberg–Marquardt program kept on disk in their exported form
+(atlasnn.compile_cache.compiled_from_disk): a later process reads them back instead of tracing and
+lowering them, and gets the traced programs' numbers bit for bit; another computation (other
+settings, another network) gets a file of its own; a damaged file is made again; a system given as
+a Python function is never served from disk."""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+import pytest
+
+from atlasnn.compile_cache import CACHE_ENV, clear_programs
+from atlasnn.nn import make_model
+from atlasnn.systems import HamiltonianSystem, henon_heiles
+from atlasnn.training import LMConfig, TrainConfig, levenberg_marquardt, train
+
+T = 2.0
+Z0 = [0.3, -0.3, 0.3, 0.15]
+
+
+def _adam(system, width=9, **cfg):
+    clear_programs()  # a new process, as far as atlasnn's programs go
+    model = make_model(Z0, width=width, depth=2, seed=3)
+    config = TrainConfig(epochs=60, n_points=40, chunk=30, progress=False, **cfg)
+    res = train(model, system, T, config)
+    return res, np.asarray(res.history.loss)
+
+
+def _lm(system, model):
+    clear_programs()
+    return levenberg_marquardt(model, system, T, LMConfig(steps=6))
+
+
+def _leaves(tree):
+    return [np.asarray(x) for x in jax.tree_util.tree_leaves(tree)]
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path))
+    return tmp_path / "exported"
+
+
+def test_a_kept_adam_chunk_is_read_back_and_gives_the_traced_numbers(cache, monkeypatch):
+    first, loss1 = _adam(henon_heiles())
+    files = sorted(cache.glob("adam-*.bin"))
+    assert len(files) == 1
+    stamp = files[0].stat().st_mtime_ns
+    again, loss2 = _adam(henon_heiles())  # read back, not exported again
+    assert files[0].stat().st_mtime_ns == stamp
+    monkeypatch.setenv(CACHE_ENV, "off")
+    traced, loss3 = _adam(henon_heiles())
+    assert np.array_equal(loss1, loss3) and np.array_equal(loss2, loss3)
+    for a, b, c in zip(_leaves(first.model), _leaves(again.model), _leaves(traced.model)):
+        assert np.array_equal(a, c) and np.array_equal(b, c)
+    assert first.state is not None and jax.tree_util.tree_structure(first.state.opt_state) == \
+        jax.tree_util.tree_structure(traced.state.opt_state)
+
+
+def test_other_settings_or_another_network_get_files_of_their_own_and_a_damaged_file_is_made_again(cache):
+    _adam(henon_heiles())
+    _adam(henon_heiles(), lr_schedule="cosine")  # another compiled epoch (Mode)
+    _, other = _adam(henon_heiles(), width=11)  # another network
+    files = sorted(cache.glob("adam-*.bin"))
+    assert len(files) == 3
+    for f in files:
+        f.write_bytes(b"not a program")
+    _, again = _adam(henon_heiles(), width=11)
+    assert np.array_equal(again, other)
+    damaged = [f.read_bytes() == b"not a program" for f in cache.glob("adam-*.bin")]
+    assert sorted(damaged) == [False, True, True]
+
+
+def test_a_kept_lm_program_is_read_back_and_gives_the_traced_numbers(cache, monkeypatch):
+    model = make_model(Z0, width=9, depth=2, seed=5)
+    first = _lm(henon_heiles(), model)
+    files = sorted(cache.glob("lm-*.bin"))
+    assert len(files) == 1
+    stamp = files[0].stat().st_mtime_ns
+    again = _lm(henon_heiles(), model)
+    assert files[0].stat().st_mtime_ns == stamp
+    monkeypatch.setenv(CACHE_ENV, "off")
+    traced = _lm(henon_heiles(), model)
+    assert np.array_equal(first.loss, traced.loss) and np.array_equal(again.loss, traced.loss)
+    assert first.steps == traced.steps and first.stop_reason == traced.stop_reason
+    for a, b, c in zip(_leaves(first.model), _leaves(again.model), _leaves(traced.model)):
+        assert np.array_equal(a, c) and np.array_equal(b, c)
+
+
+def test_a_system_given_as_a_python_function_is_never_served_from_disk(cache):
+    hh = henon_heiles()
+    plain = HamiltonianSystem(hh.hamiltonian, 2, name="mine", q_names=hh.q_names, p_names=hh.p_names,
+                              z0=hh.z0, separable=True)
+    assert plain.spec is None
+    _, loss_plain = _adam(plain)
+    _lm(plain, make_model(Z0, width=9, depth=2, seed=5))
+    assert not cache.exists() or not list(cache.glob("*.bin"))
+    _, loss_hh = _adam(henon_heiles())
+    assert np.allclose(loss_plain, loss_hh, rtol=1e-5)
+    assert len(list(cache.glob("adam-*.bin"))) == 1
