@@ -56,6 +56,10 @@ def test_a_kept_adam_chunk_is_read_back_and_gives_the_traced_numbers(cache, monk
         assert np.array_equal(a, c) and np.array_equal(b, c)
     assert first.state is not None and jax.tree_util.tree_structure(first.state.opt_state) == \
         jax.tree_util.tree_structure(traced.state.opt_state)
+    # as a jitted program returns them: not committed to a device (a committed array would make
+    # every jitted function it reaches compile a program of its own for it)
+    for res in (first, again):
+        assert not any(x.committed for x in jax.tree_util.tree_leaves((res.model, res.state.opt_state)))
 
 
 def test_other_settings_or_another_network_get_files_of_their_own_and_a_damaged_file_is_made_again(cache):

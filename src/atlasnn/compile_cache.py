@@ -275,7 +275,18 @@ def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[
     program = jax.jit(exp.call).lower(*leaves).compile()
 
     def run(*call_args):
-        return jax.tree_util.tree_unflatten(out_tree, program(*jax.tree_util.tree_leaves(call_args)))
+        out = program(*jax.tree_util.tree_leaves(call_args))
+        return jax.tree_util.tree_unflatten(out_tree, [_uncommitted(x) for x in out])
 
     return run
+
+
+def _uncommitted(x: jax.Array) -> jax.Array:
+    """``x`` as a jitted program would have returned it: an exported program's results are committed
+    to its device, and a committed argument makes every jitted function it reaches compile a program
+    of its own for it (measured: the march's end-state program compiled twice). Copied through the
+    host (its values exactly) where it is not weakly typed (a copy would drop that)."""
+    import numpy as np
+
+    return x if x.weak_type or not x.committed else jax.device_put(np.asarray(x))
 
