@@ -27,7 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.common import machine_info
+from benchmarks.common import machine_info, write_result
 
 LINE = re.compile(r"seed 0: \d+ epochs \(\w+\), loss \S+, ([\d.]+) s \+ ([\d.]+) s compiling")
 READY = re.compile(r"first training program ready after ([\d.]+) s")
@@ -130,9 +130,7 @@ def main(argv=None) -> int:
               f"{r['before_training_seconds']} s; imports {r['import_seconds']:.2f} s")
         top = list(r["compile_by_function"].items())[:4]
         print("  compiling or loading, costliest: " + "; ".join(f"{k} {v['programs']}x {v['seconds']:.2f} s" for k, v in top))
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=1), encoding="utf-8")
-    print(f"wrote {args.out}")
+    write_result(args.out, result)
     return 0
 
 

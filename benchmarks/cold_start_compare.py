@@ -10,7 +10,6 @@ pair, and the median of each figure over the rounds.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import subprocess
@@ -19,7 +18,7 @@ import tempfile
 from pathlib import Path
 
 from benchmarks.cold_start import one_run
-from benchmarks.common import machine_info
+from benchmarks.common import machine_info, write_result
 
 FIGURES = ("wall_seconds", "training_seconds", "training_compile_seconds", "outside_training_seconds",
            "outside_over_training", "before_training_seconds", "import_seconds")
@@ -73,9 +72,7 @@ def main(argv=None) -> int:
               "trees": trees, "rounds": args.rounds, "core": args.core, "figures": args.figures,
               "medians": medians, "pairs": results, "machine": machine_info(),
               "command": "python -m benchmarks.cold_start_compare " + " ".join(argv or sys.argv[1:])}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=1), encoding="utf-8")
-    print(f"wrote {args.out}")
+    write_result(args.out, result)
     return 0
 
 

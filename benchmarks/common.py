@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import platform
@@ -9,6 +10,7 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from importlib import metadata
+from pathlib import Path
 
 BETAS = (0.999, 0.9999)  # the authors' release
 
@@ -113,3 +115,11 @@ def replace_generated(page, name: str, body: str) -> None:
     except AtlasError as exc:
         raise SystemExit(str(exc)) from None
     page.write_text(text, encoding="utf-8")
+
+
+def write_result(out: str | Path, payload: dict) -> None:
+    """Write a benchmark's JSON record to ``out`` (its folder made if needed) and say so."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(payload, indent=1), encoding="utf-8")
+    print(f"wrote {out}")

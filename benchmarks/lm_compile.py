@@ -11,14 +11,12 @@ processes; the compile seconds include tracing and lowering.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import subprocess
 import sys
-from pathlib import Path
 
-from benchmarks.common import machine_info
+from benchmarks.common import machine_info, write_result
 
 _CHILD = """
 import sys
@@ -51,9 +49,7 @@ def main(argv=None) -> int:
     payload = {"case": "LM loop of the march, Hénon–Heiles, 50x2 sin network, window length 2, cache off",
                **result, "geodesic_share_seconds": share, "machine": machine_info(),
                "command": "python -m benchmarks.lm_compile " + " ".join(argv or sys.argv[1:])}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(payload, indent=1), encoding="utf-8")
-    print(f"wrote {args.out}")
+    write_result(args.out, payload)
     return 0
 
 
