@@ -182,9 +182,10 @@ def jax_time():
 # only for the exact computation it was made from, so its file name is a hash of everything the
 # trace depends on: the system's definition (only systems defined by data qualify, see
 # :func:`exportable`), the program's own settings (the caller's ``key``), the structure, shapes and
-# dtypes of its arguments, JAX's settings that change a trace, the versions of atlasnn, JAX, jaxlib,
-# Equinox and Optax, the backend, and the source text of every module of the packages the program
-# is built from. A file that cannot be read back is made again.
+# dtypes of its arguments, JAX's settings that change a trace, the versions of JAX, jaxlib, Equinox
+# and Optax, the backend, and the source text of atlasnn's top-level modules (its version among them)
+# and of every module of the packages the program is built from. A file that cannot be read back is
+# made again; a program that cannot be exported, or read back but not compiled, is traced as usual.
 
 #: system definitions that fix the computation (a Python file's content could change under its name)
 EXPORTABLE_SPECS = ("builtin", "expression")
@@ -272,7 +273,10 @@ def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[
         exp = _export(fn, leaves, treedef, out_tree, path)
     if exp is None:
         return None
-    program = jax.jit(exp.call).lower(*leaves).compile()
+    try:
+        program = jax.jit(exp.call).lower(*leaves).compile()
+    except Exception:  # noqa: BLE001 - a file that deserializes but does not fit these arguments
+        return None
 
     def run(*call_args):
         out = program(*jax.tree_util.tree_leaves(call_args))
