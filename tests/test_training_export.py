@@ -103,3 +103,50 @@ def test_a_system_given_as_a_python_function_is_never_served_from_disk(cache):
     _, loss_hh = _adam(henon_heiles())
     assert np.allclose(loss_plain, loss_hh, rtol=1e-5)
     assert len(list(cache.glob("adam-*.bin"))) == 1
+
+
+def test_only_systems_fixed_by_their_spec_qualify():
+    import dataclasses
+
+    from atlasnn.systems import BuiltinSystem, defined_by_data, expression_system, register_system
+
+    hh = henon_heiles(lam=0.7)
+    assert defined_by_data(hh)
+    expr = expression_system("p**2/2 + x**2/2", ["x"], ["p"], name="henon_heiles", z0=[1.0, 0.0])
+    assert defined_by_data(expr)
+    other = henon_heiles(lam=0.5)
+    assert not defined_by_data(dataclasses.replace(hh, hamiltonian=other.hamiltonian))  # lam 0.5 inside, 0.7 said
+    assert not defined_by_data(dataclasses.replace(hh, hamiltonian=lambda q, p: (p @ p) / 2))
+    assert not defined_by_data(dataclasses.replace(expr, hamiltonian=lambda q, p: (p @ p) / 2))
+
+    def mine(lam: float = 1.0):  # a user's own built-in: its code can change under its name
+        system = henon_heiles(lam)
+        return dataclasses.replace(system, spec={**system.spec, "name": "users_hh_for_export_test"})
+
+    register_system(BuiltinSystem("users_hh_for_export_test", mine, "d=2", "H", "z0"))
+    assert not defined_by_data(mine())
+
+
+def test_a_change_of_jax_settings_or_a_users_scaling_class_is_never_served_a_kept_program(cache, monkeypatch):
+    from atlasnn.nn import Tanh
+
+    _, default = _adam(henon_heiles())
+    previous = jax.config.jax_threefry_partitionable
+    try:
+        jax.config.update("jax_threefry_partitionable", not previous)  # other jitter draws: another program
+        _, flipped = _adam(henon_heiles())
+        monkeypatch.setenv(CACHE_ENV, "off")
+        _, traced = _adam(henon_heiles())
+        monkeypatch.setenv(CACHE_ENV, str(cache.parent))
+    finally:
+        jax.config.update("jax_threefry_partitionable", previous)
+    assert np.array_equal(flipped, traced) and not np.array_equal(flipped, default)
+    assert len(list(cache.glob("adam-*.bin"))) == 2
+
+    class MyTanh(Tanh):  # a user's class: named in the key, its code not
+        pass
+
+    clear_programs()
+    model = make_model(Z0, width=9, depth=2, seed=3, scaling=MyTanh(1.0))
+    train(model, henon_heiles(), T, TrainConfig(epochs=60, n_points=40, chunk=30, progress=False))
+    assert len(list(cache.glob("adam-*.bin"))) == 2

@@ -23,12 +23,12 @@ import hashlib
 import json
 import os
 from pathlib import Path
-from typing import Any, Callable
+from typing import Callable
 
 import jax
 
 __all__ = ["cache_dir", "code_digest", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES", "program_cache", "clear_programs",
-           "jax_time", "JaxTime", "EXPORTABLE_SPECS", "exportable", "compiled_from_disk"]
+           "jax_time", "JaxTime", "compiled_from_disk"]
 
 CACHE_ENV = "ATLASNN_CACHE_DIR"
 #: the cache's size limit (least recently used entries go past it); with it, JAX locks the cache
@@ -180,24 +180,15 @@ def jax_time():
 # StableHLO, for this backend) into <cache>/exported/; a later process deserializes it
 # (milliseconds), and the compiled code comes from the persistent cache. A stored program is right
 # only for the exact computation it was made from, so its file name is a hash of everything the
-# trace depends on: the system's definition (only systems defined by data qualify, see
-# :func:`exportable`), the program's own settings (the caller's ``key``), the structure, shapes and
+# trace depends on: the system's definition (only systems defined by data qualify: the caller
+# decides, atlasnn.systems.defined_by_data), the program's own settings (the caller's ``key``), the structure, shapes and
 # dtypes of its arguments, JAX's settings that change a trace, the versions of JAX, jaxlib, Equinox
 # and Optax, the backend, and the source text of atlasnn's top-level modules (its version among them)
 # and of every module of the packages the program is built from. A file that cannot be read back is
 # made again; a program that cannot be exported, or read back but not compiled, is traced as usual.
 
-#: system definitions that fix the computation (a Python file's content could change under its name)
-EXPORTABLE_SPECS = ("builtin", "expression")
 _TRACE_FLAGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_threefry_partitionable",
                 "jax_default_prng_impl", "jax_numpy_dtype_promotion", "jax_numpy_rank_promotion")
-
-
-def exportable(system: Any) -> bool:
-    """Whether programs of ``system`` may be kept on disk: the cache is on and the system is
-    defined by data (a built-in by name and parameters, or an expression)."""
-    spec = getattr(system, "spec", None)
-    return cache_dir() is not None and isinstance(spec, dict) and spec.get("kind") in EXPORTABLE_SPECS
 
 
 @functools.lru_cache(maxsize=8)
@@ -213,13 +204,9 @@ def _source_digest(packages: tuple[str, ...]) -> str:
 
 
 def _trace_flags() -> dict[str, str]:
-    flags = {}
-    for name in _TRACE_FLAGS:
-        try:
-            flags[name] = str(jax.config.read(name))
-        except (AttributeError, KeyError, ValueError):  # not a setting of this JAX
-            pass
-    return flags
+    """JAX's settings that change a trace, as they are now (``jax.config.read`` refuses the ones
+    that have a context manager, so they are read as attributes; one this JAX lacks reads "absent")."""
+    return {name: str(getattr(jax.config, name, "absent")) for name in _TRACE_FLAGS}
 
 
 def _kept_path(prefix: str, key: dict, packages: tuple[str, ...], leaves, treedef) -> Path:

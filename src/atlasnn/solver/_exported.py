@@ -17,7 +17,8 @@ from typing import Any, Callable
 
 import jax
 
-from atlasnn.compile_cache import compiled_from_disk, exportable, program_cache
+from atlasnn.compile_cache import compiled_from_disk, program_cache
+from atlasnn.systems import defined_by_data
 
 __all__ = ["exported_program"]
 
@@ -50,7 +51,7 @@ def _exported(jitted: Callable, key_text: str, out_tree) -> _Exported:
 def exported_program(jitted: Callable, system: Any, settings: dict, out_tree) -> Callable:
     """``jitted`` served from an exported program on disk where the system qualifies and the
     cache is on (module docstring); else ``jitted`` itself. ``out_tree``: its result's tree."""
-    if not exportable(system):
+    if not defined_by_data(system):
         return jitted
     return _exported(jitted, json.dumps({"system": system.describe(), "settings": settings}, sort_keys=True,
                                         default=str), out_tree)

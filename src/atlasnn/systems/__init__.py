@@ -6,6 +6,7 @@ A new built-in system is a factory and one :func:`register_system` entry (``_bui
 
 from atlasnn.systems._builtins import (
     BUILTIN_SYSTEMS,
+    defined_by_data,
     BuiltinSystem,
     builtin_system,
     harmonic_exact,
@@ -32,6 +33,7 @@ __all__ = [
     "with_params",
     "BuiltinSystem",
     "BUILTIN_SYSTEMS",
+    "defined_by_data",
     "register_system",
     "builtin_system",
     "system_from_spec",

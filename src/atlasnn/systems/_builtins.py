@@ -17,7 +17,7 @@ from atlasnn.systems._expression import expression_system
 from atlasnn.systems._hamiltonian import HamiltonianSystem
 from atlasnn.systems._python import python_system
 
-__all__ = ["BuiltinSystem", "BUILTIN_SYSTEMS", "register_system", "builtin_system", "system_from_spec",
+__all__ = ["BuiltinSystem", "BUILTIN_SYSTEMS", "register_system", "builtin_system", "system_from_spec", "defined_by_data",
            "nonlinear_oscillator", "henon_heiles", "harmonic_oscillator", "harmonic_exact", "with_params"]
 
 
@@ -157,3 +157,30 @@ def system_from_spec(spec: Mapping[str, Any]) -> HamiltonianSystem:
                              momenta=spec["momenta"], params=spec.get("params", {}), name=spec.get("name", "custom"),
                              separable=bool(spec.get("separable", False)), z0=spec.get("z0"))
     raise SystemError_(f"cannot rebuild a system from spec kind {kind!r}; pass the system explicitly")
+
+
+def defined_by_data(system: HamiltonianSystem) -> bool:
+    """Whether ``system``'s equations are fixed by its recorded spec alone, so that a program traced
+    from it may be kept on disk under a key made of that spec (atlasnn.compile_cache.compiled_from_disk):
+    an expression, or a built-in that atlasnn itself ships, whose Hamiltonian is still the function
+    its spec builds (the same code, and for a built-in the same parameters in it: not one replaced
+    after, e.g. by ``dataclasses.replace``). A Python function, a system registered by the user (its
+    code can change under its name) or anything else: False."""
+    spec = getattr(system, "spec", None)
+    if not isinstance(spec, dict) or spec.get("kind") not in ("builtin", "expression"):
+        return False
+    if spec["kind"] == "builtin":
+        entry = BUILTIN_SYSTEMS.get(str(spec.get("name")))
+        if entry is None or getattr(entry.factory, "__module__", None) != __name__:
+            return False
+    try:
+        rebuilt = system_from_spec(spec)
+    except Exception:  # noqa: BLE001 - a spec that does not rebuild fixes nothing
+        return False
+    mine, its = system.hamiltonian, rebuilt.hamiltonian
+    if getattr(mine, "__code__", None) is None or mine.__code__ is not its.__code__:
+        return False
+    if spec["kind"] == "builtin":  # the parameters sit in the closure: numbers, compared by value
+        cells = [c.cell_contents for c in (mine.__closure__ or ())], [c.cell_contents for c in (its.__closure__ or ())]
+        return all(isinstance(a, (int, float)) and a == b for a, b in zip(*cells)) and len(cells[0]) == len(cells[1])
+    return True

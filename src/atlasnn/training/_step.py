@@ -19,6 +19,7 @@ with γ learned and the later ones with γ frozen one program, not two.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -29,12 +30,12 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from atlasnn.compile_cache import compiled_from_disk, exportable, program_cache
+from atlasnn.compile_cache import compiled_from_disk, program_cache
 from atlasnn.precision import on_device, trace_settings
 from atlasnn.training._collocation import jittered, uniform_grid, with_release_fixed_point
 from atlasnn.training._loss import causal_physics_loss, physics_loss
 from atlasnn.nn import TrialSolution
-from atlasnn.systems import HamiltonianSystem
+from atlasnn.systems import HamiltonianSystem, defined_by_data
 
 # One Adam transformation for every run; lr and betas live in its state (inject_hyperparams),
 # so runs with other hyperparameters reuse the same compiled step.
@@ -223,6 +224,28 @@ def _run_chunk(params, rest, opt_state, track, epochs, settings, key, system, mo
     return params, opt_state, track, dict(zip(_CHUNK_OUTPUTS, (loss, res, en, gamma)))
 
 
+def _classes(x):
+    """The classes of the Equinox modules in ``x`` (a model, or a part of one), nested ones too."""
+    if isinstance(x, eqx.Module):
+        yield type(x)
+        for f in dataclasses.fields(x):
+            yield from _classes(getattr(x, f.name, None))
+    elif isinstance(x, (list, tuple)):
+        for y in x:
+            yield from _classes(y)
+    elif isinstance(x, dict):
+        for y in x.values():
+            yield from _classes(y)
+
+
+def may_keep(system: HamiltonianSystem, model_part) -> bool:
+    """Whether a training program of ``system`` and this network may be kept on disk: the system is
+    defined by data (:func:`atlasnn.systems.defined_by_data`) and every module of the network (the
+    trial solution, its MLP, its time scaling) is one of atlasnn's own classes, whose source is in
+    the program's key; a class of the user's is named in the key, but its code is not."""
+    return defined_by_data(system) and all(c.__module__.startswith("atlasnn.") for c in _classes(model_part))
+
+
 _CHUNK_CACHE: dict[Any, Any] = program_cache({})
 #: atlasnn's packages the training programs are built from (the key of their exported forms on disk)
 TRAINING_PACKAGES = ("training", "nn", "systems", "solutions")
@@ -254,7 +277,7 @@ def compiled_chunk(args: tuple, system: HamiltonianSystem, mode: Mode, batched: 
         chunk = jax.vmap(chunk, in_axes=(0, 0, 0, 0, None, 0, 0))
     fn = jax.jit(chunk)
     compiled = None
-    if exportable(system):  # kept on disk: a later process neither traces nor lowers it
+    if may_keep(system, args[1]):  # kept on disk: a later process neither traces nor lowers it
         params, _, opt_state, track = args[:4]
         out_tree = jax.tree_util.tree_structure((params, opt_state, track, dict.fromkeys(_CHUNK_OUTPUTS, 0)))
         compiled = compiled_from_disk(fn, args, key={"system": system.describe(), "mode": repr(mode),
