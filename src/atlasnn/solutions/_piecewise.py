@@ -62,13 +62,16 @@ def _stack(*xs):
     return jnp.stack(xs)
 
 
-def unstack_models(stacked: TrialSolution, n: int) -> list[TrialSolution]:
-    """The window models of :func:`stack_models`' pytree: each stacked leaf copied to the host once,
-    window i's rows copied back (indexed eagerly, each leaf shape compiled a program or two)."""
+def unstack_models(stacked: Any, n: int) -> list[Any]:
+    """The ``n`` trees of a pytree stacked on a leading axis (the window models of
+    :func:`stack_models`, the runs of a seed batch): each concrete stacked leaf copied to the host
+    once and row i copied back (indexed eagerly, each leaf shape compiled a program or two); other
+    leaves (weakly typed, traced, NumPy) split by iterating their leading axis, one dispatch a piece."""
     leaves, treedef = jax.tree_util.tree_flatten(stacked)
     host = [np.asarray(x) if _concrete(x) else None for x in leaves]
+    pieces = [list(x) if h is None else None for x, h in zip(leaves, host)]
     with _float64_if(any(h is not None and h.dtype == np.float64 for h in host)):
-        return [treedef.unflatten([x[i] if h is None else jax.device_put(h[i]) for x, h in zip(leaves, host)])
+        return [treedef.unflatten([p[i] if h is None else jax.device_put(h[i]) for p, h in zip(pieces, host)])
                 for i in range(n)]
 
 
