@@ -1,10 +1,13 @@
 """The Adam chunk and the Levenberg–Marquardt program kept on disk in their exported form
 (atlasnn.compile_cache.compiled_from_disk): a later process reads them back instead of tracing and
 lowering them, and gets the traced programs' numbers bit for bit; another computation (other
-settings, another network) gets a file of its own; a damaged file is made again; a system given as
-a Python function is never served from disk."""
+settings, another network) gets a file of its own; a damaged file, or one that does not fit, is made
+again; the folder keeps under its size limit; a system given as a Python function is never served
+from disk."""
 
 from __future__ import annotations
+
+import os
 
 import jax
 import numpy as np
@@ -74,6 +77,52 @@ def test_other_settings_or_another_network_get_files_of_their_own_and_a_damaged_
     assert np.array_equal(again, other)
     damaged = [f.read_bytes() == b"not a program" for f in cache.glob("adam-*.bin")]
     assert sorted(damaged) == [False, True, True]
+
+
+def test_a_kept_file_of_another_program_is_replaced_not_left_to_fail_each_run(cache):
+    _, loss9 = _adam(henon_heiles())
+    _, loss11 = _adam(henon_heiles(), width=11)
+    nine, eleven = sorted(cache.glob("adam-*.bin"), key=lambda f: f.stat().st_mtime_ns)
+    foreign = eleven.read_bytes()
+    nine.write_bytes(foreign)  # deserializes, but its arguments are another network's
+    _, again = _adam(henon_heiles())
+    assert np.array_equal(again, loss9)
+    assert nine.read_bytes() != foreign  # exported again in its place: the next run reads it back
+    stamp = nine.stat().st_mtime_ns
+    _, third = _adam(henon_heiles())
+    assert np.array_equal(third, loss9) and nine.stat().st_mtime_ns == stamp
+
+
+def test_the_kept_programs_stay_under_their_size_limit_least_recently_read_first(cache, monkeypatch):
+    import atlasnn.compile_cache as cc
+
+    cache.mkdir(parents=True)
+    old = [cache / f"adam-old{i}.bin" for i in range(3)]
+    for i, f in enumerate(old):
+        f.write_bytes(b"x" * 100_000)
+        os.utime(f, ns=(10**18 + i, 10**18))  # read long ago, old[0] the longest
+    monkeypatch.setattr(cc, "EXPORTED_MAX_BYTES", 250_000)
+    _adam(henon_heiles())
+    left = {f.name for f in cache.glob("*.bin")}
+    new = [n for n in left if "old" not in n]
+    assert len(new) == 1  # the program just kept stays
+    size = (cache / new[0]).stat().st_size
+    assert left == {new[0], *(f.name for f in old[3 - (250_000 - size) // 100_000:])}
+    assert sum((cache / n).stat().st_size for n in left) <= 250_000
+
+
+def test_a_write_that_fails_leaves_no_temporary_file_and_the_run_goes_on(cache, monkeypatch):
+    import atlasnn.compile_cache as cc
+
+    def refuse(*_):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(cc.os, "replace", refuse)
+    _, loss = _adam(henon_heiles())
+    monkeypatch.setenv(CACHE_ENV, "off")
+    _, traced = _adam(henon_heiles())
+    assert np.array_equal(loss, traced)
+    assert list(cache.glob("*")) == []
 
 
 def test_a_kept_lm_program_is_read_back_and_gives_the_traced_numbers(cache, monkeypatch):

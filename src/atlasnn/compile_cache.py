@@ -22,13 +22,14 @@ import functools
 import hashlib
 import json
 import os
+import time
 from pathlib import Path
 from typing import Callable
 
 import jax
 
 __all__ = ["cache_dir", "code_digest", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES", "program_cache", "clear_programs",
-           "jax_time", "JaxTime", "compiled_from_disk"]
+           "jax_time", "JaxTime", "compiled_from_disk", "EXPORTED_MAX_BYTES"]
 
 CACHE_ENV = "ATLASNN_CACHE_DIR"
 #: the cache's size limit (least recently used entries go past it); with it, JAX locks the cache
@@ -185,7 +186,8 @@ def jax_time():
 # dtypes of its arguments, JAX's settings that change a trace, the versions of JAX, jaxlib, Equinox
 # and Optax, the backend, and the source text of atlasnn's top-level modules (its version among them)
 # and of every module of the packages the program is built from. A file that cannot be read back is
-# made again; a program that cannot be exported, or read back but not compiled, is traced as usual.
+# made again, as is one that reads back but does not compile for these arguments; a program that
+# cannot be exported is traced as usual. The folder is kept under EXPORTED_MAX_BYTES.
 
 _TRACE_FLAGS = ("jax_enable_x64", "jax_default_matmul_precision", "jax_threefry_partitionable",
                 "jax_default_prng_impl", "jax_numpy_dtype_promotion", "jax_numpy_rank_promotion")
@@ -232,14 +234,45 @@ def _export(fn: Callable, leaves, treedef, out_tree, path: Path):
         return None
     if seen[-1] != out_tree:  # the caller's out_tree would put the results in the wrong places
         return None
+    tmp = path.with_suffix(f".{os.getpid()}.tmp")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
         tmp.write_bytes(exp.serialize())
         os.replace(tmp, path)  # whole or not at all, for a process reading beside this one
-    except (OSError, ImportError):
-        pass  # a read-only cache (or no flatbuffers): the program runs, next time traced again
+    except (OSError, ImportError):  # a read-only or full cache (or no flatbuffers): the program
+        with contextlib.suppress(OSError):  # runs, and is traced again next time
+            tmp.unlink(missing_ok=True)
+        return exp
+    _prune_kept(path.parent)
     return exp
+
+
+#: the size limit of ``<cache>/exported/``: past it, the files read least recently go (a program
+#: file is 20–200 kB; a test suite's run leaves a few hundred)
+EXPORTED_MAX_BYTES = 256 << 20
+
+
+def _prune_kept(folder: Path) -> None:
+    """Delete the kept programs read least recently (their access time, which a read sets) until
+    ``folder`` holds at most :data:`EXPORTED_MAX_BYTES`."""
+    try:
+        files = [(st.st_atime_ns, st.st_size, f) for f in folder.glob("*.bin") for st in [f.stat()]]
+    except OSError:  # a file removed by another process while listing: next time
+        return
+    total = sum(size for _, size, _ in files)
+    for _, size, f in sorted(files, key=lambda row: row[0]):
+        if total <= EXPORTED_MAX_BYTES:
+            break
+        with contextlib.suppress(OSError):
+            f.unlink()
+        total -= size
+
+
+def _mark_read(path: Path) -> None:
+    """Set ``path``'s access time to now, its modification time unchanged (the order in which
+    :func:`_prune_kept` deletes; a file system mounted noatime does not set it on a read)."""
+    with contextlib.suppress(OSError):
+        os.utime(path, ns=(time.time_ns(), path.stat().st_mtime_ns))
 
 
 def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[str, ...], out_tree,
@@ -254,16 +287,20 @@ def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[
         return None
     leaves, treedef = jax.tree_util.tree_flatten(args)
     path = _kept_path(prefix, key, packages, leaves, treedef)
+    program = None
     try:
         exp = jax.export.deserialize(bytearray(path.read_bytes()))
-    except Exception:  # noqa: BLE001 - none yet, or a damaged or foreign file: made (again) below
-        exp = _export(fn, leaves, treedef, out_tree, path)
+        program = jax.jit(exp.call).lower(*leaves).compile()
+        _mark_read(path)
+    except Exception:  # noqa: BLE001 - none yet, or a damaged or foreign file, or one that does
+        exp = _export(fn, leaves, treedef, out_tree, path)  # not fit these arguments: made again
     if exp is None:
         return None
-    try:
-        program = jax.jit(exp.call).lower(*leaves).compile()
-    except Exception:  # noqa: BLE001 - a file that deserializes but does not fit these arguments
-        return None
+    if program is None:
+        try:
+            program = jax.jit(exp.call).lower(*leaves).compile()
+        except Exception:  # noqa: BLE001 - exported, but not compilable: traced as usual
+            return None
 
     def run(*call_args):
         out = program(*jax.tree_util.tree_leaves(call_args))
