@@ -1,7 +1,8 @@
-"""Small host-side steps of a run (flattening parameters, copying windows out of a stack, restoring
-a checkpoint, starting Adam, the reference on several grids) give the values the JAX operations
-they replace gave, and compile no program of their own — done eagerly, each leaf shape and
-operation compiled one (70 programs in the first-hour run, 22 now: docs/PERFORMANCE.md).
+"""Small host-side steps of a run (flattening parameters, stacking a seed batch's runs and copying
+windows or runs out of a stack, restoring a checkpoint, starting Adam, the reference on several
+grids) give the values the JAX operations they replace gave, and compile no program of their own
+— done eagerly, each leaf shape and operation compiled one (70 programs in the first-hour run, 22
+now: docs/PERFORMANCE.md).
 
 Every test uses a network width no other test uses, so that a program compiled earlier in this
 process cannot hide one compiled here."""
@@ -110,6 +111,22 @@ def test_unstack_models_copies_windows_out_exactly_without_compiling():
     assert names == []
     for got, want in zip(windows, models):
         _same_leaves(got, want)
+
+
+def test_stacking_runs_of_a_seed_batch_equals_jnp_stack_without_compiling():
+    models = [_model(41, seed=s) for s in range(3)]
+    params = [_params(m) for m in models]
+    states = [init_opt_state(p, TrainConfig(epochs=10), jnp.float32) for p in params]
+    with compiled_programs() as names:
+        stacked = stack_models(states)
+    assert names == []
+    want = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *states)
+    assert jax.tree_util.tree_structure(stacked) == jax.tree_util.tree_structure(want)
+    _same_leaves(stacked, want)
+    with compiled_programs() as names:
+        back = unstack_models(stacked, 3)
+    assert names == []
+    _same_leaves(back[2], states[2])
 
 
 def test_unstack_models_keeps_float64_windows_float64():

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -46,11 +46,14 @@ def window_edges(t0: float, T: float, n_windows: int) -> np.ndarray:
     return edges
 
 
-def stack_models(models: list[TrialSolution]) -> TrialSolution:
-    """The window models as one pytree whose array leaves have a leading window axis (float64
-    models stay float64 whatever JAX's global switch says)."""
-    with _float64_if(np.dtype(models[0].z0.dtype) == np.float64):
-        return jax.tree_util.tree_map(_stack, *models)
+def stack_models(trees: Sequence[Any]) -> Any:
+    """The trees (the window models of a march, the runs of a seed batch and their optimiser
+    states) as one pytree whose array leaves have a leading axis, the inverse of
+    :func:`unstack_models`; concrete leaves are stacked on the host (float64 leaves stay float64
+    whatever JAX's global switch says)."""
+    leaves = jax.tree_util.tree_leaves(trees[0])
+    with _float64_if(any(getattr(x, "dtype", None) == np.float64 for x in leaves)):
+        return jax.tree_util.tree_map(_stack, *trees)
 
 
 def _stack(*xs):

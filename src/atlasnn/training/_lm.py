@@ -52,6 +52,7 @@ from atlasnn.precision import on_device, trace_settings
 from atlasnn.training._flat import cast_floats, ravel, unravel_on_host
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
+from atlasnn.solutions import stack_models, unstack_models
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._loss import energy_and_vector_field
 from atlasnn.training._step import TRAINING_PACKAGES, may_keep, trainable_filter
@@ -423,9 +424,8 @@ def lm_batch(models: Sequence[TrialSolution], system: HamiltonianSystem, T: floa
             config = config.replace(n_points=max(points))
         times = [on_device(lm_nodes(config, float(m.t0), float(t), dim), dtype) for m, t in zip(models, Ts)]
         if n > 1:
-            x = jnp.stack([p[0] for p in parts])
-            rest = jax.tree_util.tree_map(lambda *v: jnp.stack(v), *[p[1] for p in parts])
-            t, e0 = jnp.stack(times), jnp.asarray(e0s, dtype)
+            x, rest = stack_models([p[0] for p in parts]), stack_models([p[1] for p in parts])
+            t, e0 = stack_models(times), on_device(np.asarray(e0s), dtype)
         else:
             x, rest, t, e0 = parts[0][0], parts[0][1], times[0], on_device(e0s[0], dtype)
         args = (x, rest, t, e0, on_device(config.lam_reg, dtype), _data(config, dtype))
@@ -437,8 +437,7 @@ def lm_batch(models: Sequence[TrialSolution], system: HamiltonianSystem, T: floa
         jax.block_until_ready(state.x)
         wall = time.perf_counter() - start
         out = []
-        for i, part in enumerate(parts):
-            si = jax.tree_util.tree_map(lambda v: v[i], state) if n > 1 else state
+        for part, si in zip(parts, unstack_models(state, n) if n > 1 else [state]):
             model = cast_floats(eqx.combine(unravel_on_host(si.x, part[4]), part[1]), in_dtype)
             hist = np.asarray(si.history, np.float64)
             hist = hist[np.isfinite(hist)]

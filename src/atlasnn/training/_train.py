@@ -51,14 +51,13 @@ from typing import Any, Callable, Sequence
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.training._collocation import check_interval
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
 from atlasnn.precision import on_device
-from atlasnn.solutions import unstack_models
+from atlasnn.solutions import stack_models, unstack_models
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._records import History, TrainConfig, TrainResult, TrainState
 from atlasnn.training._step import (
@@ -92,8 +91,6 @@ def _announcer(enabled: bool, desc: str) -> Callable[[], None] | None:
     return lambda: tqdm.write(f"{desc}: compiling the epoch loop (or loading it from the cache)…", file=sys.stderr)
 
 
-def _stack(trees: Sequence[Any]) -> Any:
-    return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *trees)
 
 
 def _unstack(tree: Any, i: int) -> Any:
@@ -346,7 +343,7 @@ def train_batch(
     _check_batch(runs, rests)
     batched = n > 1
     args = [params, rests, opt_state, track, settings, keys]
-    params, rest, opt_state, track, settings, key = (_stack(a) if batched else a[0] for a in args)
+    params, rest, opt_state, track, settings, key = (stack_models(a) if batched else a[0] for a in args)
     cfg0 = runs[0].cfg
     epoch = max((r.epoch for r in runs if r.active), default=max(r.epoch for r in runs))
     epochs0 = on_device(np.arange(cfg0.chunk), np.int32)
