@@ -53,6 +53,31 @@ def test_accepted_windows_meet_their_tolerance_and_the_global_estimate_is_true()
     assert est.max_abs == pytest.approx(true, rel=0.15, abs=2e-6)  # H is quadratic: the estimate is exact
 
 
+def test_a_window_shorter_than_an_earlier_one_keeps_the_marchs_lm_point_count(monkeypatch):
+    import atlasnn.training._adaptive as adaptive
+    from atlasnn.training._lm import lm_points
+
+    seen = []
+    polish_window = adaptive._polish_window
+
+    def spy(model, system, length, config, energy0):
+        seen.append((length, config.n_points))
+        return polish_window(model, system, length, config, energy0)
+
+    monkeypatch.setattr(adaptive, "_polish_window", spy)
+    system = builtin_system("harmonic_oscillator")
+    # windows of 4, then the remainder 0.5 before T: lm_points gives 64 and 32 points
+    cfg = MarchConfig(rtol=1e-2, first_window=4.0, train=QUICK, polish=LMConfig(steps=3))
+    march(make_model(system.z0, **SMALL, seed=2), system, 4.5, cfg)
+    assert seen[0][0] == 4.0 and seen[-1][0] == pytest.approx(0.5)
+    assert lm_points(4.0, 1) == 64 and lm_points(0.5, 1) == 32
+    assert [k for _, k in seen] == [64] * len(seen)  # one compiled LM program for the march
+    # a K given in the config is kept as given
+    seen.clear()
+    march(make_model(system.z0, **SMALL, seed=2), system, 4.5, cfg.replace(polish=LMConfig(steps=3, n_points=40)))
+    assert {k for _, k in seen} == {40}
+
+
 def test_first_window_is_one_period_of_the_fastest_mode():
     system = builtin_system("harmonic_oscillator", omega=2.0)
     assert first_window(system, system.z0, 100.0) == pytest.approx(math.pi)

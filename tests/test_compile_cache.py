@@ -73,3 +73,22 @@ def test_clear_programs_drops_the_compiled_programs_held_in_memory(ho):
     clear_programs()
     assert _program._cached.cache_info().currsize == 0
     assert np.isfinite(solve(ho, [1.0, 0.0], (0.0, 1.0))(0.5)).all()  # and compiles again when needed
+
+
+def test_compile_lowered_passes_xla_options_and_drops_one_this_xla_lacks():
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from atlasnn.compile_cache import compile_lowered
+    from atlasnn.training import training_compiler_options
+
+    x = jnp.linspace(0.0, 1.0, 17)
+    lowered = jax.jit(lambda v: jnp.sin(v) * v + 1).lower(x)
+    want = np.asarray(lowered.compile()(x))
+    legacy = training_compiler_options()
+    assert legacy == ({"xla_cpu_use_fusion_emitters": False} if jax.default_backend() == "cpu" else None)
+    for options in (legacy, {"xla_no_such_option_in_any_version": True}, None):
+        np.testing.assert_allclose(np.asarray(compile_lowered(lowered, options)(x)), want, rtol=1e-6)
+    with pytest.raises(Exception):  # JAX itself refuses the unknown option: compile_lowered catches it
+        lowered.compile(compiler_options={"xla_no_such_option_in_any_version": True})

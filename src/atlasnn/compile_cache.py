@@ -29,7 +29,7 @@ from typing import Callable
 import jax
 
 __all__ = ["cache_dir", "code_digest", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES", "program_cache", "clear_programs",
-           "jax_time", "JaxTime", "compiled_from_disk", "EXPORTED_MAX_BYTES"]
+           "jax_time", "JaxTime", "compiled_from_disk", "compile_lowered", "EXPORTED_MAX_BYTES"]
 
 CACHE_ENV = "ATLASNN_CACHE_DIR"
 #: the cache's size limit (least recently used entries go past it); with it, JAX locks the cache
@@ -276,13 +276,14 @@ def _mark_read(path: Path) -> None:
 
 
 def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[str, ...], out_tree,
-                       prefix: str) -> Callable | None:
+                       prefix: str, options: dict | None = None) -> Callable | None:
     """``fn`` compiled for ``args`` (their structure, shapes and dtypes) from its exported form on
     disk: read back, or exported now and kept; a function of the same arguments returning ``fn``'s
     result (whose tree the caller gives: ``out_tree``). None when the cache is off or the program
     cannot be exported: the caller traces ``fn`` as usual. ``key``: what else the trace depends on
     (the system's definition, the program's settings); ``packages``: atlasnn's packages its code
-    comes from (``("training", "nn", "systems")``)."""
+    comes from (``("training", "nn", "systems")``); ``options``: XLA's options for compiling it
+    (:func:`compile_lowered`)."""
     if cache_dir() is None:
         return None
     leaves, treedef = jax.tree_util.tree_flatten(args)
@@ -290,7 +291,7 @@ def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[
     program = None
     try:
         exp = jax.export.deserialize(bytearray(path.read_bytes()))
-        program = jax.jit(exp.call).lower(*leaves).compile()
+        program = compile_lowered(jax.jit(exp.call).lower(*leaves), options)
         _mark_read(path)
     except Exception:  # noqa: BLE001 - none yet, or a damaged or foreign file, or one that does
         exp = _export(fn, leaves, treedef, out_tree, path)  # not fit these arguments: made again
@@ -298,7 +299,7 @@ def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[
         return None
     if program is None:
         try:
-            program = jax.jit(exp.call).lower(*leaves).compile()
+            program = compile_lowered(jax.jit(exp.call).lower(*leaves), options)
         except Exception:  # noqa: BLE001 - exported, but not compilable: traced as usual
             return None
 
@@ -307,6 +308,18 @@ def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[
         return jax.tree_util.tree_unflatten(out_tree, [_uncommitted(x) for x in out])
 
     return run
+
+
+def compile_lowered(lowered, options: dict | None = None):
+    """``lowered.compile()`` with XLA's ``options`` (debug options such as
+    ``{"xla_cpu_use_fusion_emitters": False}``; they are part of the persistent cache's key); an
+    option this XLA does not know is dropped rather than failing the run."""
+    if options:
+        try:
+            return lowered.compile(compiler_options=options)
+        except Exception:  # noqa: BLE001 - an option this jaxlib lacks (or refuses): its defaults
+            pass
+    return lowered.compile()
 
 
 def _uncommitted(x: jax.Array) -> jax.Array:

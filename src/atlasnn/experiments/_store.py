@@ -67,6 +67,7 @@ def versions() -> dict[str, str]:
     import scipy
 
     from atlasnn.precision import matmul_precision
+    from atlasnn.training import training_compiler_options
     from atlasnn.version import __version__
 
     return {
@@ -75,6 +76,7 @@ def versions() -> dict[str, str]:
         "scipy": scipy.__version__, "python": platform.python_version(), "platform": platform.platform(),
         "backend": jax.default_backend(), "device": jax.devices()[0].device_kind,
         "matmul_precision": matmul_precision(), "cpu": cpu_model(), "cpu_count": str(os.cpu_count()),
+        "training_xla_options": str(training_compiler_options() or "XLA's defaults"),
     }
 
 

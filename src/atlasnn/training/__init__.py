@@ -20,7 +20,7 @@ from atlasnn.training._marching import (
 from atlasnn.training._progress import MarchProgress
 from atlasnn.training._polish import PRECISIONS, PolishConfig, PolishResult, polish
 from atlasnn.training._refine import RefineConfig, refine
-from atlasnn.training._step import init_opt_state, restrict_opt_state, trainable_filter
+from atlasnn.training._step import init_opt_state, restrict_opt_state, trainable_filter, training_compiler_options
 from atlasnn.training._records import (
     BEST_RULES,
     LR_SCHEDULES,
@@ -49,6 +49,7 @@ __all__ = [
     "train_batch",
     "state_template",
     "trainable_filter",
+    "training_compiler_options",
     "init_opt_state",
     "transfer",
     "transfer_from",

@@ -47,7 +47,7 @@ from atlasnn.training._marching import (
     window_config,
     window_polish,
 )
-from atlasnn.training._lm import LMConfig
+from atlasnn.training._lm import LMConfig, lm_points
 from atlasnn.training._progress import MarchProgress
 from atlasnn.training._step import restrict_opt_state
 
@@ -73,6 +73,18 @@ def _local_error(system: HamiltonianSystem, model: TrialSolution, length: float)
     """(node times, max_i |δ_i| at the nodes, the estimate) of one window on its own, δ(0) = 0."""
     est = estimate_error(system, [(model, 0.0, length, 0.0)])
     return est.t, np.abs(est.delta).max(axis=1), est
+
+
+def _steady_points(pcfg, lengths: list[float], dim: int):
+    """The window's Levenberg–Marquardt config with its collocation count K fixed: the largest K
+    (:func:`~atlasnn.training._lm.lm_points`) of this window and of every attempt before it, so a
+    window shorter than an earlier one (the remainder before T, a cut, a retraining) reuses the
+    march's compiled program instead of compiling one of its own for a smaller K (2–3 s each;
+    more points on a short window cost one trial what a longer window's trial costs). A K given
+    in the config, or an L-BFGS phase, is left as it is."""
+    if not isinstance(pcfg, LMConfig) or pcfg.n_points is not None:
+        return pcfg
+    return pcfg.replace(n_points=max(lm_points(x, dim) for x in lengths))
 
 
 def _next_length(w: float, err: float, tol: float) -> float:
@@ -150,7 +162,7 @@ def march_adaptive(
         if res.stop_reason == "interrupted":
             raise KeyboardInterrupt
         net, pol = res.model, None
-        pcfg = window_polish(config, cfg)
+        pcfg = _steady_points(window_polish(config, cfg), [a["length"] for a in attempts] + [w], system.dim)
         say = _phase_lines(cfg.progress, f"window {k + 1}")
         if pcfg is not None:
             say(f"{'Levenberg–Marquardt' if isinstance(pcfg, LMConfig) else 'L-BFGS'}, at most {pcfg.steps} steps…")

@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from atlasnn.compile_cache import compiled_from_disk, program_cache
+from atlasnn.compile_cache import compile_lowered, compiled_from_disk, program_cache
 from atlasnn.precision import on_device, trace_settings
 from atlasnn.training._collocation import jittered, uniform_grid, with_release_fixed_point
 from atlasnn.training._loss import causal_physics_loss, physics_loss
@@ -252,6 +252,18 @@ TRAINING_PACKAGES = ("training", "nn", "systems", "solutions")
 _CHUNK_OUTPUTS = ("loss", "residual", "energy", "gamma")  # the per-epoch series a chunk returns
 
 
+def training_compiler_options() -> dict | None:
+    """XLA's options for compiling the two training programs, the Adam chunk and the
+    Levenberg–Marquardt loop. On a CPU: XLA's loop emitters instead of its newer fusion emitters.
+    They compile these programs in 60–80 % of the time (the first-hour case's: 1.9 → 1.1 s and
+    2.0 → 1.55 s on one core; cold runs of 32 seeds, 5.35 → 3.9 s of the training's compiling)
+    and run them as fast; they sum in another order, so a run's numbers differ in their last bits
+    from XLA's defaults, as they do from one machine to another, with no difference in accuracy
+    resolved over those seeds (docs/PERFORMANCE.md, "Fourth pass"). Elsewhere (a GPU): XLA's
+    defaults."""
+    return {"xla_cpu_use_fusion_emitters": False} if jax.default_backend() == "cpu" else None
+
+
 def compiled_chunk(args: tuple, system: HamiltonianSystem, mode: Mode, batched: bool = False,
                    announce: Callable[[], None] | None = None):
     """``_run_chunk`` compiled once per (system, mode, batched, argument structure and shapes);
@@ -282,9 +294,9 @@ def compiled_chunk(args: tuple, system: HamiltonianSystem, mode: Mode, batched: 
         out_tree = jax.tree_util.tree_structure((params, opt_state, track, dict.fromkeys(_CHUNK_OUTPUTS, 0)))
         compiled = compiled_from_disk(fn, args, key={"system": system.describe(), "mode": repr(mode),
                                                      "batched": batched}, packages=TRAINING_PACKAGES,
-                                      out_tree=out_tree, prefix="adam")
+                                      out_tree=out_tree, prefix="adam", options=training_compiler_options())
     if compiled is None:
-        compiled = fn.lower(*args).compile()
+        compiled = compile_lowered(fn.lower(*args), training_compiler_options())
     elapsed = time.perf_counter() - start
     _CHUNK_CACHE[key] = (system, compiled)
     return compiled, elapsed

@@ -319,7 +319,8 @@ _STATIC_TABLES: dict[str, TableSpec] = {
         Key("steps", Integer(1, MAX_EPOCHS), None, "Step budget (LM trials, or L-BFGS steps).",
             default_text="150 (lm), 1000 (lbfgs)"),
         Key("n_points", Integer(2, MAX_POINTS), None, "Fixed collocation times (lm: Chebyshev–Lobatto; lbfgs: "
-            "uniform).", default_text="100 (lm), 400 (lbfgs)"),
+            "uniform).", default_text="lm: about 16 per unit of time, 32 to 100, at most ~600 residuals, and in a "
+            "march never fewer than an earlier window had; lbfgs: 400"),
         Key("memory", Integer(1, 1000), 20, "lbfgs: curvature pairs kept."),
         Key("patience", Integer(1, MAX_EPOCHS), None, "Stop when the loss has not dropped by 0.1 % in this many "
             "steps.", default_text="20 (lm), 100 (lbfgs)"),
