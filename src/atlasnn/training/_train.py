@@ -91,8 +91,6 @@ def _announcer(enabled: bool, desc: str) -> Callable[[], None] | None:
     return lambda: tqdm.write(f"{desc}: compiling the epoch loop (or loading it from the cache)…", file=sys.stderr)
 
 
-
-
 def _unstack(tree: Any, i: int) -> Any:
     return jax.tree_util.tree_map(lambda x: x[i], tree)
 
