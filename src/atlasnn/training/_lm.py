@@ -47,7 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from atlasnn.compile_cache import compile_lowered, compiled_from_disk, program_cache
+from atlasnn.compile_cache import program_cache
 from atlasnn.precision import on_device, trace_settings
 from atlasnn.training._flat import cast_floats, ravel, unravel_on_host
 from atlasnn.errors import ConfigError
@@ -55,7 +55,7 @@ from atlasnn.nn import TrialSolution
 from atlasnn.solutions import stack_models, unstack_models
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.training._loss import energy_and_vector_field
-from atlasnn.training._step import TRAINING_PACKAGES, may_keep, trainable_filter, training_compiler_options
+from atlasnn.training._step import compile_training_program, trainable_filter
 
 __all__ = ["LMConfig", "LMResult", "LMOutcome", "levenberg_marquardt", "lm_batch", "lm_minimise", "lm_nodes", "lm_points"]
 
@@ -378,14 +378,8 @@ def _compiled_loop(config: LMConfig, system, unravel, unravel_jac, jac_dtype, ar
 
     fn = jax.jit(jax.vmap(run, in_axes=(0, 0, 0, 0, None, None)) if batched else run)
     start = time.perf_counter()
-    compiled = None
-    if may_keep(system, args[1]):  # kept on disk: a later process neither traces nor lowers it
-        settings = {"config": repr(key[2]), "jac_dtype": str(jac_dtype), "parameters": layout}
-        compiled = compiled_from_disk(fn, args, key={"system": system.describe(), "batched": batched, **settings},
-                                      packages=TRAINING_PACKAGES, out_tree=_STATE_TREE, prefix="lm",
-                                      options=training_compiler_options())
-    if compiled is None:
-        compiled = compile_lowered(fn.lower(*args), training_compiler_options())
+    settings = {"batched": batched, "config": repr(key[2]), "jac_dtype": str(jac_dtype), "parameters": layout}
+    compiled = compile_training_program(fn, args, system, key=settings, out_tree=_STATE_TREE, prefix="lm")
     _COMPILED[key] = (system, compiled)
     return compiled, time.perf_counter() - start
 

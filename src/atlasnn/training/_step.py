@@ -264,6 +264,21 @@ def training_compiler_options() -> dict | None:
     return {"xla_cpu_use_fusion_emitters": False} if jax.default_backend() == "cpu" else None
 
 
+def compile_training_program(fn: Callable, args: tuple, system: HamiltonianSystem, *, key: dict, out_tree,
+                             prefix: str):
+    """A training program (the jitted ``fn``) compiled for ``args`` with
+    :func:`training_compiler_options`: read back from (or kept in) its exported form on disk where
+    the system and the network (``args[1]``, the model's static part) qualify (:func:`may_keep`;
+    ``key``: the program's own settings; ``out_tree``: its result's tree), else traced here."""
+    options = training_compiler_options()
+    if may_keep(system, args[1]):  # kept on disk: a later process neither traces nor lowers it
+        kept = compiled_from_disk(fn, args, key={"system": system.describe(), **key}, packages=TRAINING_PACKAGES,
+                                  out_tree=out_tree, prefix=prefix, options=options)
+        if kept is not None:
+            return kept
+    return compile_lowered(fn.lower(*args), options)
+
+
 def compiled_chunk(args: tuple, system: HamiltonianSystem, mode: Mode, batched: bool = False,
                    announce: Callable[[], None] | None = None):
     """``_run_chunk`` compiled once per (system, mode, batched, argument structure and shapes);
@@ -288,15 +303,10 @@ def compiled_chunk(args: tuple, system: HamiltonianSystem, mode: Mode, batched: 
     if batched:
         chunk = jax.vmap(chunk, in_axes=(0, 0, 0, 0, None, 0, 0))
     fn = jax.jit(chunk)
-    compiled = None
-    if may_keep(system, args[1]):  # kept on disk: a later process neither traces nor lowers it
-        params, _, opt_state, track = args[:4]
-        out_tree = jax.tree_util.tree_structure((params, opt_state, track, dict.fromkeys(_CHUNK_OUTPUTS, 0)))
-        compiled = compiled_from_disk(fn, args, key={"system": system.describe(), "mode": repr(mode),
-                                                     "batched": batched}, packages=TRAINING_PACKAGES,
-                                      out_tree=out_tree, prefix="adam", options=training_compiler_options())
-    if compiled is None:
-        compiled = compile_lowered(fn.lower(*args), training_compiler_options())
+    params, _, opt_state, track = args[:4]
+    out_tree = jax.tree_util.tree_structure((params, opt_state, track, dict.fromkeys(_CHUNK_OUTPUTS, 0)))
+    compiled = compile_training_program(fn, args, system, key={"mode": repr(mode), "batched": batched},
+                                        out_tree=out_tree, prefix="adam")
     elapsed = time.perf_counter() - start
     _CHUNK_CACHE[key] = (system, compiled)
     return compiled, elapsed
