@@ -33,7 +33,8 @@ from atlasnn.checkpoint._format import (
 )
 from atlasnn.errors import AtlasError, CheckpointError
 from atlasnn.checkpoint._identity import interval_mismatch, system_mismatch
-from atlasnn.solutions import PiecewiseSolution, WindowRecord, stack_models, unstack_models
+from atlasnn.checkpoint._polynomial import KIND_POLYNOMIAL, polynomial_from, polynomial_payload
+from atlasnn.solutions import PiecewiseSolution, PolynomialSolution, WindowRecord, stack_models, unstack_models
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["KIND_PIECEWISE", "save_piecewise", "load_piecewise", "piecewise_payload", "piecewise_from",
@@ -74,6 +75,8 @@ def piecewise_payload(p: str, solution: Any, train_config: Any, extra: Mapping[s
                       histories: bool) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """The meta and arrays :func:`save_piecewise` writes (before the hash), for writers that add
     their own (a march's progress)."""
+    if isinstance(solution, PolynomialSolution):
+        return polynomial_payload(p, solution, extra)
     if not isinstance(solution, PiecewiseSolution):
         raise _fail(p, f"save_piecewise needs a PiecewiseSolution, got {type(solution).__name__}")
     models = list(solution.models)
@@ -132,6 +135,8 @@ def load_piecewise(path: str | os.PathLike, system: HamiltonianSystem | None = N
     """
     p = os.fspath(path)
     arrays, meta = _read(p)
+    if meta.get("kind") == KIND_POLYNOMIAL:
+        return polynomial_from(p, arrays, meta, system, expect, owner)
     if meta.get("kind") != KIND_PIECEWISE or not isinstance(meta.get("piecewise"), dict):
         raise _fail(p, f"holds no piecewise solution (kind {meta.get('kind')!r}); use load_checkpoint")
     return piecewise_from(p, arrays, meta, system, expect, owner)

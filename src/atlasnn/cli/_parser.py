@@ -140,15 +140,24 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--steps", type=int, default=None, help="integrator steps (default 199, or the config's K - 1)")
     s.set_defaults(func=cmd_integrate)
 
-    s = sub.add_parser("solve", help="solve one trajectory with the float64 collocation solver (a built-in "
-                                     "system or the system of a config); print its error estimate")
+    s = sub.add_parser("solve", help="solve one trajectory (a built-in system or the system of a config) with the "
+                                     "Gauss collocation or another solver; print its error estimate")
     add_problem_options(s, "a TOML experiment file or a built-in experiment's name (kepler-e09)")
-    s.add_argument("--rtol", type=float, default=None, help="each window's relative tolerance (default 1e-12)")
-    s.add_argument("--atol", type=float, default=None, help="each window's absolute tolerance (default 1e-14)")
-    s.add_argument("--features", type=int, default=20, help="random features per window (default 20)")
-    s.add_argument("--seed", type=int, default=0, help="the draw of the random features (default 0)")
+    s.add_argument("--solver", default="gauss", choices=("gauss", "collocation"),
+                   help="gauss: the trial solution at Gauss–Legendre nodes (symplectic, order 2s; default); "
+                        "collocation: random tanh features by Gauss–Newton")
+    s.add_argument("--rtol", type=float, default=None, help="the solver's relative tolerance (default: its own, "
+                   "1e-11 for gauss, 1e-12 for collocation)")
+    s.add_argument("--atol", type=float, default=None, help="the solver's absolute tolerance (default: its own)")
+    s.add_argument("--stages", type=int, default=None, help="gauss: s, the Gauss nodes per window (default 12)")
+    s.add_argument("--steps", dest="step_mode", default=None, choices=("constant", "adaptive"),
+                   help="gauss: one window length, "
+                   "only shortened where needed (symplectic; default), or every window its own")
+    s.add_argument("--h", type=float, default=None, help="gauss: one window length throughout")
+    s.add_argument("--features", type=int, default=None, help="collocation: random features per window (20)")
+    s.add_argument("--seed", type=int, default=None, help="collocation: the draw of the random features (0)")
     s.add_argument("--check", action="store_true", help="also compare with DOP853 at 1e-13 (the true error)")
-    s.add_argument("--save", default=None, metavar="FILE.npz", help="save the solution (load_piecewise reads it)")
+    s.add_argument("--save", default=None, metavar="FILE.npz", help="save the solution (atlasnn.load reads it)")
     s.set_defaults(func=cmd_solve)
 
     s = sub.add_parser("init", help="write a commented experiment template for your own system")

@@ -306,20 +306,21 @@ class March(Scheme):
 
 @final
 class Solve(Scheme):
-    """The float64 collocation solver (:func:`atlasnn.solver.solve_batch`): nothing trained; the
-    task's seeds (each its own draw of random features) marched by one compiled program."""
+    """The solver of :func:`atlasnn.solve` ([solve]: the Gauss collocation by default), nothing
+    trained: the task's seeds marched by one compiled program (a Collocation solver draws its
+    random features from each seed; the Gauss collocation is deterministic, so it is solved once
+    and every seed records that one solution)."""
 
     name, word, record_role = "solve", "", "solve"
-    COLUMN: ClassVar[str] = "collocation"
 
     def models(self, cfg):
-        return [self.COLUMN] if cfg.solve is not None else []
+        return [cfg.solve.solver.name] if cfg.solve is not None else []
 
     def column(self, model):
         return model
 
     def label(self, model):
-        return "Collocation (float64)"
+        return {"gauss": "Gauss collocation (float64)", "collocation": "Collocation (float64)"}.get(model, model)
 
     def stages(self, cfg):
         return [("solve", cfg.eval_stage)]
@@ -331,12 +332,14 @@ class Solve(Scheme):
         return 0.0  # no epochs: a batch of seeds is one small program
 
     def check_memory(self, cfg, n_seeds, state_dim):
-        return None  # a window's system is 2d·M unknowns: far below any limit
+        return None  # a window's system is small: far below any limit
 
     def train(self, run):
-        settings, st, seeds = run.cfg.solve, run.cfg.eval_stage, list(run.task.seeds)
-        sols = solve_batch(run.system, [run.z0] * len(seeds), (st.t0, st.T), solver=settings.solver, seeds=seeds,
-                           rtol=settings.rtol, atol=settings.atol)
+        solver, st, seeds = run.cfg.solve.solver, run.cfg.eval_stage, list(run.task.seeds)
+        if hasattr(solver, "seed"):
+            sols = solve_batch(run.system, [run.z0] * len(seeds), (st.t0, st.T), solver=solver, seeds=seeds)
+        else:
+            sols = solve_batch(run.system, [run.z0], (st.t0, st.T), solver=solver) * len(seeds)
         check_interrupt()
         for seed, sol in zip(seeds, sols):
             run.finish_solve(sol, st, seed)

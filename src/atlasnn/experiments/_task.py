@@ -43,7 +43,7 @@ from atlasnn.experiments._signals import check_interrupt
 from atlasnn.experiments._tasks import Task
 from atlasnn.experiments.config import ExperimentConfig, Stage
 from atlasnn.nn import make_model
-from atlasnn.solutions import Solution
+from atlasnn.solutions import PolynomialSolution, Solution
 from atlasnn.training import LMConfig, MarchProgress, refine
 from atlasnn.experiments._store import (
     checkpoint_seconds,
@@ -146,11 +146,14 @@ def march_verdict(cfg: ExperimentConfig, sol, rec: TrainingRecord, energy: np.nd
 
 
 def solve_record(training: Task, sol, metrics_: dict, ckpt: str, stage: Stage) -> TrainingRecord:
-    """The record of a collocation solve: no epochs; its "loss" is the worst window's local error
-    estimate over the tolerance (≤ 1 for every window kept), its wall time its share of the program
-    that marched the task's seeds (the first call's compilation or cache load included)."""
-    info, ratios = sol.info, [float(r.loss) for r in sol.windows]
+    """The record of a solve: no epochs; its "loss" is the worst window's error check over the
+    tolerance (≤ 1 for every window kept), its wall time its share of the program that marched the
+    task's seeds (the first call's compilation or cache load included; a deterministic solver's
+    one solve is charged to every seed)."""
+    info = sol.info
+    ratios = [float(r) for r in sol.check] if isinstance(sol, PolynomialSolution) else [float(r.loss) for r in sol.windows]
     lengths = np.diff(sol.edges)
+    work = {k: info[k] for k in ("rejected", "iterations", "newton_iterations", "newton_windows") if k in info}
     return TrainingRecord(
         column=training.column, label=column_label(training.model, training.role), model=training.model,
         seed=training.seed, role="solve", interval=(stage.t0, stage.T), metrics=metrics_, gamma={}, epochs=0,
@@ -160,9 +163,8 @@ def solve_record(training: Task, sol, metrics_: dict, ckpt: str, stage: Stage) -
         batch_size=int(info.get("batch", 1)), final_loss=ratios[-1], best_loss=min(ratios), lr=None, epochs_budget=0,
         march=MarchSummary(n_windows=len(ratios), window=float(lengths.max()), window_losses=ratios,
                            window_epochs=[0] * len(ratios), edges=[float(e) for e in sol.edges]),
-        extra={"solver": info["settings"], "rtol": info["rtol"], "atol": info["atol"], "rejected": info["rejected"],
-               "newton_iterations": info["newton_iterations"],
-               "first_call_time": info["first_call_time"], "batch_time": info["solve_time"]},
+        extra={"solver": info["settings"], "rtol": info["settings"]["rtol"], "atol": info["settings"]["atol"],
+               **work, "first_call_time": info["first_call_time"], "batch_time": info["solve_time"]},
     )
 
 
@@ -172,7 +174,7 @@ def solve_verdict(cfg: ExperimentConfig, rec: TrainingRecord, energy: np.ndarray
     return judge_training([rec.returned_loss], stop_reason="tolerance", energy=energy, energy0=e0, gamma={},
                           returned_loss=rec.returned_loss, interval=(stage.t0, stage.T), key="solve",
                           estimate=rec.estimate, thresholds=cfg.quality,
-                          estimate_advice="lower solve.rtol and solve.atol, or raise solve.features").as_dict()
+                          estimate_advice="lower solve.rtol and solve.atol").as_dict()
 
 
 class TaskRun:

@@ -8,9 +8,11 @@ from atlasnn.solutions._flowmap import ChebyshevBasis, FlowMapBundle, chebyshev
 from atlasnn.solutions._bounds import log_norm, residual_bound
 from atlasnn.solutions._estimate import TRUST_FRACTION, ErrorEstimate, estimate_error, state_range
 from atlasnn.solutions._linearised import propagate, residual_and_jacobian
+from atlasnn.solutions._polynomial import PolynomialSolution
 from atlasnn.solutions._piecewise import PiecewiseSolution, WindowRecord, stack_models, unstack_models, window_edges
 from atlasnn.solutions._base import INTERVAL_SLACK, ExtrapolationError, ExtrapolationWarning
 from atlasnn.solutions._solution import OUTSIDE_MODES, Solution
+from atlasnn.solutions._tableau import MAX_STAGES, GaussTableau, gauss_tableau, legendre_integral, shifted_legendre
 
 __all__ = [
     "ChebyshevBasis",
@@ -27,6 +29,7 @@ __all__ = [
     "log_norm",
     "Solution",
     "PiecewiseSolution",
+    "PolynomialSolution",
     "BundleSolution",
     "MEMBER_CHUNK",
     "bundle_start",
@@ -38,4 +41,9 @@ __all__ = [
     "ExtrapolationError",
     "OUTSIDE_MODES",
     "INTERVAL_SLACK",
+    "GaussTableau",
+    "gauss_tableau",
+    "shifted_legendre",
+    "legendre_integral",
+    "MAX_STAGES",
 ]

@@ -1,20 +1,21 @@
 """Solving Hamilton's equations for one trajectory: :func:`solve`, and the solver objects it takes.
 
-:class:`Collocation` (the default) solves ATLAS-NN's trial solution window by window in float64 —
-random tanh features, the output layer found by Gauss–Newton on collocation points, windows
-accepted by their estimated error — as one compiled program. :class:`AdamMarch` is the paper's
-network trained by Adam window by window. A new solver is one :class:`AbstractSolver` subclass and
-one :func:`register_solver` entry.
+:class:`GaussCollocation` (the default) solves ATLAS-NN's trial solution with a polynomial network
+collocated at the Gauss–Legendre nodes of every window — the Gauss–Legendre Runge–Kutta method,
+symplectic and of order 2s — as one compiled program. :class:`Collocation` solves it over random
+tanh features by Gauss–Newton; :class:`AdamMarch` is the paper's network trained by Adam window by
+window. A new solver is one :class:`AbstractSolver` subclass and one :func:`register_solver` entry.
 
 :func:`solve_bundle` solves a whole bundle (every initial state and parameter of a box) as one
 float64 flow map (:class:`FlowMap`), composed window after window.
 """
 
-from atlasnn.solver._base import SOLVERS, AbstractSolver, register_solver, solver_from_name
+from atlasnn.solver._base import SOLVERS, AbstractSolver, check_tolerance, register_solver, solver_from_name
 from atlasnn.solver._collocation import Collocation, require_float64
 from atlasnn.solver._flowmap import FlowMap, FlowMapProblem, flowmap_problem, solve_bundle
+from atlasnn.solver._gauss import GaussCollocation
 from atlasnn.solver._features import WINDOW_SCALINGS, RandomFeatures, collocation_nodes
-from atlasnn.solver._solve import DEFAULT_ATOL, DEFAULT_RTOL, TIGHTEST_TOLERANCE, solve, solve_batch
+from atlasnn.solver._solve import solve, solve_batch
 from atlasnn.solver._trained import AdamMarch
 
 __all__ = [
@@ -25,6 +26,7 @@ __all__ = [
     "flowmap_problem",
     "solve_batch",
     "AbstractSolver",
+    "GaussCollocation",
     "Collocation",
     "AdamMarch",
     "SOLVERS",
@@ -34,7 +36,5 @@ __all__ = [
     "RandomFeatures",
     "collocation_nodes",
     "WINDOW_SCALINGS",
-    "DEFAULT_RTOL",
-    "DEFAULT_ATOL",
-    "TIGHTEST_TOLERANCE",
+    "check_tolerance",
 ]

@@ -1,8 +1,9 @@
 """What every trajectory solver is: one small interface and one registry.
 
-A solver object holds its own settings (frozen, checked when it is built) and turns a problem —
-a system, an initial state, an interval and a tolerance — into a
-:class:`~atlasnn.solutions.PiecewiseSolution`. :func:`atlasnn.solve` takes any of them; configs
+A solver object holds its own settings — its tolerances and what they mean among them — frozen and
+checked when it is built, and turns a problem (a system, an initial state, an interval) into a
+solution (:class:`~atlasnn.solutions.PolynomialSolution` or
+:class:`~atlasnn.solutions.PiecewiseSolution`). :func:`atlasnn.solve` takes any of them; configs
 and the CLI name them through :data:`SOLVERS` (a new solver is one class and one
 :func:`register_solver` entry).
 """
@@ -10,28 +11,60 @@ and the CLI name them through :data:`SOLVERS` (a new solver is one class and one
 from __future__ import annotations
 
 import abc
+import dataclasses
+import math
+from numbers import Real
 from typing import Any, Callable, ClassVar
 
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.solutions import PiecewiseSolution
+from atlasnn.solutions import AbstractSolution
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["AbstractSolver", "SOLVERS", "register_solver", "solver_from_name"]
+__all__ = ["AbstractSolver", "SOLVERS", "register_solver", "solver_from_name", "check_tolerance"]
+
+
+def check_tolerance(owner: str, name: str, value: Any, tightest: float, *, zero: bool = False) -> float:
+    """``value`` as a float if it is a finite real number > 0 (≥ 0 with ``zero``) and not below
+    ``tightest`` (what the solver can reach), else one line naming the value and the remedy."""
+    if isinstance(value, bool) or not isinstance(value, Real) or not math.isfinite(float(value)) \
+            or float(value) < 0 or (float(value) == 0 and not zero):
+        raise ConfigError(f"{owner} {name} must be a finite number {'>=' if zero else '>'} 0, got {value!r}")
+    value = float(value)
+    if 0 < value < tightest:
+        raise ConfigError(f"{owner} {name} = {value:g} is below what it can reach ({tightest:g}); raise it to "
+                          f"at least {tightest:g}")
+    return value
 
 
 class AbstractSolver(abc.ABC):
-    """A way of solving Hamilton's equations on an interval with a trial solution per window."""
+    """A way of solving Hamilton's equations on an interval with a trial solution per window.
+
+    A subclass is a frozen dataclass with fields ``rtol`` and ``atol`` (its tolerances, in its own
+    meaning), a ``name`` and ``tightest`` (the smallest rtol it can reach), and :meth:`solve`."""
 
     #: the name configs and ``--solver`` use
     name: ClassVar[str]
+    #: the smallest tolerance the solver can reach (smaller ones are refused when it is built)
+    tightest: ClassVar[float]
 
     @abc.abstractmethod
-    def solve(self, system: HamiltonianSystem, z0: np.ndarray, t0: float, T: float, *, rtol: float, atol: float,
-              progress: Callable[[float], None] | None = None) -> PiecewiseSolution:
+    def solve(self, system: HamiltonianSystem, z0: np.ndarray, t0: float, T: float, *,
+              progress: Callable[[float], None] | None = None) -> AbstractSolution:
         """The solution on [t0, T] from z0 (already checked). ``progress(fraction)`` is called as
         the march advances."""
+
+    def check_tolerances(self) -> None:
+        """Refuse tolerances that are not numbers, or below :attr:`tightest` (call from __post_init__)."""
+        owner = type(self).__name__
+        object.__setattr__(self, "rtol", check_tolerance(owner, "rtol", self.rtol, self.tightest))
+        object.__setattr__(self, "atol", check_tolerance(owner, "atol", self.atol, 0.0, zero=True))
+
+    def with_tolerance(self, rtol: Any = None, atol: Any = None) -> "AbstractSolver":
+        """A copy with other tolerances (None keeps the solver's own), checked as at construction."""
+        changes = {k: v for k, v in (("rtol", rtol), ("atol", atol)) if v is not None}
+        return dataclasses.replace(self, **changes) if changes else self
 
 
 #: solver name -> class

@@ -55,6 +55,7 @@ class Collocation(AbstractSolver):
     points, each accepted when its estimated local error meets atol + rtol·|z| (docs/SOLVER.md).
 
     Attributes:
+        rtol, atol: each window's estimated local error must be within atol + rtol·|z| per component.
         features: M, the random tanh features per window (unknowns: 2d·M per window).
         points: P collocation nodes per window (P ≥ M: the residual's 2d·P equations must be able
             to determine the 2d·M unknowns); default M + 4.
@@ -79,7 +80,11 @@ class Collocation(AbstractSolver):
     """
 
     name: ClassVar[str] = "collocation"
+    #: round-off ~1e-16 per operation, amplified by the collocation's conditioning
+    tightest: ClassVar[float] = 1e-15
 
+    rtol: float = 1e-12
+    atol: float = 1e-14
     features: int = 20
     points: int | None = None
     scale: float = 2.0
@@ -101,6 +106,7 @@ class Collocation(AbstractSolver):
     chunk: int = 64
 
     def __post_init__(self) -> None:
+        self.check_tolerances()
         m = _positive_int("features", self.features)
         p = m + 4 if self.points is None else _positive_int("points", self.points)
         if p < m:
@@ -122,16 +128,16 @@ class Collocation(AbstractSolver):
         _positive_int("seed", self.seed, 0)
 
     # ------------------------------------------------------------------ solving
-    def solve(self, system: HamiltonianSystem, z0: np.ndarray, t0: float, T: float, *, rtol: float, atol: float,
+    def solve(self, system: HamiltonianSystem, z0: np.ndarray, t0: float, T: float, *,
               progress: Callable[[float], None] | None = None) -> PiecewiseSolution:
-        return self.solve_batch(system, np.asarray(z0)[None], t0, T, rtol=rtol, atol=atol, progress=progress)[0]
+        return self.solve_batch(system, np.asarray(z0)[None], t0, T, progress=progress)[0]
 
-    def solve_batch(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float, *, rtol: float,
-                    atol: float, seeds: Any = None,
+    def solve_batch(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float, *, seeds: Any = None,
                     progress: Callable[[float], None] | None = None) -> list[PiecewiseSolution]:
         """One solution per row of ``z0s`` (shape (B, 2d)), all marched by one compiled program;
         member b uses the features of ``seeds[b]`` (default: this solver's seed for every member)."""
         require_float64()
+        rtol, atol = self.rtol, self.atol
         z0s = np.atleast_2d(np.asarray(z0s, np.float64))
         seeds = [self.seed] * len(z0s) if seeds is None else [int(s) for s in seeds]
         if len(seeds) != len(z0s):

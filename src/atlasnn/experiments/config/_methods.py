@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from atlasnn.experiments.config._types import _fail
-from atlasnn.solver import Collocation
+from atlasnn.solver import solver_from_name
 from atlasnn.training import DEFAULT_WINDOW_TRAIN, LMConfig, MarchConfig, PolishConfig, n_windows_for
 
 __all__ = ["MarchSettings", "SolveSettings", "polish_config", "march_settings", "solve_settings"]
@@ -29,11 +29,10 @@ class MarchSettings:
 
 @dataclass(frozen=True)
 class SolveSettings:
-    """The ``[solve]`` table: the collocation solver (its seed is set per run seed) and its tolerances."""
+    """The ``[solve]`` table: the solver object, holding its tolerances (a Collocation's seed is set
+    per run seed; a GaussCollocation has none: it is deterministic)."""
 
-    solver: Any  # atlasnn.solver.Collocation
-    rtol: float
-    atol: float
+    solver: Any  # atlasnn.solver.GaussCollocation or Collocation
 
 
 def polish_config(path: str, v: dict[str, Any]) -> PolishConfig | LMConfig | None:
@@ -98,10 +97,19 @@ def march_settings(v: dict[str, Any], given: dict[str, Any], stage) -> MarchSett
                          scheme=scheme.replace(train=train, first=first))
 
 
+#: the [solve] keys each method takes (besides method, rtol, atol, safety)
+_SOLVE_KEYS = {"gauss": ("stages", "steps", "h"), "collocation": ("features", "points", "scaling")}
+
+
 def solve_settings(v: dict[str, Any]) -> SolveSettings:
-    """The [solve] table as the solver object and its tolerances (the solver checks its own settings)."""
-    if v["points"] is not None and v["points"] < v["features"]:
-        _fail("solve.points", v["points"], f"must be at least solve.features ({v['features']}): fewer points cannot "
-              "determine the output weights")
-    solver = Collocation(features=v["features"], points=v["points"], scaling=v["scaling"], safety=v["safety"])
-    return SolveSettings(solver, float(v["rtol"]), float(v["atol"]))
+    """The [solve] table as the solver object (the solver checks its own settings)."""
+    method = v["method"]
+    for other, keys in _SOLVE_KEYS.items():
+        for key in keys:
+            if other != method and v.get(key) is not None:
+                _fail(f"solve.{key}", v[key], f"is a setting of method = \"{other}\", not of \"{method}\"")
+    if method == "collocation" and v["points"] is not None and v["points"] < (v["features"] or 20):
+        _fail("solve.points", v["points"], f"must be at least solve.features ({v['features'] or 20}): fewer points "
+              "cannot determine the output weights")
+    given = {k: v[k] for k in _SOLVE_KEYS[method] + ("rtol", "atol", "safety") if v.get(k) is not None}
+    return SolveSettings(solver_from_name(method, **given))

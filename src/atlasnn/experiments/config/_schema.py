@@ -296,18 +296,31 @@ _STATIC_TABLES: dict[str, TableSpec] = {
         Key("polish", Sub("polish"), {}, "The second phase of every window after Adam (default: "
             "Levenberg–Marquardt, method = \"lm\"; method = \"none\" turns it off)."),
     )),
-    "solve": TableSpec("The float64 collocation solver (atlasnn.solver.Collocation): windows of ATLAS-NN's trial "
-                       "solution z_k + f(s)·W φ(s/h) with seeded random tanh features φ, W solved by Gauss–Newton, "
-                       "each window accepted when its estimated local error meets atol + rtol·|z|.", (
-        Key("rtol", Number(low=1e-15, high=1), 1e-12, "Relative part of each window's local tolerance."),
-        Key("atol", Number(low=1e-15, high=1), 1e-14, "Absolute part of each window's local tolerance."),
-        Key("features", Integer(1, 1000), 20, "M, the random features per window (2d·M unknowns per window)."),
-        Key("points", Integer(1, 10_000), None, "P collocation nodes per window (at least features).",
+    "solve": TableSpec("The solver of atlasnn.solve on the evaluation interval, nothing trained (docs/SOLVER.md): "
+                       "the Gauss collocation (method = \"gauss\": ATLAS-NN's trial solution with a polynomial "
+                       "network at the Gauss–Legendre nodes of every window; symplectic, order 2s) or the random-"
+                       "feature collocation (method = \"collocation\": z_k + f(s)·W φ(s/h), W by Gauss–Newton).", (
+        Key("method", Choice(("gauss", "collocation")), "gauss", "gauss (measured the faster and more accurate: "
+            "docs/SOLVER.md) or collocation."),
+        Key("rtol", Number(low=1e-16, high=1), None, "Relative part of each window's tolerance (gauss: its error "
+            "along the window; collocation: its local error).", default_text="the solver's: 1e-11 (gauss), 1e-12"),
+        Key("atol", Number(low=0, high=1), None, "Absolute part of each window's tolerance.",
+            default_text="the solver's: 1e-13 (gauss), 1e-14"),
+        Key("stages", Integer(1, 16), None, "gauss: s, the Gauss–Legendre nodes per window (order 2s).",
+            default_text="12"),
+        Key("steps", Choice(("constant", "adaptive")), None, "gauss: one window length, found at the start and "
+            "only ever shortened (symplectic), or every window its own length.", default_text="constant"),
+        Key("h", Number(low=0, low_open=True), None, "gauss: one window length throughout (the tolerance is then "
+            "only checked).", default_text="from the tolerance"),
+        Key("features", Integer(1, 1000), None, "collocation: M, the random features per window (2d·M unknowns "
+            "per window).", default_text="20"),
+        Key("points", Integer(1, 10_000), None, "collocation: P collocation nodes per window (at least features).",
             default_text="features + 4"),
-        Key("scaling", Choice(("linear", "tanh", "rational_exp")), "linear", "The time scaling f of each window: "
-            "f = s (measured the best here), or ATLAS-NN's tanh or rational-exp shape."),
-        Key("safety", Number(low=0, low_open=True, high=1000), 3.0, "The local error estimate is multiplied by this "
-            "before the test (it reads a median 2–3× low: docs/SOLVER.md)."),
+        Key("scaling", Choice(("linear", "tanh", "rational_exp")), None, "collocation: the time scaling f of each "
+            "window: f = s (measured the best there), or ATLAS-NN's tanh or rational-exp shape.",
+            default_text="linear"),
+        Key("safety", Number(low=0, low_open=True, high=1000), None, "The window's error estimate is multiplied by "
+            "this before the test.", default_text="2 (gauss), 3 (collocation)"),
     )),
     "march.network": TableSpec("The network of the marched models.", _network_keys(
         48, 4.0, "measured: 3–8 lowers a window's error 2–9×")),

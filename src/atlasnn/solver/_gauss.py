@@ -1,0 +1,242 @@
+"""The Gauss collocation solver: ATLAS-NN's trial solution with a polynomial network collocated at
+the s Gauss–Legendre nodes of every window — the s-stage Gauss–Legendre Runge–Kutta method.
+
+The method is in :mod:`._gauss_step` (one window) and :mod:`._gauss_march` (the compiled march);
+this module holds the settings, checks them, runs the program chunk by chunk and returns the
+:class:`~atlasnn.solutions.PolynomialSolution`, with its error estimate (a companion solution on
+windows half as long) and, for long marches, the means to solve a window again.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, fields
+from typing import Any, Callable, ClassVar
+
+import jax
+import numpy as np
+
+from atlasnn.errors import ConfigError
+from atlasnn.solutions import MAX_STAGES, PolynomialSolution, gauss_tableau
+from atlasnn.solver._base import AbstractSolver, register_solver
+from atlasnn.solver._collocation import require_float64
+from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, ReplayState, compiled_gauss_march,
+                                         compiled_gauss_replay, compiled_gauss_windows, initial_state)
+from atlasnn.systems import HamiltonianSystem
+
+__all__ = ["GaussCollocation", "KEEP_BYTES"]
+
+#: a march keeps every window's polynomial while they take at most this much memory (else only the
+#: window starts, and a window is solved again when it is evaluated)
+KEEP_BYTES = 1 << 30
+#: the most memory one call's buffers take across the members of a batch
+_CHUNK_BYTES = 64 << 20
+#: window lengths replayed per call of the companion's program
+_REPLAY_CHUNK = 4096
+
+
+def _number(name: str, value: Any, *, low: float = 0.0, above: bool = True) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(float(value)) or (float(value) <= low if above else float(value) < low):
+        raise ConfigError(f"GaussCollocation {name} must be a finite number {'>' if above else '>='} {low:g}, "
+                          f"got {value!r}")
+    return float(value)
+
+
+def _integer(name: str, value: Any, low: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise ConfigError(f"GaussCollocation {name} must be an integer >= {low}, got {value!r}")
+    return int(value)
+
+
+@register_solver
+@dataclass(frozen=True)
+class GaussCollocation(AbstractSolver):
+    """ATLAS-NN's trial solution ẑ(t_k + θh) = z_k + θh·N(θ) with N a polynomial of degree s − 1,
+    collocated at the s Gauss–Legendre nodes of each window: the s-stage Gauss–Legendre
+    Runge–Kutta method. Symplectic, symmetric, of order 2s at the window ends and s + 1 between
+    them; conserves every quadratic invariant (angular momentum) to round-off. The stage equations
+    are solved by fixed-point iteration to round-off (simplified Newton where it does not converge),
+    the state summed with compensation, the coefficients symplectic in float64 (docs/SOLVER.md).
+
+    Attributes:
+        stages: s (1–16; order 2s).
+        rtol, atol: every window's error along it, as its Picard check bounds it, must be within
+            atol + rtol·|z| per component (a tolerance below float64's round-off counts as round-off).
+        steps: ``"constant"`` (one length, found over the first windows and only ever shortened:
+            symplectic) or ``"adaptive"`` (every window its own length: fewer windows on an eccentric
+            orbit, no exact symplecticity).
+        h: a window length to use throughout (tolerances then only checked and recorded).
+        safety: the check's bound is multiplied by this before it is compared with the tolerance.
+        growth: the most a window may grow over the last (while lengths may grow).
+        warmup: windows over which a constant length is found.
+        newton: solve a window by simplified Newton iterations where the fixed-point iteration fails.
+        max_iterations: iterations per window at most (each kind).
+        max_rejects: rejected tries in a row before the march gives up.
+        keep: keep every window's polynomial (True), only the window starts (False: a window is
+            solved again when evaluated), or decide by the memory it takes (None: up to 1 GiB).
+        chunk: windows per call of the compiled program (progress is reported between calls).
+    """
+
+    name: ClassVar[str] = "gauss"
+    #: a tolerance below round-off counts as round-off; this is only a floor against nonsense
+    tightest: ClassVar[float] = 1e-16
+
+    stages: int = 12
+    rtol: float = 1e-11
+    atol: float = 1e-13
+    steps: str = "constant"
+    h: float | None = None
+    safety: float = 2.0
+    growth: float = 4.0
+    warmup: int = 8
+    newton: bool = True
+    max_iterations: int = 100
+    max_rejects: int = 30
+    keep: bool | None = None
+    chunk: int = 1024
+
+    def __post_init__(self) -> None:
+        gauss_tableau(self.stages)  # refuses a stage count out of range
+        self.check_tolerances()
+        _number("safety", self.safety)
+        if _number("growth", self.growth) <= 1.0:
+            raise ConfigError(f"GaussCollocation growth must be > 1, got {self.growth!r}")
+        if self.steps not in STEP_MODES:
+            raise ConfigError(f"GaussCollocation steps must be one of {list(STEP_MODES)}, got {self.steps!r}")
+        if self.h is not None:
+            _number("h", self.h)
+        for name in ("max_iterations", "max_rejects", "chunk"):
+            _integer(name, getattr(self, name))
+        _integer("warmup", self.warmup, 0)
+        for name in ("newton",) + (("keep",) if self.keep is not None else ()):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"GaussCollocation {name} must be true or false, got {getattr(self, name)!r}")
+
+    @property
+    def order(self) -> int:
+        """2s, the order at the window ends."""
+        return 2 * self.stages
+
+    def settings(self) -> dict[str, Any]:
+        """The settings as a JSON-able dict (what a record keeps)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    # ------------------------------------------------------------------ solving
+    def solve(self, system: HamiltonianSystem, z0: np.ndarray, t0: float, T: float, *,
+              progress: Callable[[float], None] | None = None) -> PolynomialSolution:
+        return self.solve_batch(system, np.asarray(z0)[None], t0, T, progress=progress)[0]
+
+    def solve_batch(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float, *,
+                    progress: Callable[[float], None] | None = None) -> list[PolynomialSolution]:
+        """One solution per row of ``z0s`` (shape (B, 2d)), all marched by one compiled program."""
+        require_float64()
+        z0s = np.atleast_2d(np.asarray(z0s, np.float64))
+        b, n = z0s.shape
+        per_window = 8 * (self.stages + 3) * n + 24
+        chunk = int(min(self.chunk, max(16, _CHUNK_BYTES // (b * per_window))))
+        program = compiled_gauss_march(system, stages=self.stages, steps=self.steps, chunk=chunk,
+                                       max_iterations=self.max_iterations, newton=self.newton, growth=self.growth,
+                                       safety=self.safety, warmup=self.warmup, max_rejects=self.max_rejects,
+                                       members=b)
+        started = time.perf_counter()
+        rows, state, first_call = self._march(program, z0s, t0, T, progress)
+        wall = time.perf_counter() - started
+        out = []
+        for m in range(b):
+            start, length, z, e, L, ratio = (np.concatenate([r[i][m] for r in rows]) for i in range(6))
+            end, failed = float(state.t[m]), int(state.failed[m])
+            if failed or start.size == 0 or end < T:
+                why = FAILURES.get(failed, "the march stopped")
+                raise ConfigError(
+                    f"the Gauss march{'' if b == 1 else f' of member {m}'} stopped at t = {end:.6g} of "
+                    f"[{t0:.6g}, {T:.6g}]: {why} (rtol={self.rtol:g}, atol={self.atol:g}, h={self.h}); "
+                    + ("try another h or newton=True" if self.h is not None else
+                       "loosen the tolerance, or the system may be singular there"))
+            info = {"solver": self.name, "settings": self.settings(), "order": self.order, "windows": int(start.size),
+                    "rejected": int(state.rejected[m]), "iterations": int(state.iterations[m]),
+                    "newton_windows": int(state.newton[m]), "check_worst": float(state.worst[m]),
+                    "h_min": float(length.min()), "h_max": float(length.max()), "solve_time": wall,
+                    "first_call_time": first_call, "batch": b}
+            out.append(self._solution(system, np.append(start, T), z, e, L, ratio, info))
+        return out
+
+    def _march(self, program, z0s, t0, T, progress):
+        """Call the compiled program until every member reaches T or fails: the accepted windows
+        per call (each (B, ...) cut to the member's count), the final state, the first call's time."""
+        b = len(z0s)
+        stacked = [initial_state(z, t0, self.stages) for z in z0s]
+        state = GaussState(*(np.stack(x) for x in zip(*stacked)))
+        args = tuple(np.float64(x) for x in (T, self.rtol, self.atol, self.h or 0.0))
+        rows, first_call = [], 0.0
+        with jax.enable_x64(True):
+            while True:
+                tic = time.perf_counter()
+                out = jax.device_get(program(state, *args))
+                if not rows:  # the first call compiles (or loads from the cache) and runs
+                    first_call = time.perf_counter() - tic
+                state = out.state
+                counts = np.asarray(out.count)
+                rows.append([[np.asarray(x)[m, :counts[m]] for m in range(b)] for x in out[1:-1]])
+                t_now, failed = np.asarray(state.t), np.asarray(state.failed)
+                if progress is not None:
+                    progress(min(1.0, float(t_now.min() - t0) / (T - t0)))
+                if np.all((t_now >= T) | (failed != 0)):
+                    break
+        return rows, state, first_call
+
+    # ------------------------------------------------------------------ the solution
+    def _solution(self, system, edges, z, e, L, ratio, info) -> PolynomialSolution:
+        keep = self.keep if self.keep is not None else L.nbytes <= KEEP_BYTES
+        sol = PolynomialSolution(system, edges, z, e, L if keep else None, self.stages, ratio, info,
+                                 resolve=None if keep else self.resolver(system))
+        sol.estimator = lambda: self.companion(sol)
+        return sol
+
+    def resolver(self, system):
+        """``resolve(z, e, h) -> L``: windows solved again from their starts (from a guess of
+        constant rate rather than the previous window's: the same equations, the same polynomial to
+        round-off), in blocks of a fixed size (one program)."""
+        windows = compiled_gauss_windows(system, stages=self.stages, max_iterations=self.max_iterations,
+                                         newton=self.newton)
+
+        def resolve(z, e, h):
+            out = []
+            with jax.enable_x64(True):
+                for a in range(0, len(h), _REPLAY_CHUNK):
+                    piece = slice(a, a + _REPLAY_CHUNK)
+                    m = len(h[piece])
+                    pad = lambda x: np.concatenate([x, np.repeat(x[:1], _REPLAY_CHUNK - m, axis=0)])  # noqa: E731
+                    out.append(np.asarray(windows(pad(z[piece]), pad(e[piece]), pad(h[piece])))[:m])
+            return np.concatenate(out)
+
+        return resolve
+
+    def companion(self, sol: PolynomialSolution) -> PolynomialSolution:
+        """The same method over the same interval on windows half as long: the reference of the
+        error estimate (module docstring of :mod:`atlasnn.solutions._polynomial`)."""
+        starts, lengths = sol.edges[:-1], np.diff(sol.edges)
+        halves = np.repeat(0.5 * lengths, 2)
+        edges = np.append(np.stack([starts, starts + 0.5 * lengths], axis=1).reshape(-1), sol.edges[-1])
+        replay = compiled_gauss_replay(sol.system, stages=self.stages, max_iterations=self.max_iterations,
+                                       newton=self.newton)
+        z0 = sol.z0
+        state = ReplayState(z0, np.zeros_like(z0), np.float64(0.0), np.zeros((self.stages, z0.size)), np.int64(0))
+        zs, es, Ls = [], [], []
+        with jax.enable_x64(True):
+            for a in range(0, halves.size, _REPLAY_CHUNK):
+                part = np.zeros(_REPLAY_CHUNK)
+                piece = halves[a:a + _REPLAY_CHUNK]
+                part[:piece.size] = piece
+                state, (z, e, L) = jax.device_get(replay(state, part))
+                zs.append(np.asarray(z)[:piece.size])
+                es.append(np.asarray(e)[:piece.size])
+                Ls.append(np.asarray(L)[:piece.size])
+        if int(state.failed):
+            raise ConfigError("the error estimate's companion solution did not converge on windows half as long")
+        L = np.concatenate(Ls)
+        keep = sol.L is not None
+        return PolynomialSolution(sol.system, edges, np.concatenate(zs), np.concatenate(es), L if keep else None,
+                                  self.stages, None, {"companion_of": sol.info.get("solver")}, outside="allow",
+                                  resolve=None if keep else self.resolver(sol.system))

@@ -1,0 +1,275 @@
+"""The Gauss collocation march as one compiled program: windows in a ``lax.while_loop``, each
+solved by :func:`._gauss_step.gauss_step`, its length set by the window's Picard check.
+
+The lengths (``steps``):
+
+* ``"constant"``: one length for the whole march, found over the first ``warmup`` windows (each
+  grows or shrinks by the check's error, as an adaptive solver's step does) and then kept: a later
+  window is only ever shortened, when its check exceeds the tolerance (it is tried again shorter,
+  and the shorter length is kept from then on). A method of fixed step is symplectic; a handful of
+  shortenings keeps the energy error bounded (each changes the modified Hamiltonian once);
+* ``"adaptive"``: every window's length from the previous window's check (grow at most ``growth``,
+  shrink at least to half after a rejection): fewer windows where the dynamics has several time
+  scales (an eccentric orbit), at the price of exact symplecticity (the energy error can drift);
+* a length given by the user (``h``): every window that length, the check only recorded.
+
+A window is accepted when its iteration reached round-off and (unless the length is given) its
+check's error bound, times ``safety``, is within atol + rtol·|z| for every component (a tolerance
+below round-off counts as round-off). The error is of order s + 1 in h along the window, so the
+next length is h · clip(0.9 ε^(−1/(s+1)), 0.2, growth) with ε the bound over the tolerance.
+
+The program marches at most ``chunk`` accepted windows per call and returns them; the caller calls
+it again from where it stopped (one program serves every interval, and progress shows between
+calls). Members (initial states) on a leading axis: one program marches them all, each with
+windows of its own.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from atlasnn.compile_cache import program_cache
+from atlasnn.precision import trace_settings
+from atlasnn.solutions import gauss_tableau
+from atlasnn.solver._exported import exported_program
+from atlasnn.solver._gauss_step import compensated_add, continued_stages, gauss_step, local_error, tableau_arrays
+
+__all__ = ["GaussState", "GaussChunk", "ReplayState", "compiled_gauss_march", "compiled_gauss_replay",
+           "compiled_gauss_windows", "initial_state", "FAILURES", "STEP_MODES"]
+
+#: the ways window lengths are chosen (module docstring)
+STEP_MODES = ("constant", "adaptive")
+
+#: why a march stopped early, by the code in GaussState.failed
+FAILURES = {
+    1: "the window length fell below round-off of the time",
+    2: "windows were rejected too many times in a row",
+    3: "the stage equations did not converge (fixed-point and Newton iterations both failed)",
+}
+
+
+class GaussState(NamedTuple):
+    """Where a march stands between calls (float64 arrays but for the counters)."""
+
+    t: jax.Array
+    te: jax.Array  # the compensation of t's summation
+    z: jax.Array
+    e: jax.Array  # the compensation of z's summation
+    h: jax.Array  # the length the next window tries
+    h_prev: jax.Array  # the last accepted window's length (its L_prev continues into the next)
+    L_prev: jax.Array  # (s, n)
+    accepted: jax.Array
+    rejected: jax.Array
+    iterations: jax.Array
+    newton: jax.Array  # windows solved by the Newton iteration
+    failed: jax.Array  # 0 running or done, else a key of FAILURES
+    worst: jax.Array  # the largest check ratio among the accepted windows
+
+
+class GaussChunk(NamedTuple):
+    """Up to ``chunk`` accepted windows: starts, lengths, start states and their compensation,
+    stage increments L (s, n), check ratios; and the state after them."""
+
+    count: jax.Array
+    start: jax.Array
+    length: jax.Array
+    z: jax.Array
+    e: jax.Array
+    L: jax.Array
+    ratio: jax.Array
+    state: GaussState
+
+
+def initial_state(z0: np.ndarray, t0: float, stages: int) -> GaussState:
+    """The state before the first window (host NumPy arrays); the program sets the first length and
+    the first window's guess on its first call (:func:`_started`)."""
+    z0 = np.asarray(z0, np.float64)
+    zero, izero = np.float64(0.0), np.int64(0)
+    return GaussState(np.float64(t0), zero, z0, np.zeros_like(z0), zero, zero, np.zeros((stages,) + z0.shape),
+                      izero, izero, izero, izero, izero, zero)
+
+
+def _started(system, tab, st: GaussState, T, h_given) -> GaussState:
+    """``st`` with its first length and guess where the march has not started (h_prev = 0): the
+    given length, else 1/‖A(z0)‖_F (A the field's Jacobian; at most the interval), and a guess of
+    constant rate f(z0), written as a previous window of that length whose polynomial is that line."""
+
+    def start(st):
+        a = system.jacobian(st.z[None])[0]
+        h0 = jnp.minimum(T - st.t, 1.0 / jnp.maximum(jnp.sqrt(jnp.sum(a * a)), 1e-300))
+        h0 = jnp.where(h_given > 0, h_given, h0)
+        f0 = system.vector_field(st.z[None])[0]
+        return st._replace(h=h0, h_prev=h0, L_prev=h0 * tab["b"][:, None] * f0[None, :])
+
+    return lax.cond(st.h_prev > 0, lambda st: st, start, st)
+
+
+def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
+    """Try one window from ``st``: (accepted?, the step's result, its length, its check ratio, the
+    next length, whether it is the last window)."""
+    s = tab["b"].shape[0]
+    field = system.vector_field
+    jac = (lambda x: system.jacobian(x[None])[0]) if settings["newton"] else None
+    floor = 1e-12 * jnp.maximum(jnp.abs(T), 1.0)
+    span = (T - st.t) - st.te
+    last = st.h >= span - floor
+    h = jnp.where(last, span, st.h)
+    Y0 = continued_stages(tab, st.z, st.e, st.L_prev, h / st.h_prev)
+    r = gauss_step(field, jac, tab, st.z, st.e, h, Y0, max_iterations=settings["max_iterations"])
+    end, dense = local_error(field, tab, st.z, st.e, h, r.L)
+    # a tolerance below what float64 resolves counts as round-off: a few ulps of z and of the increments
+    noise = 8 * jnp.finfo(st.z.dtype).eps * (jnp.abs(st.z) + jnp.sum(jnp.abs(r.L), axis=0))
+    tol = jnp.maximum(atol + rtol * jnp.maximum(jnp.abs(st.z), jnp.abs(r.z)), noise)
+    ratio = settings["safety"] * jnp.max(jnp.maximum(end, dense) / tol)
+    given = h_given > 0
+    ok = r.converged & jnp.all(jnp.isfinite(r.z)) & (given | (jnp.isfinite(ratio) & (ratio <= 1.0)))
+    fac = jnp.clip(0.9 * ratio ** (-1.0 / (s + 1)), 0.2, settings["growth"])
+    fac = jnp.where(jnp.isfinite(fac), fac, 0.2)
+    if settings["steps"] == "constant":  # after the warm-up an accepted window keeps the length
+        fac = jnp.where(ok & (st.accepted >= settings["warmup"]), 1.0, fac)
+    fac = jnp.where(ok, fac, jnp.where(r.converged, jnp.minimum(fac, 0.9), 0.5))
+    h_next = jnp.where(given, h_given, jnp.where(ok & last, st.h, h * fac))
+    return ok, r, h, ratio, h_next, last
+
+
+@program_cache
+@functools.lru_cache(maxsize=32)
+def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety, warmup, max_rejects,
+            settings_key):
+    tab = tableau_arrays(gauss_tableau(stages))  # NumPy float64: constants of the program (traced in x64)
+    settings = {"steps": steps, "max_iterations": max_iterations, "newton": newton, "growth": growth,
+                "safety": safety, "warmup": warmup}
+
+    def run(state: GaussState, T, rtol, atol, h_given):
+        n = state.z.shape[0]
+        dt = state.z.dtype
+        buf = (jnp.zeros(chunk, dt), jnp.zeros(chunk, dt), jnp.zeros((chunk, n), dt), jnp.zeros((chunk, n), dt),
+               jnp.zeros((chunk, stages, n), dt), jnp.zeros(chunk, dt))
+        floor = 1e-14 * jnp.maximum(jnp.abs(T), 1.0)
+        state = _started(system, tab, state, T, h_given)
+
+        def going(c):
+            k, st, streak, _ = c
+            return (st.t < T) & (k < chunk) & (st.failed == 0)
+
+        def body(c):
+            k, st, streak, buf = c
+            ok, r, h, ratio, h_next, last = _window(system, tab, settings, st, T, rtol, atol, h_given)
+            t1, te1 = compensated_add(st.t, st.te, h)
+            t1, te1 = jnp.where(last, T, t1), jnp.where(last, 0.0, te1)
+            rows = (st.t + st.te, h, st.z, st.e, r.L, ratio)
+            # row k written whatever the outcome (in place): a rejected try is overwritten by the next
+            buf = tuple(b.at[k].set(x) for b, x in zip(buf, rows))
+            streak = jnp.where(ok, 0, streak + 1)
+            failed = jnp.where(~r.converged & (h_given > 0), 3,
+                               jnp.where(streak > max_rejects, jnp.where(r.converged, 2, 3),
+                                         jnp.where(h_next < floor, 1, 0)))
+            keep = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
+            new = GaussState(keep(t1, st.t), keep(te1, st.te), keep(r.z, st.z), keep(r.e, st.e), h_next,
+                             keep(h, st.h_prev), keep(r.L, st.L_prev), st.accepted + ok.astype(st.accepted.dtype),
+                             st.rejected + (~ok).astype(st.rejected.dtype), st.iterations + r.iterations,
+                             st.newton + r.newton.astype(st.newton.dtype),
+                             jnp.where(ok, 0, failed).astype(st.failed.dtype),
+                             jnp.where(ok, jnp.maximum(st.worst, ratio), st.worst))
+            return k + ok.astype(k.dtype), new, streak, buf
+
+        k, st, _, buf = lax.while_loop(going, body, (jnp.asarray(0), state, jnp.asarray(0), buf))
+        return GaussChunk(k, *buf, st)
+
+    batched = jax.vmap(run, in_axes=(0, None, None, None, None))
+
+    def alone(state, T, rtol, atol, h_given):
+        out = run(jax.tree_util.tree_map(lambda x: x[0], state), T, rtol, atol, h_given)
+        return jax.tree_util.tree_map(lambda x: x[None], out)
+
+    return jax.jit(batched), jax.jit(alone)
+
+
+#: the tree of a program's result, for its exported form
+_OUT_TREE = jax.tree_util.tree_structure(
+    GaussChunk(*([0] * (len(GaussChunk._fields) - 1)), GaussState(*([0] * len(GaussState._fields)))))
+
+
+def compiled_gauss_march(system: Any, *, stages: int, steps: str, chunk: int, max_iterations: int, newton: bool,
+                         growth: float, safety: float, warmup: int, max_rejects: int, members: int):
+    """The compiled Gauss march for a system and these settings over ``members`` members (a
+    leading axis on the state, also for one); one program per shape, cached, keyed by the trace
+    settings; served from its exported form on disk where the system qualifies."""
+    settings = (int(stages), str(steps), int(chunk), int(max_iterations), bool(newton), float(growth), float(safety),
+                int(warmup), int(max_rejects), trace_settings())
+    jitted = _cached(system, *settings)[int(members == 1)]
+    return exported_program(jitted, system, {"settings": settings, "alone": members == 1, "method": "gauss"},
+                            _OUT_TREE)
+
+
+class ReplayState(NamedTuple):
+    """Where a replay stands: the state and its compensation, the last window's length and stages."""
+
+    z: jax.Array
+    e: jax.Array
+    h_prev: jax.Array
+    L_prev: jax.Array
+    failed: jax.Array
+
+
+@program_cache
+@functools.lru_cache(maxsize=32)
+def _cached_replay(system, stages, max_iterations, newton, settings_key):
+    tab = tableau_arrays(gauss_tableau(stages))  # NumPy float64: constants of the program (traced in x64)
+    jac = (lambda x: system.jacobian(x[None])[0]) if newton else None
+
+    def run(state: ReplayState, lengths):
+        def begin(st):  # the first call: a guess of constant rate, as the march's first window
+            return st._replace(h_prev=lengths[0], L_prev=lengths[0] * tab["b"][:, None]
+                               * system.vector_field(st.z[None])[0][None, :])
+
+        state = lax.cond(state.h_prev > 0, lambda st: st, begin, state)
+
+        def body(st, h):
+            active = h > 0
+            hh = jnp.where(active, h, st.h_prev)
+            Y0 = continued_stages(tab, st.z, st.e, st.L_prev, hh / st.h_prev)
+            r = gauss_step(system.vector_field, jac, tab, st.z, st.e, hh, Y0, max_iterations=max_iterations)
+            keep = lambda new, old: jnp.where(active, new, old)  # noqa: E731
+            bad = (active & ~(r.converged & jnp.all(jnp.isfinite(r.z)))).astype(st.failed.dtype)
+            new = ReplayState(keep(r.z, st.z), keep(r.e, st.e), keep(hh, st.h_prev), keep(r.L, st.L_prev),
+                              jnp.maximum(st.failed, bad))
+            return new, (st.z, st.e, r.L)
+
+        return lax.scan(body, state, lengths)
+
+    return jax.jit(run)
+
+
+def compiled_gauss_replay(system: Any, *, stages: int, max_iterations: int, newton: bool):
+    """The compiled march over given window lengths (no control): ``run(ReplayState, lengths)``
+    returns the state after them and each window's (start state, compensation, L); a length of 0
+    is a no-op (the padding of the last chunk). A state with h_prev = 0 starts with a guess of
+    constant rate."""
+    return _cached_replay(system, int(stages), int(max_iterations), bool(newton), trace_settings())
+
+
+@program_cache
+@functools.lru_cache(maxsize=32)
+def _cached_windows(system, stages, max_iterations, newton, settings_key):
+    tab = tableau_arrays(gauss_tableau(stages))  # NumPy float64: constants of the program (traced in x64)
+    jac = (lambda x: system.jacobian(x[None])[0]) if newton else None
+
+    def one(z, e, h):
+        Y0 = z + (e + h * tab["c"][:, None] * system.vector_field(z[None])[0][None, :])
+        r = gauss_step(system.vector_field, jac, tab, z, e, h, Y0, max_iterations=max_iterations)
+        return r.L
+
+    return jax.jit(jax.vmap(one))
+
+
+def compiled_gauss_windows(system: Any, *, stages: int, max_iterations: int, newton: bool):
+    """The compiled solve of independent windows: ``run(z (m, n), e (m, n), h (m,)) -> L (m, s, n)``,
+    each from a guess of constant rate (a window kept without its polynomial, solved again)."""
+    return _cached_windows(system, int(stages), int(max_iterations), bool(newton), trace_settings())
