@@ -1,6 +1,7 @@
-"""The collocation solver inside an experiment: a ``[solve]`` table adds the column
-``collocation`` (every seed its own random features, one program), measured, estimated, judged and
-reported like the trained columns; ``schemes`` picks which of a config's schemes run."""
+"""The solver inside an experiment: a ``[solve]`` table adds the column of its method (``gauss`` by
+default: one deterministic solution every seed records; ``collocation``: every seed its own random
+features, one program), measured, estimated, judged and reported like the trained columns;
+``schemes`` picks which of a config's schemes run."""
 
 from __future__ import annotations
 
@@ -48,40 +49,50 @@ def done(tmp_path_factory):
 
 def test_only_the_named_scheme_runs_and_its_column_is_measured(done):
     out, cfg, res = done
-    assert res["columns"] == table_columns(cfg) == ["se", "collocation"]
-    recs = [r for r in res["runs"] if r["column"] == "collocation"]
+    assert res["columns"] == table_columns(cfg) == ["se", "gauss"]
+    recs = [r for r in res["runs"] if r["column"] == "gauss"]
     assert [r["seed"] for r in recs] == [0, 1] and {r["role"] for r in recs} == {"solve"}
     for r in recs:
         assert r["metrics"]["relative_max"] <= 1e-9  # measured against the run's DOP853 reference
         assert r["estimate"]["relative_max"] <= 1e-9 and r["quality"]["status"] == "ok"
         assert r["returned_loss"] <= 1.0 and r["rtol"] == 1e-11
-    # the two seeds drew different features: different windows
-    assert recs[0]["edges"] != recs[1]["edges"]
+    # deterministic: every seed records the one solution
+    assert recs[0]["edges"] == recs[1]["edges"]
+
+
+def test_the_collocation_method_draws_features_per_seed(tmp_path):
+    text = CONFIG.replace("[solve]\nrtol = 1e-11", '[solve]\nmethod = "collocation"\nrtol = 1e-10')
+    cfg = parse_config(tomllib.loads(text), source="s.toml")
+    res = run_experiment(cfg, tmp_path / "run", progress=False, log=lambda *a: None, config_text=text)
+    assert res["columns"] == ["se", "collocation"]
+    recs = [r for r in res["runs"] if r["column"] == "collocation"]
+    assert recs[0]["edges"] != recs[1]["edges"]  # the two seeds drew different features: different windows
+    assert all(r["metrics"]["relative_max"] <= 1e-8 for r in recs)
 
 
 def test_the_saved_solution_is_the_measured_one_and_is_accurate_on_its_own(done):
     out, cfg, res = done
-    rec = next(r for r in res["runs"] if r["column"] == "collocation" and r["seed"] == 1)
+    rec = next(r for r in res["runs"] if r["column"] == "gauss" and r["seed"] == 1)
     sol = load_piecewise(out / rec["checkpoint"])
     t = np.linspace(0.0, 4 * np.pi, 777)  # not the run's grid
     ref = reference_solution(sol.system, sol.system.initial_state(None), t, rtol=1e-13, atol=1e-13)
     assert np.abs(sol(t) - ref).max() <= 1e-9 * np.ptp(ref, axis=0).max()
-    assert (out / "tables.md").read_text(encoding="utf-8").count("Collocation (float64)") >= 1
+    assert (out / "tables.md").read_text(encoding="utf-8").count("Gauss collocation (float64)") >= 1
 
 
 def test_without_schemes_every_table_runs_and_the_scheme_names_match_the_registry():
     data = tomllib.loads(CONFIG)
     del data["schemes"]
     cfg = parse_config(data, source="s.toml")
-    assert table_columns(cfg) == ["se", "atlas_exp", "atlas_exp_march", "collocation"]
+    assert table_columns(cfg) == ["se", "atlas_exp", "atlas_exp_march", "gauss"]
     assert tuple(SCHEMES) == SCHEME_NAMES
 
 
 def test_every_suite_problem_and_long_experiment_has_a_solve_profile():
     for name in suite_members("hard") + ["henon-heiles-long", "oscillator-long"]:
         cfg = load_config(builtin_config_path(name), profile="solve")
-        assert table_columns(cfg) == ["se", "collocation"], name
-        assert cfg.solve.rtol == 3e-13 and cfg.evaluation.reference_rtol == 2.3e-14
+        assert table_columns(cfg) == ["se", "gauss"], name
+        assert cfg.solve.solver.name == "gauss" and cfg.evaluation.reference_rtol == 2.3e-14
 
 
 def test_a_transfer_config_can_run_the_solver_alone_and_its_report_has_no_loss_figures(tmp_path):
@@ -92,6 +103,6 @@ def test_a_transfer_config_can_run_the_solver_alone_and_its_report_has_no_loss_f
     data["target"]["train"]["tolerance"] = 1e-5  # the report would draw it against the trainings' losses
     cfg = parse_config(data, source="t.toml")
     res = run_experiment(cfg, tmp_path / "run", progress=False, log=lambda *a: None, config_text=text)
-    assert res["columns"] == ["se", "collocation"]
+    assert res["columns"] == ["se", "gauss"]
     figures = {p.stem for p in (tmp_path / "run" / "figures").glob("*.png")}
     assert "trajectories" in figures and not {"loss", "target_loss_comparison"} & figures

@@ -276,14 +276,15 @@ def _mark_read(path: Path) -> None:
 
 
 def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[str, ...], out_tree,
-                       prefix: str, options: dict | None = None) -> Callable | None:
+                       prefix: str, options: dict | None = None, host: bool = False) -> Callable | None:
     """``fn`` compiled for ``args`` (their structure, shapes and dtypes) from its exported form on
     disk: read back, or exported now and kept; a function of the same arguments returning ``fn``'s
     result (whose tree the caller gives: ``out_tree``). None when the cache is off or the program
     cannot be exported: the caller traces ``fn`` as usual. ``key``: what else the trace depends on
     (the system's definition, the program's settings); ``packages``: atlasnn's packages its code
     comes from (``("training", "nn", "systems")``); ``options``: XLA's options for compiling it
-    (:func:`compile_lowered`)."""
+    (:func:`compile_lowered`); ``host``: the results as NumPy arrays (for a caller that copies them
+    to the host anyway: no device copies of its own)."""
     if cache_dir() is None:
         return None
     leaves, treedef = jax.tree_util.tree_flatten(args)
@@ -305,6 +306,8 @@ def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[
 
     def run(*call_args):
         out = program(*jax.tree_util.tree_leaves(call_args))
+        if host:
+            return jax.tree_util.tree_unflatten(out_tree, jax.device_get(list(out)))
         return jax.tree_util.tree_unflatten(out_tree, [_uncommitted(x) for x in out])
 
     return run

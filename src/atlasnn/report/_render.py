@@ -49,7 +49,7 @@ def _histories(run_dir: Path, results: dict) -> dict[str, dict]:
         if r.march is not None:  # one file of all windows; its loss: the windows' one after the other
             sol = load_piecewise(path, expect=expect, owner=owner)
             extra, gam = sol.info.get("extra") or {}, {}
-            curves = [np.asarray(w.history) for w in sol.windows if w.history is not None]
+            curves = [np.asarray(w.history) for w in getattr(sol, "windows", []) if w.history is not None]
             if not curves:  # solved, not trained (the collocation solver): no loss curve
                 continue
             loss = np.concatenate(curves)

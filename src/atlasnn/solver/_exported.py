@@ -27,8 +27,8 @@ class _Exported:
     """A jitted program served from its exported form on disk, compiled once per argument shapes
     (traced as usual where it cannot be exported)."""
 
-    def __init__(self, jitted: Callable, key: dict, out_tree):
-        self.jitted, self.key, self.out_tree = jitted, key, out_tree
+    def __init__(self, jitted: Callable, key: dict, out_tree, host: bool):
+        self.jitted, self.key, self.out_tree, self.host = jitted, key, out_tree, host
         self.loaded: dict[Any, Callable] = {}
 
     def __call__(self, *args):
@@ -37,21 +37,22 @@ class _Exported:
         fn = self.loaded.get(sig)
         if fn is None:
             fn = compiled_from_disk(self.jitted, args, key=self.key, packages=("solver", "systems"),
-                                    out_tree=self.out_tree, prefix="march") or self.jitted
+                                    out_tree=self.out_tree, prefix="march", host=self.host) or self.jitted
             self.loaded[sig] = fn
         return fn(*args)
 
 
 @program_cache
 @functools.lru_cache(maxsize=32)
-def _exported(jitted: Callable, key_text: str, out_tree) -> _Exported:
-    return _Exported(jitted, json.loads(key_text), out_tree)
+def _exported(jitted: Callable, key_text: str, out_tree, host: bool) -> _Exported:
+    return _Exported(jitted, json.loads(key_text), out_tree, host)
 
 
-def exported_program(jitted: Callable, system: Any, settings: dict, out_tree) -> Callable:
+def exported_program(jitted: Callable, system: Any, settings: dict, out_tree, host: bool = False) -> Callable:
     """``jitted`` served from an exported program on disk where the system qualifies and the
-    cache is on (module docstring); else ``jitted`` itself. ``out_tree``: its result's tree."""
+    cache is on (module docstring); else ``jitted`` itself. ``out_tree``: its result's tree;
+    ``host``: the kept program returns NumPy arrays (for a caller that copies them to the host)."""
     if not defined_by_data(system):
         return jitted
     return _exported(jitted, json.dumps({"system": system.describe(), "settings": settings}, sort_keys=True,
-                                        default=str), out_tree)
+                                        default=str), out_tree, host)

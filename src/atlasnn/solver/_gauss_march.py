@@ -205,7 +205,7 @@ def compiled_gauss_march(system: Any, *, stages: int, steps: str, chunk: int, ma
                 int(warmup), int(max_rejects), trace_settings())
     jitted = _cached(system, *settings)[int(members == 1)]
     return exported_program(jitted, system, {"settings": settings, "alone": members == 1, "method": "gauss"},
-                            _OUT_TREE)
+                            _OUT_TREE, host=True)
 
 
 class ReplayState(NamedTuple):

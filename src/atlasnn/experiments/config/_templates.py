@@ -51,8 +51,8 @@ def _system_items(system: str | None, hamiltonian: str | None, coordinates: Sequ
 def _tables(name: str, transfer: bool, system_items: list, what: str, T: Any = "4*pi", march: bool = False,
             solve: bool = False) -> list[tuple[str, list[tuple[str, Any]]]]:
     """(table, [(key, value)]) in file order: the paper's oscillator settings; ``march``: the
-    models time-marched over [0, T] instead of trained directly; ``solve``: the float64
-    collocation solver's column too."""
+    models time-marched over [0, T] instead of trained directly; ``solve``: the Gauss
+    collocation's column too."""
     interval = "source [0, 4pi] -> target [0, 20pi]" if transfer else f"one interval [0, {T}]"
     interval += ", time-marched" if march else ""
     top = [("name", name), ("description", f"{what}: {interval}"), ("kind", "transfer" if transfer else "short"),
@@ -75,7 +75,7 @@ def _tables(name: str, transfer: bool, system_items: list, what: str, T: Any = "
     if march:
         tables += [("march", [("models", ["atlas_exp"])])]
     if solve:
-        tables += [("solve", [("rtol", 1e-12), ("atol", 1e-14)])]
+        tables += [("solve", [("method", "gauss"), ("rtol", 1e-11), ("atol", 1e-13)])]
     tables += [("evaluation", [("eval_points", 5000 if transfer else 2000), ("fine_factor", 100)])]
     return tables
 
@@ -129,7 +129,7 @@ def init_template(path: str | Path, *, transfer: bool = False, system: str | Non
     ``params``: values of named parameters (a built-in's, which must exist, or names used in H).
     ``T``: the interval's end (a number or an expression such as "20*pi"); ``march``: time-march
     the model instead of training it directly (for anything longer than a few periods);
-    ``solve``: add the float64 collocation solver's column. Neither goes with ``transfer``."""
+    ``solve``: add the Gauss collocation's column. Neither goes with ``transfer``."""
     path = Path(path)
     if transfer and (march or solve or T != "4*pi"):
         raise ConfigError("--march, --solve and --T make a single-interval template; a transfer one has source and "
