@@ -22,7 +22,7 @@ from atlasnn.evaluation import reference_solution
 from atlasnn.systems import henon_heiles
 
 from benchmarks.common import machine_info
-from benchmarks.solver_workprecision import timed
+from benchmarks.solver_workprecision import timed  # noqa: F401
 
 
 def members(count: int, seed: int = 0) -> np.ndarray:

@@ -30,7 +30,7 @@ from atlasnn.errors import ConfigError
 from atlasnn.solutions._base import AbstractSolution, check_inside
 from atlasnn.solutions._estimate import ErrorEstimate
 from atlasnn.solutions._solution import check_outside_mode
-from atlasnn.solutions._tableau import gauss_tableau, shifted_legendre, window_value
+from atlasnn.solutions._tableau import gauss_tableau, shifted_legendre
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["PolynomialSolution"]
@@ -121,10 +121,10 @@ class PolynomialSolution(AbstractSolution):
         k = self.window_index(t)
         start, length = self.edges[k], self.edges[k + 1] - self.edges[k]
         theta = (t - start) / length
-        L = self._stage_rows(k)  # (m, s, 2d)
-        value = np.einsum("mj,mjn->mn", window_value(self._tab, theta), L)
-        rate = np.einsum("mj,mjn->mn", shifted_legendre(theta, self.stages) @ self._tab.rate.T, L) / length[:, None]
-        return self.z[k] + (self.e[k] + value), rate
+        basis = shifted_legendre(theta, self.stages)  # (m, s + 1)
+        weights = np.stack([theta[:, None] * (basis[:, :-1] @ self._tab.value.T), basis @ self._tab.rate.T], axis=1)
+        both = weights @ self._stage_rows(k)  # (m, 2, 2d): ẑ − z_k and h·dẑ/dt
+        return self.z[k] + (self.e[k] + both[:, 0]), both[:, 1] / length[:, None]
 
     def pieces(self) -> list[tuple[Any, float, float, float]]:
         raise NotImplementedError("a polynomial solution has no network pieces; its estimate() compares it "

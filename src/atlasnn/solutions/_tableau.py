@@ -18,7 +18,7 @@ multiple of 2⁻⁵², μ_ji = 1 − μ_ij, μ_ii = 1/2), so the method that flo
 up to the round-off of its arithmetic, not also up to that of its coefficients (Antoñana, Makazaga
 & Murua, IRKGL16, Numer. Algorithms 2017).
 
-The coefficients are computed once per s with mpmath at 40 digits. The window's polynomial (the
+The coefficients are computed once per s with mpmath at 40 digits (a few milliseconds). The window's polynomial (the
 dense output) is held in the shifted Legendre basis P̃_k(θ) = P_k(2θ − 1), which is well
 conditioned on [0, 1] and beyond it (the warm start of the next window evaluates it on [1, 2]),
 in the trial solution's own form (exact at θ = 0 whatever L is):
@@ -130,40 +130,53 @@ def _halves(s: int) -> np.ndarray:
     return np.stack([to_coeffs @ shifted_legendre(0.5 * (j + phi), s) for j in (0, 1)])
 
 
+def _legendre_values(k_max: int, x):
+    """P_0(x)..P_kmax(x) by the three-term recurrence (x an mpmath number)."""
+    out = [x * 0 + 1, x]
+    for k in range(1, k_max):
+        out.append(((2 * k + 1) * x * out[k] - k * out[k - 1]) / (k + 1))
+    return out[: k_max + 1]
+
+
 def _exact(s: int):
-    """Nodes, weights and the Legendre coefficients of ℓ_j and of ∫_0^θ ℓ_j, at 40 digits."""
+    """Nodes, weights, the Legendre coefficients of ℓ_j, of ∫_0^θ ℓ_j and of (∫_0^θ ℓ_j)/θ, and
+    a_ij, at 40 digits (mpmath's working precision raised in this block only)."""
     import mpmath as mp
 
-    mp.mp.dps = 40
-    x0, _ = np.polynomial.legendre.leggauss(s)
-    nodes = []
-    for guess in x0:  # Newton from float64 on P_s(x) = 0
-        x = mp.mpf(float(guess))
-        for _ in range(8):
-            x -= mp.legendre(s, x) / mp.diff(lambda y: mp.legendre(s, y), x)
-        nodes.append(x)
-    dp = [mp.diff(lambda y: mp.legendre(s, y), x) for x in nodes]
-    c = [(1 + x) / 2 for x in nodes]
-    b = [1 / ((1 - x ** 2) * d ** 2) for x, d in zip(nodes, dp)]  # the weights on [-1, 1], halved
-    # ℓ_j = Σ_k D_jk P̃_k (k < s): the Gauss quadrature of ℓ_j P̃_k is exact, and ℓ_j(c_i) = δ_ij
-    d = [[(2 * k + 1) * b[j] * mp.legendre(k, nodes[j]) for k in range(s)] for j in range(s)]
-    # ∫_0^θ P̃_k = (P̃_{k+1} − P̃_{k−1}) / (2(2k + 1)) for k ≥ 1, and (P̃_1 + P̃_0)/2 for k = 0
-    integral = [[mp.mpf(0)] * (s + 1) for _ in range(s)]
-    for j in range(s):
-        for k in range(s):
-            if k == 0:
-                integral[j][0] += d[j][0] / 2
-                integral[j][1] += d[j][0] / 2
-            else:
+    with mp.workdps(40):
+        nodes = []
+        for guess in np.polynomial.legendre.leggauss(s)[0]:  # Newton from float64 on P_s(x) = 0
+            x = mp.mpf(float(guess))
+            for _ in range(6):
+                p = _legendre_values(s, x)
+                x -= p[s] / (s * (x * p[s] - p[s - 1]) / (x * x - 1))
+            nodes.append(x)
+        P = [_legendre_values(s, x) for x in nodes]  # P[i][k] = P_k(x_i), x_i = 2c_i − 1
+        c = [(1 + x) / 2 for x in nodes]
+        b = [1 / ((1 - x * x) * (s * (x * p[s] - p[s - 1]) / (x * x - 1)) ** 2) for x, p in zip(nodes, P)]
+        # ℓ_j = Σ_k D_jk P̃_k (k < s): the Gauss quadrature of ℓ_j P̃_k is exact, and ℓ_j(c_i) = δ_ij
+        d = [[(2 * k + 1) * b[j] * P[j][k] for k in range(s)] for j in range(s)]
+        # ∫_0^θ P̃_k = (P̃_{k+1} − P̃_{k−1}) / (2(2k + 1)) for k ≥ 1, and (P̃_1 + P̃_0)/2 for k = 0
+        integral = [[mp.mpf(0)] * (s + 1) for _ in range(s)]
+        for j in range(s):
+            integral[j][0] += d[j][0] / 2
+            integral[j][1] += d[j][0] / 2
+            for k in range(1, s):
                 integral[j][k + 1] += d[j][k] / (2 * (2 * k + 1))
                 integral[j][k - 1] -= d[j][k] / (2 * (2 * k + 1))
-    a = [[sum(integral[j][k] * mp.legendre(k, 2 * c[i] - 1) for k in range(s + 1)) for j in range(s)]
-         for i in range(s)]
-    # N_j(θ) = Λ_j(θ)/θ, of degree s − 1: its Legendre coefficients by s-point Gauss quadrature (exact)
-    lam = lambda j, th: sum(integral[j][k] * mp.legendre(k, 2 * th - 1) for k in range(s + 1))  # noqa: E731
-    n = [[(2 * k + 1) * sum(b[i] * lam(j, c[i]) / c[i] * mp.legendre(k, nodes[i]) for i in range(s))
-          for k in range(s)] for j in range(s)]
-    return c, b, d, integral, a, n
+        a = [[mp.fsum(integral[j][k] * P[i][k] for k in range(s + 1)) for j in range(s)] for i in range(s)]
+        # N_j(θ) = Λ_j(θ)/θ, of degree s − 1, with Λ_j(c_i) = a_ij: its Legendre coefficients by
+        # s-point Gauss quadrature (exact)
+        n = [[(2 * k + 1) * mp.fsum(b[i] * a[i][j] / c[i] * P[i][k] for i in range(s)) for k in range(s)]
+             for j in range(s)]
+        mu = [[_fraction(a[i][j] / b[j]) for j in range(s)] for i in range(s)]
+        return c, b, d, integral, mu, n
+
+
+def _fraction(x) -> Fraction:
+    """An mpmath number as the exact rational it holds."""
+    man, exp = x.man_exp
+    return Fraction(man) * Fraction(2) ** exp
 
 
 def _symplectic_mu(mu_exact) -> np.ndarray:
@@ -176,7 +189,7 @@ def _symplectic_mu(mu_exact) -> np.ndarray:
     for i in range(s):
         out[i, i] = 0.5
         for j in range(i):
-            q = round(Fraction(str(mu_exact[i][j])) / quantum) * quantum
+            q = round(mu_exact[i][j] / quantum) * quantum
             if not -1 < q < 2:
                 raise AssertionError(f"μ[{i},{j}] = {float(q)} is out of the exactly representable range")
             out[i, j] = float(q)
@@ -192,8 +205,7 @@ def gauss_tableau(stages: int) -> GaussTableau:
     if isinstance(stages, bool) or not isinstance(stages, (int, np.integer)) or not 1 <= stages <= MAX_STAGES:
         raise ConfigError(f"stages must be an integer from 1 to {MAX_STAGES}, got {stages!r}")
     s = int(stages)
-    c, b, d, integral, a, n = _exact(s)
-    mu_exact = [[a[i][j] / b[j] for j in range(s)] for i in range(s)]
+    c, b, d, integral, mu_exact, n = _exact(s)
     mu = _symplectic_mu(mu_exact)
     f = lambda rows: np.array([[float(x) for x in r] for r in rows])  # noqa: E731
     series = f([[integral[j][k] / b[j] for k in range(s + 1)] for j in range(s)])
