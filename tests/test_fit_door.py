@@ -13,7 +13,7 @@ import pytest
 from atlasnn.cli import main
 from atlasnn.errors import ConfigError
 from atlasnn.experiments.config import load_family
-from atlasnn.inverse import (FIT_METHODS, AbstractFitMethod, Bundle, CollocationFit, Joint, Shooting, fit, fit_shooting,
+from atlasnn.inverse import (FIT_METHODS, AbstractFitMethod, BundleFit, CollocationFit, Joint, Shooting, fit, fit_shooting,
                              register_fit_method, synthetic_observations)
 from atlasnn.observations import Unknown
 from atlasnn.systems import henon_heiles
@@ -46,7 +46,7 @@ def test_a_name_instead_of_an_object_is_refused_naming_the_object():
 
 def test_the_registry_holds_the_built_in_methods_by_their_config_names():
     assert {n: c for n, c in FIT_METHODS.items() if n in ("shooting", "joint", "bundle", "collocation")} == {
-        "shooting": Shooting, "joint": Joint, "bundle": Bundle, "collocation": CollocationFit}
+        "shooting": Shooting, "joint": Joint, "bundle": BundleFit, "collocation": CollocationFit}
     with pytest.raises(ConfigError, match="AbstractFitMethod subclass"):
         register_fit_method(dict)
 

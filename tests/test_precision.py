@@ -23,7 +23,7 @@ from atlasnn.precision import default_float
     reason="the suite was started with ATLASNN_X64 set",
 )
 def test_float32_is_the_default():
-    assert not atlasnn.x64_enabled()
+    assert not atlasnn.precision.x64_enabled()
     assert default_float() == jnp.float32
     model = make_model((1.0, 0.0), scaling="rational_exp", width=16, depth=2)
     leaves = jax.tree_util.tree_leaves(model)
@@ -31,20 +31,20 @@ def test_float32_is_the_default():
 
 
 def test_enable_x64_toggles_and_restores():
-    before = atlasnn.x64_enabled()
+    before = atlasnn.precision.x64_enabled()
     try:
-        atlasnn.enable_x64(True)
-        assert atlasnn.x64_enabled() is True
+        atlasnn.precision.enable_x64(True)
+        assert atlasnn.precision.x64_enabled() is True
         assert default_float() == jnp.float64
         assert jnp.zeros(2).dtype == jnp.float64
         model = make_model((1.0, 0.0), scaling="tanh", width=4, depth=1)
         assert model.net.weights[0].dtype == jnp.float64 and model.scaling.raw_m.dtype == jnp.float64
-        atlasnn.enable_x64(False)
-        assert atlasnn.x64_enabled() is False
+        atlasnn.precision.enable_x64(False)
+        assert atlasnn.precision.x64_enabled() is False
         assert jnp.zeros(2).dtype == jnp.float32
     finally:
-        atlasnn.enable_x64(before)
-    assert atlasnn.x64_enabled() == before
+        atlasnn.precision.enable_x64(before)
+    assert atlasnn.precision.x64_enabled() == before
 
 
 _X64_SCRIPT = textwrap.dedent(
@@ -60,7 +60,7 @@ _X64_SCRIPT = textwrap.dedent(
     model = make_model(system.z0, scaling="rational_exp", width=8, depth=1, seed=0)
     res = train(model, system, 1.0, TrainConfig(epochs=40, lr=1e-2, n_points=8, sigma=0.1, chunk=40, progress=False))
     print(json.dumps({
-        "x64": atlasnn.x64_enabled(),
+        "x64": atlasnn.precision.x64_enabled(),
         "dtypes": sorted({str(x.dtype) for x in jax.tree_util.tree_leaves(res.model)}),
         "out": str(res.model(np.linspace(0.0, 1.0, 5)).dtype),
         "loss": [float(v) for v in res.history.loss],

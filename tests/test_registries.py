@@ -107,7 +107,14 @@ def test_a_builtin_system_is_one_entry():
         del BUILTIN_SYSTEMS["duffing"]
 
 
-def test_the_top_level_face_loads_names_on_use():
-    assert atlasnn.make_model is make_model and atlasnn.train is train
+def test_the_top_level_face_loads_names_on_use_and_holds_one_door_per_question():
+    from atlasnn.solver import GaussCollocation, solve
+
+    assert atlasnn.solve is solve and atlasnn.GaussCollocation is GaussCollocation
+    assert len(atlasnn.__all__) <= 30
+    for name in ("solve", "fit", "solve_bundle", "run_experiment", "save", "load"):
+        assert name in atlasnn.__all__
+    # the training functions live in atlasnn.training, not on the face
+    assert "train" not in atlasnn.__all__ and make_model is atlasnn.nn.make_model and train is atlasnn.training.train
     with pytest.raises(AttributeError, match="no attribute"):
         atlasnn.not_a_name  # noqa: B018

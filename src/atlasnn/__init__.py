@@ -1,15 +1,24 @@
-"""atlasnn: ATLAS-NN, learnable time-scaled Hamiltonian neural networks (JAX).
+"""atlasnn: ATLAS-NN, learnable time-scaled Hamiltonian neural networks, and the float64 Gauss
+collocation of its trial solution (JAX).
 
-The package, one subpackage per concept, data flowing one way (lowest first):
+The face: one door per question, each taking method objects that hold their settings.
+
+* a trajectory: :func:`solve` (and :func:`solve_batch`) with :class:`GaussCollocation` (default),
+  :class:`Collocation`, :class:`AdamMarch` or :class:`Transfer`;
+* a bundle (every initial state and parameter of a :class:`BundleBox`): :func:`solve_bundle` with
+  :class:`FlowMap` (default) or :class:`NetworkBundle`;
+* parameters from observations: :func:`fit` with :class:`Shooting` (default), :class:`CollocationFit`,
+  :class:`Joint` or :class:`BundleFit`, returning a :class:`FitResult`;
+* the paper's experiments: :func:`load_config`, :func:`run_experiment` (and ``atlasnn reproduce``);
+* any solution: :func:`save`, :func:`load`.
+
+Everything else lives in its subpackage (``atlasnn.training`` for training, marching and transfer by
+hand; ``atlasnn.evaluation``, ``atlasnn.report`` …), in layers, data flowing one way (lowest first):
 
     systems, nn → solutions → training → solver → checkpoint → evaluation → inverse → report → experiments → cli
 
-(``observations``, the data of inverse problems, sits on the ground floor with ``fileio``.)
-
-The names below are this face: what the README and a script use, e.g.
-``from atlasnn import HamiltonianSystem, make_model, train, Solution``. They are loaded on first
-use (PEP 562), so ``import atlasnn`` and ``atlasnn --help`` stay quick; each also lives in its
-subpackage (``atlasnn.training.train``), which is where its documentation is.
+(``observations``, the data of inverse problems, sits on the ground floor with ``fileio``.) The
+names are loaded on first use (PEP 562), so ``import atlasnn`` and ``atlasnn --help`` stay quick.
 """
 
 from __future__ import annotations
@@ -19,7 +28,7 @@ from typing import Any
 
 from atlasnn.compile_cache import enable_compile_cache
 from atlasnn.errors import AtlasError
-from atlasnn.precision import apply_matmul_precision, enable_x64, x64_enabled
+from atlasnn.precision import apply_matmul_precision
 from atlasnn.version import __version__
 
 enable_compile_cache()  # before anything compiles (atlasnn.compile_cache; ATLASNN_CACHE_DIR=off)
@@ -27,26 +36,19 @@ apply_matmul_precision()  # full float32 products on a GPU too (atlasnn.precisio
 
 # name -> the subpackage that defines it
 _FACE = {
-    "systems": ("HamiltonianSystem", "builtin_system", "expression_system", "register_system", "BuiltinSystem",
-                "BundleBox", "with_params"),
-    "nn": ("make_model", "TrialSolution", "TimeScaling", "ModelKind", "register_model", "MODELS"),
-    "solutions": ("Solution", "PiecewiseSolution", "BundleSolution", "FlowMapBundle"),
-    "training": ("TrainConfig", "train", "train_batch", "transfer", "polish", "PolishConfig", "MarchConfig",
-                 "march", "march_batch", "DEFAULT_NETWORK", "DEFAULT_WINDOW_TRAIN", "train_bundle", "BundleTrainConfig"),
-    "solver": ("solve", "solve_batch", "Collocation", "AdamMarch", "solve_bundle", "FlowMap"),
-    "checkpoint": ("save_checkpoint", "load_checkpoint", "save_piecewise", "load_piecewise", "save_bundle",
-                   "load_bundle", "save_flowmap", "load_flowmap"),
-    "evaluation": ("reference_solution", "integrate", "error_table", "judge_training", "Metric", "register_metric",
-                   "reference_members"),
-    "inverse": ("fit", "Shooting", "CollocationFit", "Joint", "Bundle", "FitResult", "fit_joint", "JointConfig",
-                "fit_with_bundle", "fit_collocation", "fit_multistart", "fit_shooting", "synthetic_observations"),
+    "systems": ("HamiltonianSystem", "builtin_system", "expression_system", "BundleBox"),
+    "solver": ("solve", "solve_batch", "GaussCollocation", "Collocation", "AdamMarch", "Transfer", "solve_bundle",
+               "FlowMap", "NetworkBundle"),
+    "checkpoint": ("save", "load"),
+    "evaluation": ("reference_solution", "integrate"),
+    "inverse": ("fit", "Shooting", "CollocationFit", "Joint", "BundleFit", "FitResult"),
     "observations": ("Observations", "Unknown", "load_observations"),
-    "experiments": ("run_experiment", "resume_experiment", "run_sweep", "load_config", "run_family"),
+    "experiments": ("run_experiment", "load_config"),
 }
 _WHERE = {name: pkg for pkg, names in _FACE.items() for name in names}
 _WHERE["load_config"] = "experiments.config"
 
-__all__ = ["__version__", "AtlasError", "enable_x64", "x64_enabled", *_WHERE]
+__all__ = ["__version__", "AtlasError", *_WHERE]
 
 
 def __getattr__(name: str) -> Any:

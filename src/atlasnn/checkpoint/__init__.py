@@ -1,9 +1,10 @@
-"""Checkpoints: trained models, training states and time-marching solutions saved as one ``.npz``
-file each (arrays + JSON meta, a content hash, atomic writes, never pickle), loaded back with
+"""Checkpoints: every solution saved and loaded by one pair, :func:`save` and :func:`load`; trained
+models, training states and time-marching solutions saved as one ``.npz`` file each (arrays + JSON meta, a content hash, atomic writes, never pickle), loaded back with
 every problem reported as one line naming the file; a time-marching run's progress, window by
 window, to resume it; bundle solutions."""
 
 from atlasnn.checkpoint._bundle import KIND_BUNDLE, load_bundle, save_bundle
+from atlasnn.checkpoint._door import load, save
 from atlasnn.checkpoint._flowmap import KIND_FLOWMAP, load_flowmap, save_flowmap
 from atlasnn.checkpoint._format import FORMAT, FORMAT_VERSION
 from atlasnn.checkpoint._march import KIND_MARCH_PROGRESS, load_march_progress, save_march_progress
@@ -19,6 +20,8 @@ from atlasnn.checkpoint._single import (
 )
 
 __all__ = [
+    "save",
+    "load",
     "save_checkpoint",
     "load_checkpoint",
     "Checkpoint",

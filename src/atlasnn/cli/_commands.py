@@ -421,6 +421,8 @@ def cmd_solve(args) -> int:
             f"{info['rejected']} rejected, {info['newton_iterations']} Gauss-Newton iterations")
     print(f"{system.name}: [{t0:g}, {T:.6g}] in {sol.n_windows} windows ({work}), {info['solve_time'] * 1e3:.1f} ms "
           f"(first call, with compilation or cache load: {info['first_call_time']:.2f} s)")
+    if info.get("advice"):
+        print(f"note: {info['advice']}")
     est = sol.estimate(z0=z0)
     trust = "" if est.trusted else f" (quantitative only up to t = {est.trusted_until:.4g}: past it the error is large)"
     print(f"estimated max error: {est.max_abs:.3e} = {est.relative_max:.3e} of the state's range{trust}")

@@ -344,10 +344,11 @@ def reference_solutions(system: HamiltonianSystem, z0: Any, grids: Sequence[Any]
 
 
 def dop853(system: HamiltonianSystem, z_init: np.ndarray, t: np.ndarray, rtol: float,
-           atol: float) -> tuple[np.ndarray, int]:
+           atol: float, rhs: Callable[[float, np.ndarray], np.ndarray] | None = None) -> tuple[np.ndarray, int]:
     """(Z at the times ``t``, the number of right-hand-side evaluations): SciPy's DOP853 from
-    ``z_init`` at ``t[0]`` (checked inputs; :func:`reference_solution` is the public face)."""
-    rhs = reference_rhs(system)
+    ``z_init`` at ``t[0]`` (checked inputs; :func:`reference_solution` is the public face);
+    ``rhs``: the field as a NumPy function (default: the system's compiled one)."""
+    rhs = reference_rhs(system) if rhs is None else rhs
     try:
         with jax.enable_x64(True):
             sol = solve_ivp(

@@ -5,7 +5,10 @@ reference solution on it, every method becomes points (wall time, error):
 
 - the symplectic integrators (symplectic Euler, Störmer–Verlet, Yoshida-4) with N = m·(E − 1)
   steps for several m, so that every evaluation time is a step time (no interpolation);
-- DOP853 (SciPy ``solve_ivp``) at several tolerances rtol = atol, reporting at t_1..t_E;
+- DOP853 (SciPy ``solve_ivp``) at several tolerances rtol = atol, reporting at t_1..t_E, its
+  right-hand side NumPy code where the system has it written (the built-ins: a call costs a few µs)
+  and the compiled JAX field elsewhere (about 16 µs a call: DOP853 is then slower than at its best,
+  which ``WorkPoint.rhs`` records);
 - network methods, given by the caller: the training wall time per seed (and, separately, the
   time to evaluate the trained solution at 10⁴ times, :func:`evaluation_seconds`).
 
@@ -30,7 +33,7 @@ import numpy as np
 
 from atlasnn.evaluation._integrators import dop853, integrate
 from atlasnn.evaluation._metrics import energy_drift
-from atlasnn.systems import HamiltonianSystem
+from atlasnn.systems import HamiltonianSystem, numpy_field
 
 SYMPLECTIC = {"symplectic_euler": "symplectic Euler", "stormer_verlet": "Störmer–Verlet", "yoshida4": "Yoshida-4"}
 #: gradient evaluations (∇V and ∇T each once) per step of each symplectic method
@@ -52,6 +55,7 @@ class WorkPoint:
     kind: str = "classical"  # "classical" | "network"
     compile_seconds: float = 0.0
     evaluations: int = 0  # right-hand-side (DOP853) or gradient (symplectic) evaluations; 0 for networks
+    rhs: str = ""  # DOP853's right-hand side: "numpy" (written out) or "jax" (the compiled field)
 
 
 def _timed(fn: Callable[[], Any], min_seconds: float, max_repeats: int = 50) -> tuple[Any, float]:
@@ -94,14 +98,17 @@ def symplectic_points(system: HamiltonianSystem, z0: np.ndarray, t_eval: np.ndar
 def dop853_points(system: HamiltonianSystem, z0: np.ndarray, t_eval: np.ndarray, z_ref: np.ndarray,
                   *, tolerances: Sequence[float] = TOLERANCES, min_seconds: float = 0.2) -> list[WorkPoint]:
     """DOP853 at rtol = atol = each tolerance (dense output at the evaluation times), its
-    right-hand side compiled ahead of time (:func:`~atlasnn.evaluation.reference_rhs`)."""
+    right-hand side NumPy code where the system has one written (:func:`atlasnn.systems.numpy_field`),
+    else compiled ahead of time (:func:`~atlasnn.evaluation.reference_rhs`)."""
     e0 = float(system.energy64(z0))
     z_init = np.asarray(z0, np.float64)
     t = np.asarray(t_eval, np.float64)
+    rhs = numpy_field(system)
     points = []
     for tol in tolerances:
-        (z, nfev), seconds = _timed(lambda: dop853(system, z_init, t, tol, tol), min_seconds)
-        points.append(WorkPoint("dop853", f"tol={tol:g}", seconds, **errors(system, z, z_ref, e0), evaluations=nfev))
+        (z, nfev), seconds = _timed(lambda: dop853(system, z_init, t, tol, tol, rhs), min_seconds)
+        points.append(WorkPoint("dop853", f"tol={tol:g}", seconds, **errors(system, z, z_ref, e0), evaluations=nfev,
+                                rhs="jax" if rhs is None else "numpy"))
     return points
 
 

@@ -7,7 +7,7 @@ partial observations, through one door, :func:`fit`, which takes a method object
 * :class:`CollocationFit` — parameters, trajectory and its network weights solved together in
   float64 (:func:`fit_collocation`), then polished by shooting;
 * :class:`Joint` — one network trained on the data and Hamilton's equations (:func:`fit_joint`);
-* :class:`Bundle` — a bundle trained over the unknowns' bounds, then fitted (:func:`fit_with_bundle`).
+* :class:`BundleFit` — a bundle trained over the unknowns' bounds, then fitted (:func:`fit_with_bundle`).
 
 All return a :class:`FitResult` (estimates, Gauss–Newton σ), which :func:`judge_fit` marks
 untrusted where a rule says so. :func:`synthetic_observations` makes test data; the observations
@@ -18,7 +18,7 @@ from atlasnn.inverse._bundle_fit import bundle_box_for, fit_with_bundle
 from atlasnn.inverse._collocation_fit import CollocationFit, fit_collocation
 from atlasnn.inverse._fit_result import MISFIT_LIMIT, FitResult, distrust, flag_misfit, gauss_newton_covariance
 from atlasnn.inverse._joint import JointConfig, fit_joint
-from atlasnn.inverse._methods import FIT_METHODS, Bundle, Joint, Shooting, fit, register_fit_method
+from atlasnn.inverse._methods import FIT_METHODS, BundleFit, Joint, Shooting, fit, register_fit_method
 from atlasnn.inverse._multistart import auto_starts, fit_multistart, judge_fit
 from atlasnn.inverse._shooting import auto_segments, check_shooting_inputs, fit_shooting, predict_fit, shooting_misfit
 from atlasnn.inverse._synthetic import synthetic_observations
@@ -29,7 +29,7 @@ __all__ = [
     "Shooting",
     "CollocationFit",
     "Joint",
-    "Bundle",
+    "BundleFit",
     "FIT_METHODS",
     "register_fit_method",
     "FitResult",

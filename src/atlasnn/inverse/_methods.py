@@ -8,7 +8,7 @@ one :func:`register_fit_method` entry. The built-in ones:
   the guess alone (``starts=1``) or as a multistart over the bounds (default);
 * :class:`CollocationFit` — the simultaneous float64 collocation fit, polished by shooting;
 * :class:`Joint` — one network trained on the data and Hamilton's equations together;
-* :class:`Bundle` — a bundle trained over the unknowns' bounds, then least squares on it.
+* :class:`BundleFit` — a bundle trained over the unknowns' bounds, then least squares on it.
 
 Every one returns a :class:`FitResult`, judged by the rules of :func:`judge_fit` that need no other fit.
 """
@@ -30,7 +30,7 @@ from atlasnn.observations import Observations, Unknown
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.training import BundleTrainConfig, train_bundle
 
-__all__ = ["AbstractFitMethod", "Shooting", "Joint", "Bundle", "FIT_METHODS", "register_fit_method", "fit"]
+__all__ = ["AbstractFitMethod", "Shooting", "Joint", "BundleFit", "FIT_METHODS", "register_fit_method", "fit"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,7 +70,7 @@ class Joint(AbstractFitMethod):
 
 
 @dataclasses.dataclass(frozen=True)
-class Bundle(AbstractFitMethod):
+class BundleFit(AbstractFitMethod):
     """A bundle trained on the equations over the unknowns' bounds (time-marched in ``windows``),
     then least squares with it as the model (:func:`fit_with_bundle`); the training's seconds are
     in the result's ``search["training_seconds"]``."""
@@ -107,7 +107,7 @@ def register_fit_method(cls: type) -> type:
     return cls
 
 
-for _cls in (Shooting, Joint, Bundle, CollocationFit):
+for _cls in (Shooting, Joint, BundleFit, CollocationFit):
     register_fit_method(_cls)
 
 
@@ -117,7 +117,7 @@ def fit(system: HamiltonianSystem, observations: Observations, unknowns: Sequenc
     ``observations`` by ``method`` (default: :class:`Shooting`, a multistart over the bounds).
 
     ``method`` is an object — ``Shooting(segments=4)``, ``CollocationFit()``, ``Joint(JointConfig(epochs=500))``,
-    ``Bundle(windows=4)`` — not a name (names are for configs, :data:`FIT_METHODS`)."""
+    ``BundleFit(windows=4)`` — not a name (names are for configs, :data:`FIT_METHODS`)."""
     method = Shooting() if method is None else method
     if not isinstance(method, AbstractFitMethod):
         hint = f" (use {FIT_METHODS[method].__name__}())" if isinstance(method, str) and method in FIT_METHODS else ""

@@ -14,7 +14,7 @@ forward-mode autodiff of the same function.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 from typing import Any, Sequence
 
@@ -83,6 +83,7 @@ class BundleSolution:
     edges: np.ndarray
     box: BundleBox
     system: HamiltonianSystem | None = None
+    info: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         edges = np.asarray(self.edges, np.float64).reshape(-1)

@@ -6,22 +6,26 @@ symplectic and of order 2s — as one compiled program. :class:`Collocation` sol
 tanh features by Gauss–Newton; :class:`AdamMarch` is the paper's network trained by Adam window by
 window. A new solver is one :class:`AbstractSolver` subclass and one :func:`register_solver` entry.
 
-:func:`solve_bundle` solves a whole bundle (every initial state and parameter of a box) as one
-float64 flow map (:class:`FlowMap`), composed window after window.
+:func:`solve_bundle` solves a whole bundle (every initial state and parameter of a box) with a method
+object: one float64 flow map (:class:`FlowMap`, the default) or a trained network
+(:class:`NetworkBundle`).
 """
 
 from atlasnn.solver._base import SOLVERS, AbstractSolver, check_tolerance, register_solver, solver_from_name
 from atlasnn.solver._collocation import Collocation, require_float64
-from atlasnn.solver._flowmap import FlowMap, FlowMapProblem, flowmap_problem, solve_bundle
+from atlasnn.solver._bundle import NetworkBundle, solve_bundle
+from atlasnn.solver._flowmap import FlowMap, FlowMapProblem, flowmap_bundle, flowmap_problem
 from atlasnn.solver._gauss import GaussCollocation
 from atlasnn.solver._features import WINDOW_SCALINGS, RandomFeatures, collocation_nodes
 from atlasnn.solver._solve import solve, solve_batch
-from atlasnn.solver._trained import AdamMarch
+from atlasnn.solver._trained import AdamMarch, Transfer
 
 __all__ = [
     "solve",
     "solve_bundle",
     "FlowMap",
+    "NetworkBundle",
+    "flowmap_bundle",
     "FlowMapProblem",
     "flowmap_problem",
     "solve_batch",
@@ -29,6 +33,7 @@ __all__ = [
     "GaussCollocation",
     "Collocation",
     "AdamMarch",
+    "Transfer",
     "SOLVERS",
     "register_solver",
     "solver_from_name",

@@ -49,7 +49,7 @@ from atlasnn.errors import ConfigError
 from atlasnn.solutions import ChebyshevBasis, FlowMapBundle
 from atlasnn.systems import BundleBox, HamiltonianSystem, parametric_field
 
-__all__ = ["FlowMap", "solve_bundle", "flowmap_problem", "FlowMapProblem"]
+__all__ = ["FlowMap", "flowmap_bundle", "flowmap_problem", "FlowMapProblem"]
 
 
 @dataclass(frozen=True)
@@ -399,12 +399,11 @@ def _final_fit(method: FlowMap, system, box: BundleBox, physics: _Physics, shell
                       f"(states {_listed(visited)}, region {_listed(region)}); use more windows or higher degrees")
 
 
-def solve_bundle(system: HamiltonianSystem, box: BundleBox, method: FlowMap = FlowMap(), *, seed: int = 0,
-                 progress: Callable[[str], None] | None = None) -> FlowMapBundle:
+def flowmap_bundle(system: HamiltonianSystem, box: BundleBox, method: FlowMap, *, seed: int = 0,
+                   progress: Callable[[str], None] | None = None) -> FlowMapBundle:
     """The bundle over ``box`` as one float64 flow map (module docstring). ``seed`` draws the
-    collocation points; ``progress`` is told each fit and Gauss–Newton step."""
-    if not isinstance(method, FlowMap):
-        raise ConfigError(f"method must be a FlowMap, got {type(method).__name__}")
+    collocation points; ``progress`` is told each fit and Gauss–Newton step. The door is
+    :func:`atlasnn.solve_bundle`."""
     box.check_system(system)
     n_unknowns = method.unknowns(box.state_dim, len(box.params))
     if n_unknowns > method.max_unknowns:

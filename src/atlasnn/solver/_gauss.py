@@ -154,13 +154,25 @@ class GaussCollocation(AbstractSolver):
                     f"[{t0:.6g}, {T:.6g}]: {why} (rtol={self.rtol:g}, atol={self.atol:g}, h={self.h}); "
                     + ("try another h or newton=True" if self.h is not None else
                        "loosen the tolerance, or the system may be singular there"))
+            advice = self._advice(length)
             info = {"solver": self.name, "settings": self.settings(), "order": self.order, "windows": int(start.size),
                     "rejected": int(state.rejected[m]), "iterations": int(state.iterations[m]),
                     "newton_windows": int(state.newton[m]), "check_worst": float(state.worst[m]),
                     "h_min": float(length.min()), "h_max": float(length.max()), "solve_time": wall,
-                    "first_call_time": first_call, "batch": b}
+                    "first_call_time": first_call, "batch": b, **({"advice": advice} if advice else {})}
             out.append(self._solution(system, np.append(start, T), z, e, L, ratio, info))
         return out
+
+    def _advice(self, length: np.ndarray) -> str | None:
+        """A line for a constant-length march whose length had to shrink far after its warm-up (an
+        orbit with several time scales, such as an eccentric Kepler orbit): adaptive lengths take
+        fewer windows there."""
+        kept = length[self.warmup:-1]
+        if self.steps != "constant" or self.h is not None or kept.size < 2 or kept.max() <= 8 * kept.min():
+            return None
+        return (f"the window length shrank {kept.max() / kept.min():.0f}-fold after the warm-up (time scales that "
+                "differ along the orbit): steps='adaptive' would take fewer windows (not symplectic: "
+                "docs/SOLVER.md, 'Window lengths')")
 
     def _march(self, program, z0s, t0, T, progress):
         """Call the compiled program until every member reaches T or fails: the accepted windows

@@ -5,7 +5,7 @@ tables that validate and document them (``FAMILY_TABLES``, part of
 
 Every default has one home. The bundle's training settings are :class:`BundleTrainConfig`'s (the
 Python API); the joint fit's are :class:`JointConfig`'s; the other methods' are their objects'
-(:class:`Shooting`, :class:`Bundle`, :class:`CollocationFit`); the rest (the box, the network,
+(:class:`Shooting`, :class:`BundleFit`, :class:`CollocationFit`); the rest (the box, the network,
 the held-out test set, the observations) are the records' below. The schema keys read them from
 there, so the config parser, the reference and the Python API agree by construction.
 """
@@ -34,7 +34,7 @@ from atlasnn.experiments.config._types import (
     _table,
 )
 from atlasnn.errors import ConfigError
-from atlasnn.inverse import FIT_METHODS, AbstractFitMethod, Bundle, CollocationFit, Joint, JointConfig, Shooting
+from atlasnn.inverse import FIT_METHODS, AbstractFitMethod, BundleFit, CollocationFit, Joint, JointConfig, Shooting
 from atlasnn.nn import model_aliases
 from atlasnn.observations import Unknown
 from atlasnn.solver import FlowMap
@@ -122,11 +122,11 @@ class FitSettings:
     # the defaults are the method objects' own (one home for each)
     segments: int | str = Shooting.segments
     starts: int | str = Shooting.starts
-    bundle_windows: int = Bundle.windows
-    bundle_epochs: int = Bundle.epochs
-    bundle_lm_steps: int = Bundle.lm_steps
-    bundle_lm_points: int = Bundle.lm_points
-    bundle_width: int = Bundle.width
+    bundle_windows: int = BundleFit.windows
+    bundle_epochs: int = BundleFit.epochs
+    bundle_lm_steps: int = BundleFit.lm_steps
+    bundle_lm_points: int = BundleFit.lm_points
+    bundle_width: int = BundleFit.width
     collocation_windows: int | str = CollocationFit.windows
     collocation_features: int = CollocationFit.features
 
@@ -134,7 +134,7 @@ class FitSettings:
         """The listed methods as the objects :func:`atlasnn.inverse.fit` takes, with these settings."""
         made = {"shooting": lambda: Shooting(segments=self.segments, starts=self.starts),
                 "joint": lambda: Joint(self.joint),
-                "bundle": lambda: Bundle(windows=self.bundle_windows, epochs=self.bundle_epochs,
+                "bundle": lambda: BundleFit(windows=self.bundle_windows, epochs=self.bundle_epochs,
                                          lm_steps=self.bundle_lm_steps, lm_points=self.bundle_lm_points,
                                          width=self.bundle_width),
                 "collocation": lambda: CollocationFit(windows=self.collocation_windows,
@@ -285,7 +285,7 @@ FAMILY_TABLES: dict[str, TableSpec] = {
         Key("times_seed", _SEED, ObservationSettings.times_seed, "Synthetic: the seed of the observation times."),
     )),
     "fit": TableSpec("The fit methods of an inverse problem and their settings; the defaults are the method "
-                     "objects' (atlasnn.inverse: Joint, Shooting, Bundle, CollocationFit).", (
+                     "objects' (atlasnn.inverse: Joint, Shooting, BundleFit, CollocationFit).", (
         Key("methods", NameList(lambda: f"expected a non-empty list of {sorted(FIT_METHODS)}",
                                 lambda: tuple(sorted(FIT_METHODS))), list(_F.methods),
             "The methods run on every seed's data, each through atlasnn.inverse.fit."),

@@ -1,0 +1,67 @@
+"""One door for a bundle — the solutions of every initial state and parameter value of a box:
+:func:`solve_bundle`, which takes a method object, as :func:`atlasnn.solve` does for one trajectory.
+
+* :class:`FlowMap` (default) — one float64 flow map composed window after window: measured
+  10³–10⁴× more accurate than the trained bundle at a fraction of the cost (docs/FAMILIES.md);
+* :class:`NetworkBundle` — the paper's kind of network, trained on Hamilton's equations over the box
+  (:func:`atlasnn.training.train_bundle`), time-marched over windows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from atlasnn.errors import ConfigError
+from atlasnn.solver._flowmap import FlowMap, flowmap_bundle
+from atlasnn.systems import BundleBox, HamiltonianSystem
+from atlasnn.training import BundleTrainConfig, train_bundle
+
+__all__ = ["NetworkBundle", "solve_bundle"]
+
+
+@dataclass(frozen=True)
+class NetworkBundle:
+    """A network trained over the box (:func:`atlasnn.training.train_bundle`): ẑ(t; z0, λ) = z0 +
+    f(t − t0; γ)·N(t, z0, λ; θ), Adam then Levenberg–Marquardt per window.
+
+    Attributes:
+        config: the training's settings (windows, epochs, LM steps…).
+        scaling, width, depth: the network (ATLAS-NN's time scaling by name).
+    """
+
+    config: BundleTrainConfig = field(default_factory=BundleTrainConfig)
+    scaling: str = "rational_exp"
+    width: int = 32
+    depth: int = 2
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.config, BundleTrainConfig):
+            raise ConfigError(f"NetworkBundle config must be a BundleTrainConfig, got {type(self.config).__name__}")
+        for name in ("width", "depth"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"NetworkBundle {name} must be an integer >= 1, got {value!r}")
+
+
+def solve_bundle(system: HamiltonianSystem, box: BundleBox, method: FlowMap | NetworkBundle | None = None, *,
+                 seed: int = 0, progress: Callable[[str], None] | None = None) -> Any:
+    """Every trajectory of the box at once: the initial states and parameter values of ``box``
+    (a :class:`~atlasnn.systems.BundleBox`) over its interval, by ``method``.
+
+    Returns a :class:`~atlasnn.solutions.FlowMapBundle` (:class:`FlowMap`, the default) or a
+    :class:`~atlasnn.solutions.BundleSolution` (:class:`NetworkBundle`, its training record in
+    ``info``): ``bundle(t, z0s, params)`` evaluates any members at any times. ``seed`` draws the
+    collocation points (and the network's weights); ``progress`` is told each step in words."""
+    method = FlowMap() if method is None else method
+    if isinstance(method, FlowMap):
+        return flowmap_bundle(system, box, method, seed=seed, progress=progress)
+    if not isinstance(method, NetworkBundle):
+        raise ConfigError(f"method must be FlowMap() or NetworkBundle(), got {type(method).__name__}")
+    say = progress or (lambda _line: None)
+    trained = train_bundle(system, box, method.config, scaling=method.scaling, width=method.width,
+                           depth=method.depth, seed=seed,
+                           on_window=lambda k, loss, seconds: say(f"window {k + 1}: loss {loss:.3g}, {seconds:.1f} s"))
+    trained.solution.info.update(train_time=trained.train_time, compile_time=trained.compile_time,
+                                 retried=list(trained.retried))
+    return trained.solution
