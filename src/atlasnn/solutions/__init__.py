@@ -6,6 +6,7 @@ from atlasnn.solutions._base import AbstractSolution
 from atlasnn.solutions._bundle import MEMBER_CHUNK, BundleSolution, bundle_start
 from atlasnn.solutions._flowmap import ChebyshevBasis, FlowMapBundle, chebyshev
 from atlasnn.solutions._bounds import log_norm, residual_bound
+from atlasnn.solutions._evaluate import bucket_size
 from atlasnn.solutions._estimate import TRUST_FRACTION, ErrorEstimate, estimate_error, state_range
 from atlasnn.solutions._linearised import propagate, residual_and_jacobian
 from atlasnn.solutions._polynomial import PolynomialSolution
@@ -46,4 +47,5 @@ __all__ = [
     "shifted_legendre",
     "legendre_integral",
     "MAX_STAGES",
+    "bucket_size",
 ]

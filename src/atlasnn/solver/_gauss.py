@@ -18,7 +18,7 @@ import jax
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.solutions import MAX_STAGES, PolynomialSolution, gauss_tableau
+from atlasnn.solutions import MAX_STAGES, PolynomialSolution, bucket_size, gauss_tableau
 from atlasnn.solver._base import AbstractSolver, register_solver
 from atlasnn.solver._collocation import require_float64
 from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, ReplayState, compiled_gauss_march,
@@ -134,14 +134,18 @@ class GaussCollocation(AbstractSolver):
         require_float64()
         z0s = np.atleast_2d(np.asarray(z0s, np.float64))
         b, n = z0s.shape
+        # a batch padded to 8, 16, 32 … members (copies of the first: the same work, dropped): a few
+        # compiled programs rather than one per batch size
+        padded = b if b == 1 else bucket_size(b)
         per_window = 8 * (self.stages + 3) * n + 24
-        chunk = int(min(self.chunk, max(16, _CHUNK_BYTES // (b * per_window))))
+        chunk = int(min(self.chunk, max(16, _CHUNK_BYTES // (padded * per_window))))
         program = compiled_gauss_march(system, stages=self.stages, steps=self.steps, chunk=chunk,
                                        max_iterations=self.max_iterations, newton=self.newton, growth=self.growth,
                                        safety=self.safety, warmup=self.warmup, max_rejects=self.max_rejects,
-                                       members=b)
+                                       members=padded)
         started = time.perf_counter()
-        rows, state, first_call = self._march(program, z0s, t0, T, progress)
+        rows, state, first_call = self._march(program, np.concatenate([z0s, np.repeat(z0s[:1], padded - b, axis=0)]),
+                                              t0, T, progress)
         wall = time.perf_counter() - started
         out = []
         for m in range(b):
@@ -189,8 +193,8 @@ class GaussCollocation(AbstractSolver):
                 if not rows:  # the first call compiles (or loads from the cache) and runs
                     first_call = time.perf_counter() - tic
                 state = out.state
-                counts = np.asarray(out.count)
-                rows.append([[np.asarray(x)[m, :counts[m]] for m in range(b)] for x in out[1:-1]])
+                kept = np.asarray(out.kept, bool)
+                rows.append([[np.asarray(x)[m][kept[m]] for m in range(b)] for x in out[1:-1]])
                 t_now, failed = np.asarray(state.t), np.asarray(state.failed)
                 if progress is not None:
                     progress(min(1.0, float(t_now.min() - t0) / (T - t0)))

@@ -18,10 +18,10 @@ check's error bound, times ``safety``, is within atol + rtol·|z| for every comp
 below round-off counts as round-off). The error is of order s + 1 in h along the window, so the
 next length is h · clip(0.9 ε^(−1/(s+1)), 0.2, growth) with ε the bound over the tolerance.
 
-The program marches at most ``chunk`` accepted windows per call and returns them; the caller calls
-it again from where it stopped (one program serves every interval, and progress shows between
-calls). Members (initial states) on a leading axis: one program marches them all, each with
-windows of its own.
+The program marches at most ``chunk`` accepted windows per call (a batch: ``chunk`` tries per member)
+and returns them; the caller calls it again from where it stopped (one program serves every
+interval, and progress shows between calls). Members (initial states) on a leading axis: one
+program marches them all, each with windows of its own.
 """
 
 from __future__ import annotations
@@ -73,10 +73,11 @@ class GaussState(NamedTuple):
 
 
 class GaussChunk(NamedTuple):
-    """Up to ``chunk`` accepted windows: starts, lengths, start states and their compensation,
-    stage increments L (s, n), check ratios; and the state after them."""
+    """``chunk`` rows of windows — whether each was accepted (the others are rejected tries or
+    unused rows), starts, lengths, start states and their compensation, stage increments L (s, n),
+    check ratios — and the state after them."""
 
-    count: jax.Array
+    kept: jax.Array
     start: jax.Array
     length: jax.Array
     z: jax.Array
@@ -146,47 +147,70 @@ def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety
     settings = {"steps": steps, "max_iterations": max_iterations, "newton": newton, "growth": growth,
                 "safety": safety, "warmup": warmup}
 
-    def run(state: GaussState, T, rtol, atol, h_given):
-        n = state.z.shape[0]
-        dt = state.z.dtype
+    def attempt(st, streak, T, rtol, atol, h_given):
+        """One try of one window: (the state after it, the rejections in a row, accepted?, its row)."""
+        floor = 1e-14 * jnp.maximum(jnp.abs(T), 1.0)
+        ok, r, h, ratio, h_next, last = _window(system, tab, settings, st, T, rtol, atol, h_given)
+        t1, te1 = compensated_add(st.t, st.te, h)
+        t1, te1 = jnp.where(last, T, t1), jnp.where(last, 0.0, te1)
+        streak = jnp.where(ok, 0, streak + 1)
+        failed = jnp.where(~r.converged & (h_given > 0), 3,
+                           jnp.where(streak > max_rejects, jnp.where(r.converged, 2, 3),
+                                     jnp.where(h_next < floor, 1, 0)))
+        keep = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
+        new = GaussState(keep(t1, st.t), keep(te1, st.te), keep(r.z, st.z), keep(r.e, st.e), h_next,
+                         keep(h, st.h_prev), keep(r.L, st.L_prev), st.accepted + ok.astype(st.accepted.dtype),
+                         st.rejected + (~ok).astype(st.rejected.dtype), st.iterations + r.iterations,
+                         st.newton + r.newton.astype(st.newton.dtype),
+                         jnp.where(ok, 0, failed).astype(st.failed.dtype),
+                         jnp.where(ok, jnp.maximum(st.worst, ratio), st.worst))
+        return new, streak, ok, (st.t + st.te, h, st.z, st.e, r.L, ratio)
+
+    def running(st, T):
+        return (st.t < T) & (st.failed == 0)
+
+    def alone(state: GaussState, T, rtol, atol, h_given):
+        """One member: a while loop that stops at T; row k of the buffers is the k-th accepted window
+        (written in place whatever the outcome: a rejected try is overwritten by the next)."""
+        st = _started(system, tab, jax.tree_util.tree_map(lambda x: x[0], state), T, h_given)
+        n, dt = st.z.shape[0], st.z.dtype
         buf = (jnp.zeros(chunk, dt), jnp.zeros(chunk, dt), jnp.zeros((chunk, n), dt), jnp.zeros((chunk, n), dt),
                jnp.zeros((chunk, stages, n), dt), jnp.zeros(chunk, dt))
-        floor = 1e-14 * jnp.maximum(jnp.abs(T), 1.0)
-        state = _started(system, tab, state, T, h_given)
-
-        def going(c):
-            k, st, streak, _ = c
-            return (st.t < T) & (k < chunk) & (st.failed == 0)
 
         def body(c):
             k, st, streak, buf = c
-            ok, r, h, ratio, h_next, last = _window(system, tab, settings, st, T, rtol, atol, h_given)
-            t1, te1 = compensated_add(st.t, st.te, h)
-            t1, te1 = jnp.where(last, T, t1), jnp.where(last, 0.0, te1)
-            rows = (st.t + st.te, h, st.z, st.e, r.L, ratio)
-            # row k written whatever the outcome (in place): a rejected try is overwritten by the next
-            buf = tuple(b.at[k].set(x) for b, x in zip(buf, rows))
-            streak = jnp.where(ok, 0, streak + 1)
-            failed = jnp.where(~r.converged & (h_given > 0), 3,
-                               jnp.where(streak > max_rejects, jnp.where(r.converged, 2, 3),
-                                         jnp.where(h_next < floor, 1, 0)))
-            keep = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
-            new = GaussState(keep(t1, st.t), keep(te1, st.te), keep(r.z, st.z), keep(r.e, st.e), h_next,
-                             keep(h, st.h_prev), keep(r.L, st.L_prev), st.accepted + ok.astype(st.accepted.dtype),
-                             st.rejected + (~ok).astype(st.rejected.dtype), st.iterations + r.iterations,
-                             st.newton + r.newton.astype(st.newton.dtype),
-                             jnp.where(ok, 0, failed).astype(st.failed.dtype),
-                             jnp.where(ok, jnp.maximum(st.worst, ratio), st.worst))
-            return k + ok.astype(k.dtype), new, streak, buf
+            st, streak, ok, rows = attempt(st, streak, T, rtol, atol, h_given)
+            return k + ok.astype(k.dtype), st, streak, tuple(b.at[k].set(x) for b, x in zip(buf, rows))
 
-        k, st, _, buf = lax.while_loop(going, body, (jnp.asarray(0), state, jnp.asarray(0), buf))
-        return GaussChunk(k, *buf, st)
-
-    batched = jax.vmap(run, in_axes=(0, None, None, None, None))
-
-    def alone(state, T, rtol, atol, h_given):
-        out = run(jax.tree_util.tree_map(lambda x: x[0], state), T, rtol, atol, h_given)
+        k, st, _, buf = lax.while_loop(lambda c: running(c[1], T) & (c[0] < chunk), body,
+                                       (jnp.asarray(0), st, jnp.asarray(0), buf))
+        out = GaussChunk(jnp.arange(chunk) < k, *buf, st)
         return jax.tree_util.tree_map(lambda x: x[None], out)
+
+    def batched(state: GaussState, T, rtol, atol, h_given):
+        """Members on a leading axis: a while loop of tries, every member one try per trip (a
+        finished one idling), until all are done or ``chunk`` trips; trip j's rows go to row j of
+        the buffers for every member at once (written in place: a row index per member, under
+        ``vmap``, would make every write a scatter that copies the buffers)."""
+        st = jax.vmap(_started, in_axes=(None, None, 0, None, None))(system, tab, state, T, h_given)
+        b, n, dt = st.z.shape[0], st.z.shape[1], st.z.dtype
+        buf = (jnp.zeros((chunk, b), bool), jnp.zeros((chunk, b), dt), jnp.zeros((chunk, b), dt),
+               jnp.zeros((chunk, b, n), dt), jnp.zeros((chunk, b, n), dt), jnp.zeros((chunk, b, stages, n), dt),
+               jnp.zeros((chunk, b), dt))
+        tries = jax.vmap(attempt, in_axes=(0, 0, None, None, None, None))
+
+        def body(c):
+            j, st, streak, buf = c
+            new, streak2, ok, rows = tries(st, streak, T, rtol, atol, h_given)
+            active = running(st, T)
+            pick = lambda a, b: jnp.where(active.reshape(active.shape + (1,) * (a.ndim - 1)), a, b)  # noqa: E731
+            st = jax.tree_util.tree_map(pick, new, st)
+            return (j + 1, st, jnp.where(active, streak2, streak),
+                    tuple(bf.at[j].set(x) for bf, x in zip(buf, (ok & active, *rows))))
+
+        _, st, _, buf = lax.while_loop(lambda c: jnp.any(running(c[1], T)) & (c[0] < chunk), body,
+                                       (jnp.asarray(0), st, jnp.zeros(b, jnp.int32), buf))
+        return GaussChunk(*(jnp.moveaxis(x, 0, 1) for x in buf), st)
 
     return jax.jit(batched), jax.jit(alone)
 

@@ -30,7 +30,7 @@ class AdamMarch(AbstractSolver):
     Attributes:
         rtol, atol: every window's estimated local error must be within atol + rtol × the state's
             range (the trained windows are float32: rtol below 1e-7 is out of reach and refused).
-        network: the arguments of :func:`atlasnn.make_model`.
+        network: the arguments of :func:`atlasnn.nn.make_model`.
         config: the march's other settings (its own rtol/atol are replaced by these).
         seed: the networks' initialisation.
     """
