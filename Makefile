@@ -62,8 +62,8 @@ suite: $(BIN)/atlasnn
 suite-doc: $(BIN)/atlasnn
 	$(BIN)/python scripts/suite_doc.py runs/suite-hard
 
-# The float64 collocation solver (docs/SOLVER.md) on every hard problem and both long experiments,
-# five seeds each, nothing trained (--profile solve); records and summary into docs/runs/suite-solve/.
+# The Gauss collocation (docs/SOLVER.md) on every hard problem and both long experiments,
+# nothing trained (--profile solve: deterministic, one seed); records and summary into docs/runs/suite-solve/
 solve-runs: $(BIN)/atlasnn
 	$(BIN)/atlasnn suite hard --profile solve --out runs/suite-solve --overwrite --no-progress
 	for e in henon-heiles-long oscillator-long; do \
