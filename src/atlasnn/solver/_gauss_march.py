@@ -4,7 +4,8 @@ solved by :func:`._gauss_step.gauss_step`, its length set by the window's Picard
 The lengths (``steps``):
 
 * ``"constant"``: one length for the whole march, found over the first ``warmup`` windows (each
-  grows or shrinks by the check's error, as an adaptive solver's step does) and then kept: a later
+  grows or shrinks by the check's error, as an adaptive solver's step does, and the warm-up goes
+  on while a window still grows by the most it may) and then kept: a later
   window is only ever shortened, when its check exceeds the tolerance (it is tried again shorter,
   and the shorter length is kept from then on). A method of fixed step is symplectic; a handful of
   shortenings keeps the energy error bounded (each changes the modified Hamiltonian once);
@@ -70,6 +71,7 @@ class GaussState(NamedTuple):
     newton: jax.Array  # windows solved by the Newton iteration
     failed: jax.Array  # 0 running or done, else a key of FAILURES
     worst: jax.Array  # the largest check ratio among the accepted windows
+    settled: jax.Array  # 1 once a constant length is found (then only ever shortened)
 
 
 class GaussChunk(NamedTuple):
@@ -93,17 +95,21 @@ def initial_state(z0: np.ndarray, t0: float, stages: int) -> GaussState:
     z0 = np.asarray(z0, np.float64)
     zero, izero = np.float64(0.0), np.int64(0)
     return GaussState(np.float64(t0), zero, z0, np.zeros_like(z0), zero, zero, np.zeros((stages,) + z0.shape),
-                      izero, izero, izero, izero, izero, zero)
+                      izero, izero, izero, izero, izero, zero, izero)
 
 
 def _started(system, tab, st: GaussState, T, h_given) -> GaussState:
     """``st`` with its first length and guess where the march has not started (h_prev = 0): the
-    given length, else 1/‖A(z0)‖_F (A the field's Jacobian; at most the interval), and a guess of
-    constant rate f(z0), written as a previous window of that length whose polynomial is that line."""
+    given length, else 1/ω with ω² = ‖A²‖_F (A the field's Jacobian: for H = T(p) + V(q), A²'s
+    eigenvalues are −ω² of the linearised motion whatever the masses and units; at most the
+    interval), and a guess of constant rate f(z0), written as a previous window of that length
+    whose polynomial is that line."""
 
     def start(st):
         a = system.jacobian(st.z[None])[0]
-        h0 = jnp.minimum(T - st.t, 1.0 / jnp.maximum(jnp.sqrt(jnp.sum(a * a)), 1e-300))
+        omega = jnp.sqrt(jnp.sqrt(jnp.sum((a @ a) ** 2)))
+        h0 = jnp.where(omega > 0, 1.0 / jnp.where(omega > 0, omega, 1.0), T - st.t)
+        h0 = jnp.minimum(T - st.t, h0)
         h0 = jnp.where(h_given > 0, h_given, h0)
         f0 = system.vector_field(st.z[None])[0]
         return st._replace(h=h0, h_prev=h0, L_prev=h0 * tab["b"][:, None] * f0[None, :])
@@ -113,7 +119,7 @@ def _started(system, tab, st: GaussState, T, h_given) -> GaussState:
 
 def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
     """Try one window from ``st``: (accepted?, the step's result, its length, its check ratio, the
-    next length, whether it is the last window)."""
+    next length, whether it is the last window, whether a constant length is settled)."""
     s = tab["b"].shape[0]
     field = system.vector_field
     jac = (lambda x: system.jacobian(x[None])[0]) if settings["newton"] else None
@@ -132,11 +138,15 @@ def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
     ok = r.converged & jnp.all(jnp.isfinite(r.z)) & (given | (jnp.isfinite(ratio) & (ratio <= 1.0)))
     fac = jnp.clip(0.9 * ratio ** (-1.0 / (s + 1)), 0.2, settings["growth"])
     fac = jnp.where(jnp.isfinite(fac), fac, 0.2)
-    if settings["steps"] == "constant":  # after the warm-up an accepted window keeps the length
-        fac = jnp.where(ok & (st.accepted >= settings["warmup"]), 1.0, fac)
+    settled = st.settled
+    if settings["steps"] == "constant":
+        # the length is found over the warm-up, and for as long after it as it still grows by the
+        # most a window may (a poor first guess); from then on an accepted window keeps it
+        settled = jnp.where(ok & (st.accepted >= settings["warmup"]) & (fac < settings["growth"]), 1, settled)
+        fac = jnp.where(ok & (settled > 0), 1.0, fac)
     fac = jnp.where(ok, fac, jnp.where(r.converged, jnp.minimum(fac, 0.9), 0.5))
     h_next = jnp.where(given, h_given, jnp.where(ok & last, st.h, h * fac))
-    return ok, r, h, ratio, h_next, last
+    return ok, r, h, ratio, h_next, last, settled.astype(st.settled.dtype)
 
 
 @program_cache
@@ -150,7 +160,7 @@ def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety
     def attempt(st, streak, T, rtol, atol, h_given):
         """One try of one window: (the state after it, the rejections in a row, accepted?, its row)."""
         floor = 1e-14 * jnp.maximum(jnp.abs(T), 1.0)
-        ok, r, h, ratio, h_next, last = _window(system, tab, settings, st, T, rtol, atol, h_given)
+        ok, r, h, ratio, h_next, last, settled = _window(system, tab, settings, st, T, rtol, atol, h_given)
         t1, te1 = compensated_add(st.t, st.te, h)
         t1, te1 = jnp.where(last, T, t1), jnp.where(last, 0.0, te1)
         streak = jnp.where(ok, 0, streak + 1)
@@ -163,7 +173,7 @@ def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety
                          st.rejected + (~ok).astype(st.rejected.dtype), st.iterations + r.iterations,
                          st.newton + r.newton.astype(st.newton.dtype),
                          jnp.where(ok, 0, failed).astype(st.failed.dtype),
-                         jnp.where(ok, jnp.maximum(st.worst, ratio), st.worst))
+                         jnp.where(ok, jnp.maximum(st.worst, ratio), st.worst), settled)
         return new, streak, ok, (st.t + st.te, h, st.z, st.e, r.L, ratio)
 
     def running(st, T):
