@@ -3,7 +3,7 @@ PY ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: quick test reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc solve-runs bench clean-venv
+.PHONY: quick test docs reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc solve-runs bench clean-venv
 
 $(BIN)/atlasnn: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -69,6 +69,12 @@ solve-runs: $(BIN)/atlasnn
 	for e in henon-heiles-long oscillator-long; do \
 	  $(BIN)/atlasnn reproduce $$e --profile solve --out runs/suite-solve/$$e/solve --overwrite --no-progress || exit 1; done
 	$(BIN)/python scripts/solve_doc.py runs/suite-solve docs/runs/suite-solve
+
+# The documentation site (mkdocs.yml): docs/ and the API reference from the docstrings, into site/;
+# --strict makes every warning (a broken link or anchor, a docstring that does not render) an error.
+docs: $(BIN)/atlasnn
+	$(BIN)/pip install -q -e '.[docs]'
+	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict
 
 bench: $(BIN)/atlasnn
 	$(BIN)/pip install -q 'torch==2.13.0'
