@@ -3,7 +3,7 @@ PY ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: quick test reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc solve-runs bench clean-venv
+.PHONY: quick test docs reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc solve-runs bench clean-venv
 
 $(BIN)/atlasnn: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -70,9 +70,77 @@ solve-runs: $(BIN)/atlasnn
 	  $(BIN)/atlasnn reproduce $$e --profile solve --out runs/suite-solve/$$e/solve --overwrite --no-progress || exit 1; done
 	$(BIN)/python scripts/solve_doc.py runs/suite-solve docs/runs/suite-solve
 
+# The documentation site (mkdocs.yml): docs/ and the API reference from the docstrings, into site/;
+# --strict makes every warning (a broken link or anchor, a docstring that does not render) an error.
+docs: $(BIN)/atlasnn
+	$(BIN)/pip install -q -e '.[docs]'
+	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict
+
+# Every benchmark record the docs cite, rerun, and the docs' generated tables rewritten from them
+# (benchmarks/README.md: the instruments, their questions and records). Hours on the 2-core machine;
+# one at a time: `make bench BENCH="throughput compile_once"`. The GPU records: scripts/gpu_check.sh.
+ONE_CORE := taskset -c 0 env XLA_FLAGS=--xla_cpu_multi_thread_eigen=false OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1
+BENCH ?= throughput seed_batch device_accuracy time_to_accuracy compile_once cold_start chain_cost rerun_drift \
+	estimate_effectivity window_optimisers bundle_eval bundle_cost flowmap_estimate flowmap_gauss_newton \
+	inverse_starts inverse_collocation_untuned inverse_noise solver_workprecision solver_suite solver_batch \
+	solver_first_run solver_local_error solver_scalings solver_sin_mlp energy_long step_modes
+BR := docs/benchmarks
+
 bench: $(BIN)/atlasnn
-	$(BIN)/pip install -q 'torch==2.13.0'
-	$(BIN)/python -m benchmarks.throughput
+	$(BIN)/pip install -q -e '.[bench]'
+	$(MAKE) $(addprefix bench-,$(BENCH))
+
+bench-throughput:
+	taskset -c 0 $(BIN)/python -m benchmarks.throughput --rounds 3 --torch-threads 1 --out $(BR)/throughput.json --doc docs/PERFORMANCE.md
+bench-seed_batch:
+	taskset -c 0 $(BIN)/python -m benchmarks.seed_batch --out $(BR)/seed_batch_one_core.json
+bench-device_accuracy:
+	$(BIN)/python -m benchmarks.device_accuracy --seeds 64 --epochs 20000 --out $(BR)/device_accuracy_cpu.json
+	$(BIN)/python -m benchmarks.device_accuracy --table $(BR)/device_accuracy_cpu.json $(BR)/gpu/device_accuracy_gpu.json \
+	  $(BR)/gpu/device_accuracy_gpu_tf32.json $(BR)/gpu/device_accuracy_gpu_full.json --doc docs/PERFORMANCE.md
+bench-time_to_accuracy:
+	taskset -c 0 env XLA_FLAGS=--xla_cpu_multi_thread_eigen=false $(BIN)/python -m benchmarks.time_to_accuracy --seeds 3 --doc docs/PERFORMANCE.md
+bench-compile_once:
+	$(BIN)/python -m benchmarks.compile_once --experiment oscillator-long --doc docs/PERFORMANCE.md
+bench-cold_start:
+	$(BIN)/python -m benchmarks.cold_start --repeat 3 --out $(BR)/cold_start.json
+bench-chain_cost:
+	$(BIN)/python -m benchmarks.chain_cost --particles 16 64 --doc docs/PERFORMANCE.md
+bench-rerun_drift:
+	$(BIN)/python benchmarks/rerun_drift.py
+bench-estimate_effectivity:
+	$(BIN)/python -m benchmarks.estimate_effectivity --doc docs/ESTIMATE.md
+bench-window_optimisers:
+	$(BIN)/python -m benchmarks.window_optimisers --doc docs/ESTIMATE.md
+bench-bundle_eval:
+	$(BIN)/python -m benchmarks.bundle_eval
+bench-bundle_cost:
+	$(ONE_CORE) $(BIN)/python -m benchmarks.bundle_cost --run docs/runs/families/oscillator-bundle \
+	  --out $(BR)/bundle_cost.json --figure docs/figures/bundle_cost
+	$(ONE_CORE) $(BIN)/python -m benchmarks.bundle_cost --run docs/runs/families/oscillator-bundle-float64 \
+	  --out $(BR)/bundle_cost_float64.json --figure docs/figures/bundle_cost_float64
+bench-flowmap_estimate:
+	$(ONE_CORE) $(BIN)/python -m benchmarks.flowmap_estimate
+bench-flowmap_gauss_newton:
+	taskset -c 0 $(BIN)/python -m benchmarks.flowmap_gauss_newton
+bench-inverse_starts:
+	$(BIN)/python -m benchmarks.inverse_starts --out $(BR)/inverse_starts.json
+	$(BIN)/python -m benchmarks.inverse_starts --column collocation --out $(BR)/inverse_starts.json
+	$(BIN)/python -m benchmarks.inverse_starts --column segments --out $(BR)/inverse_starts.json
+bench-inverse_collocation_untuned:
+	$(BIN)/python -m benchmarks.inverse_collocation_untuned --out $(BR)/inverse_collocation_untuned.json
+bench-inverse_noise:
+	taskset -c 0 $(BIN)/python -m benchmarks.inverse_noise --seeds 3
+bench-solver_workprecision:
+	$(BIN)/python -m benchmarks.solver_workprecision
+bench-solver_suite:
+	$(BIN)/python -m benchmarks.solver_suite --out docs/runs/solver/suite.json
+bench-solver_batch bench-solver_first_run bench-solver_local_error bench-solver_scalings bench-step_modes: bench-%:
+	$(BIN)/python -m benchmarks.$* --out $(BR)/$*.json
+bench-solver_sin_mlp:
+	$(BIN)/python -m benchmarks.solver_sin_mlp --widths 8 16 --max-steps 100 --out $(BR)/solver_sin_mlp.json
+bench-energy_long:
+	$(BIN)/python -m benchmarks.energy_long
 
 clean-venv:
 	rm -rf $(VENV)

@@ -78,7 +78,7 @@ def section(run: Path, docs: Path) -> str:
     lines.append(f"Command: `{_command(run, meta)}` — seeds {meta['seeds']}, jobs {meta['jobs']}, "
                  f"wall time {meta.get('wall_time_total', float('nan')) / 60:.1f} min on this machine "
                  f"(atlasnn {meta['versions']['atlasnn']}, JAX {meta['versions']['jax']}, {meta['versions']['backend']}). "
-                 f"Summaries: [docs/runs/{profile}/{name}/](runs/{profile}/{name}/).")
+                 f"Summaries: [docs/runs/{profile}/{name}/summary.json](runs/{profile}/{name}/summary.json).")
     lines.append("")
     tables = (run / "tables.md").read_text().replace("\n# ", "\n### ").replace("\n## ", "\n### ")
     if tables.startswith("# "):

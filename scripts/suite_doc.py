@@ -2,12 +2,17 @@
 into docs/SUITE.md (between its ``<!-- generated:NAME -->`` markers), and each problem's overview
 figure under docs/figures/suite/.
 
-    python scripts/suite_doc.py runs/suite-hard        # after `atlasnn suite hard --seeds 5 --jobs 2`
+    python scripts/suite_doc.py runs/suite-hard --times   # after `make suite`, on a quiet machine
+    python scripts/suite_doc.py docs/runs/suite --render-only   # the page's tables again from the record
 
 Sections written: ``suite`` (a table per problem and scheme, from suite.json), ``targets`` (the
 issue's targets counted: worst seed ≤ 1e-3 and median ≤ 1e-4 of the range for adaptive
 time-marching; the verdict's false ok / false alarms; the estimate's effectivity where the true
 error exceeds 1e-5 of the range) and ``timing`` (the suite's wall time, when timed.py recorded it).
+
+The training seconds per seed and the suite's wall time are written only with ``--times``: pass it
+when the run's timings describe the code as it is (a quiet machine, the current executors); without
+it the page carries no timing and the tables no seconds column.
 """
 
 from __future__ import annotations
@@ -83,14 +88,32 @@ def timing(suite_dir: Path, docs: Path) -> str:
     return "\n\n".join(lines) + f"\n\nIn all {total / 60:.1f} min on {data.get('cpu_count')} cores."
 
 
+def drop_column(markdown: str, header: str) -> str:
+    """The Markdown tables of ``markdown`` without their column named ``header``."""
+    out, index = [], None
+    for line in markdown.splitlines():
+        cells = line.strip().strip("|").split("|") if line.startswith("|") else None
+        if cells is None:
+            index = None
+        elif header in [c.strip() for c in cells]:
+            index = [c.strip() for c in cells].index(header)
+        if cells is not None and index is not None:
+            line = "|" + "|".join(cells[:index] + cells[index + 1:]) + "|"
+        out.append(line)
+    return "\n".join(out)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("suite", type=Path, help="the suite directory (holds suite.json)")
     ap.add_argument("--docs", type=Path, default=Path("docs"))
+    ap.add_argument("--times", action="store_true", help="also the training seconds and the wall time")
+    ap.add_argument("--render-only", action="store_true",
+                    help="rewrite the page's tables from SUITE/suite.json, copying nothing")
     args = ap.parse_args()
     summary = json.loads((args.suite / "suite.json").read_text())
     dest = args.docs / "runs" / "suite"
-    for run in sorted(p.parent for p in args.suite.glob("*/*/results.json")):
+    for run in [] if args.render_only else sorted(p.parent for p in args.suite.glob("*/*/results.json")):
         out = dest / run.parent.name / run.name
         out.mkdir(parents=True, exist_ok=True)
         for name in KEEP:
@@ -101,12 +124,15 @@ def main() -> None:
             figs = args.docs / "figures" / "suite" / run.parent.name
             figs.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(fig, figs / f"overview-{run.name}.png")
-    shutil.copyfile(args.suite / "suite.json", dest / "suite.json")
+    if not args.render_only:
+        shutil.copyfile(args.suite / "suite.json", dest / "suite.json")
     page = args.docs / "SUITE.md"
     text = page.read_text(encoding="utf-8")
-    text = replace_generated(text, "suite", suite_markdown(summary))
+    tables = suite_markdown(summary)
+    text = replace_generated(text, "suite", tables if args.times else drop_column(tables, "training s/seed"))
     text = replace_generated(text, "targets", targets(summary))
-    text = replace_generated(text, "timing", timing(args.suite, args.docs))
+    if args.times and "<!-- generated:timing -->" in text:
+        text = replace_generated(text, "timing", timing(args.suite, args.docs))
     page.write_text(text, encoding="utf-8")
     print(f"wrote {page} and {dest}")
 

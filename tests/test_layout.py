@@ -1,7 +1,7 @@
 """The package's shape: packages by concept, data flowing one way, no private name used outside
 its package, no import circles (imports inside functions count), modules under 500 lines.
 
-The layers below are the order of README's layout section; a package may import only packages of
+The layers below are the order of CONTRIBUTING.md's layout section; a package may import only packages of
 a lower layer (and itself). The graph is read from the source with ``ast``: nothing is imported.
 """
 
@@ -87,7 +87,7 @@ def test_imports_only_run_down_the_layers():
     upward = []
     for module, path in MODULES.items():
         if module == "atlasnn":
-            continue  # the top-level face lists what the README imports, lazily
+            continue  # the top-level face lists the doors, lazily
         for target, _, line in _imports(path):
             mine, theirs = _package(module), _package(target)
             if mine == theirs:

@@ -1,4 +1,4 @@
-"""Round 3 reliability cases (docs/RELIABILITY.md): each bad input is one line, refused before
+"""Reliability cases (CHANGELOG.md, 2026-11-25): each bad input is one line, refused before
 anything is trained or written. No training runs here."""
 
 from __future__ import annotations

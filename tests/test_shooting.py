@@ -206,7 +206,7 @@ def test_a_fit_that_does_not_explain_the_data_is_flagged():
 
 
 def test_synthetic_data_starts_where_the_fits_start():
-    """The README's example: observations from t = 0.2 on, z0 at t = 0 (the fits' default t0). The
+    """The fit how-to's example (docs/howto/FIT.md): observations from t = 0.2 on, z0 at t = 0 (the fits' default t0). The
     data used to start z0 at the first observation time and the fit landed 11σ off (g = 0.908)."""
     from atlasnn.systems import expression_system
 

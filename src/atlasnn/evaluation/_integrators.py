@@ -300,7 +300,8 @@ def reference_solution(
         system: the Hamiltonian system.
         z0: the state at ``t_eval[0]`` (length 2d), or ``None`` for the system's default.
         t_eval: strictly increasing, finite 1-D array of times.
-        rtol, atol: the solver's tolerances.
+        rtol: the solver's relative tolerance.
+        atol: the solver's absolute tolerance.
 
     Returns:
         Z: float64 array of shape (len(t_eval), 2d); ``Z[0]`` is z0.

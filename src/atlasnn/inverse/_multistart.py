@@ -47,7 +47,7 @@ BOUND_FRACTION = 1e-4
 
 def auto_starts(n_unknowns: int) -> int:
     """Starts of ``starts="auto"``: the guess and 12 more per unknown (a 20-start grid over one
-    unknown's bounds found the Hénon–Heiles coupling from every guess: docs/INVERSE.md)."""
+    unknown's bounds found the Hénon–Heiles coupling from every guess: docs/FAMILIES.md, "From bad first guesses")."""
     return 1 + 12 * n_unknowns
 
 

@@ -27,7 +27,9 @@ class NetworkBundle:
 
     Attributes:
         config: the training's settings (windows, epochs, LM steps…).
-        scaling, width, depth: the network (ATLAS-NN's time scaling by name).
+        scaling: the network's time scaling, by name (ATLAS-NN's by default).
+        width: the network's width.
+        depth: the network's depth.
     """
 
     config: BundleTrainConfig = field(default_factory=BundleTrainConfig)

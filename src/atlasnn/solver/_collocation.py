@@ -55,7 +55,9 @@ class Collocation(AbstractSolver):
     points, each accepted when its estimated local error meets atol + rtol·|z| (docs/SOLVER.md).
 
     Attributes:
-        rtol, atol: each window's estimated local error must be within atol + rtol·|z| per component.
+        rtol: relative tolerance: each window's estimated local error must be within atol + rtol·|z|
+            per component.
+        atol: absolute tolerance (see rtol).
         features: M, the random tanh features per window (unknowns: 2d·M per window).
         points: P collocation nodes per window (P ≥ M: the residual's 2d·P equations must be able
             to determine the 2d·M unknowns); default M + 4.

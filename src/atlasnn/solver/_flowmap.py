@@ -59,9 +59,10 @@ class FlowMap:
     Attributes:
         windows: h = (T − t0)/windows, the length over which one map is fitted (the error falls
             fast with h: on the oscillator bundle 24 → 48 windows cut it 30–100×).
-        time_degree, state_degree, param_degree: the Chebyshev degrees of φ in s, in the state
-            (total over its components) and in λ (total); unknowns: 2d × (time_degree + 1) ×
-            (the number of state and parameter multi-indices).
+        time_degree: the Chebyshev degree of φ in s; unknowns: 2d × (time_degree + 1) × (the
+            number of state and parameter multi-indices).
+        state_degree: the Chebyshev degree of φ in the state (total over its components).
+        param_degree: the Chebyshev degree of φ in λ (total).
         oversampling: residual rows per unknown.
         iterations: Gauss–Newton steps at most per fit.
         shell_margin: the energy shell widened by this fraction of its width plus of |H|.

@@ -62,8 +62,10 @@ class GaussCollocation(AbstractSolver):
 
     Attributes:
         stages: s (1–16; order 2s).
-        rtol, atol: every window's error along it, as its Picard check bounds it, must be within
-            atol + rtol·|z| per component (a tolerance below float64's round-off counts as round-off).
+        rtol: relative tolerance: every window's error along it, as its Picard check bounds it, must
+            be within atol + rtol·|z| per component (a tolerance below float64's round-off counts as
+            round-off).
+        atol: absolute tolerance (see rtol).
         steps: ``"constant"`` (one length, found over the first windows and only ever shortened:
             symplectic) or ``"adaptive"`` (every window its own length: fewer windows on an eccentric
             orbit, no exact symplecticity).

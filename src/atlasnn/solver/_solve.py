@@ -54,7 +54,8 @@ def solve(system: HamiltonianSystem, z0: Any = None, interval: tuple[float, floa
             Gauss–Legendre nodes; symplectic, order 2s), :class:`~atlasnn.solver.Collocation`
             (random tanh features, Gauss–Newton) or :class:`~atlasnn.solver.AdamMarch` (the
             paper's networks trained by Adam, window by window).
-        rtol, atol: replace the solver's own tolerances (each solver says what they mean).
+        rtol: replaces the solver's own relative tolerance (each solver says what it means).
+        atol: replaces the solver's own absolute tolerance.
         progress: called with the fraction of the interval done as the march advances.
 
     Returns the solution: evaluate ẑ and dẑ/dt at any times (``sol(t)``, ``sol.derivative(t)``),

@@ -28,8 +28,10 @@ class AdamMarch(AbstractSolver):
     accurate by orders of magnitude (docs/SOLVER.md).
 
     Attributes:
-        rtol, atol: every window's estimated local error must be within atol + rtol × the state's
-            range (the trained windows are float32: rtol below 1e-7 is out of reach and refused).
+        rtol: relative tolerance: every window's estimated local error must be within atol + rtol ×
+            the state's range (the trained windows are float32: rtol below 1e-7 is out of reach and
+            refused).
+        atol: absolute tolerance (see rtol).
         network: the arguments of :func:`atlasnn.nn.make_model`.
         config: the march's other settings (its own rtol/atol are replaced by these).
         seed: the networks' initialisation.
@@ -73,7 +75,8 @@ class Transfer(AbstractSolver):
         source: the source interval's length (default 4π, the paper's oscillator source).
         network: the arguments of :func:`atlasnn.nn.make_model` (default: the paper's
             ATLAS-NN exp model, 80 wide, 2 deep).
-        source_train, target_train: the two trainings' settings (:class:`atlasnn.training.TrainConfig`).
+        source_train: the source training's settings (:class:`atlasnn.training.TrainConfig`).
+        target_train: the target training's settings.
         thaw: keep γ trainable on the target (the paper freezes it).
         seed: the network's initialisation.
     """

@@ -136,8 +136,9 @@ def expression_system(
 
     Args:
         hamiltonian: the expression H in the coordinate, momentum and parameter names.
-        coordinates, momenta: the d coordinate names and the d momentum names (d >= 1);
-            a single string "x, y" is split on commas and blanks.
+        coordinates: the d coordinate names (d >= 1); a single string "x, y" is split on commas
+            and blanks.
+        momenta: the d momentum names, the same way.
         params: named parameters with finite values.
         name: a short identifier (letters, digits, ``_ . -``; used in file names).
         separable: ``True`` if H = T(p) + V(q) (the user's declaration, not checked),

@@ -35,7 +35,8 @@ class HamiltonianSystem:
         hamiltonian: ``H(q, p)`` for q, p of shape (d,), returning a scalar; must be JAX-traceable.
         dim: the number of degrees of freedom d (the state has 2d components).
         name: a short identifier (used in file names and tables).
-        q_names, p_names: names of the coordinates and momenta (default q1.., p1..).
+        q_names: names of the coordinates (default q1..qd).
+        p_names: names of the momenta (default p1..pd).
         z0: default initial state (q then p), length 2d.
         separable: the user's declaration that H = T(p) + V(q). Explicit symplectic
             integrators need it; atlasnn does not try to prove it.

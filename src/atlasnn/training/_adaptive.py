@@ -246,8 +246,9 @@ def march(
         on_window: called with each window's :class:`WindowRecord` when it is done.
         on_chunk: passed to the trainer (called after every chunk of epochs with the list of
             current training states); raising KeyboardInterrupt there stops the march.
-        resume, on_progress: continue from a :class:`~atlasnn.training._progress.MarchProgress`;
-            be handed one after every finished window (to save it: ``atlasnn.checkpoint``).
+        resume: continue from a :class:`~atlasnn.training.MarchProgress`.
+        on_progress: called with a :class:`~atlasnn.training.MarchProgress` after every finished
+            window (to save it: ``atlasnn.checkpoint``).
     """
     if config.adaptive:
         return march_adaptive(model, system, T, config, on_window=on_window, on_chunk=on_chunk,

@@ -259,8 +259,8 @@ def training_compiler_options() -> dict | None:
     2.0 → 1.55 s on one core; cold runs of 32 seeds, 5.35 → 3.9 s of the training's compiling)
     and run them as fast; they sum in another order, so a run's numbers differ in their last bits
     from XLA's defaults, as they do from one machine to another, with no difference in accuracy
-    resolved over those seeds (docs/PERFORMANCE.md, "Fourth pass"). Elsewhere (a GPU): XLA's
-    defaults."""
+    resolved over those seeds (measured when this was chosen: CHANGELOG.md, 2026-11-27, and git's
+    history of docs/benchmarks/). Elsewhere (a GPU): XLA's defaults."""
     return {"xla_cpu_use_fusion_emitters": False} if jax.default_backend() == "cpu" else None
 
 
