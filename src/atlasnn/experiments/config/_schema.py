@@ -212,9 +212,10 @@ _STATIC_TABLES: dict[str, TableSpec] = {
         Key("march", Sub("march"), None, "Time-marching ATLAS-NN on the experiment's interval (a transfer run's "
             "target): the interval cut into windows, each trained from the previous window's end state, γ "
             "learned in the first (docs/METHOD.md); adds a column per model.", default_text="none"),
-        Key("solve", Sub("solve"), None, "The float64 collocation solver (atlasnn.solve, docs/SOLVER.md) on the "
-            "experiment's interval (a transfer run's target): no training; each seed draws its own random "
-            "features; adds the column collocation.", default_text="none"),
+        Key("solve", Sub("solve"), None, "The solver of atlasnn.solve (docs/SOLVER.md) on the experiment's "
+            "interval (a transfer run's target): no training; adds the column of its method (gauss, "
+            "deterministic: every seed records one solution; collocation: each seed draws its own random "
+            "features).", default_text="none"),
         Key("schemes", NameList(lambda: f"expected a non-empty list drawn from {list(SCHEME_NAMES)}", SCHEME_NAMES,
                                 unique=True), None, "Which of the config's schemes run (short: the models on the "
             "interval; baseline, transfer: a transfer run's; march: [march]; solve: [solve]); e.g. a profile "
