@@ -160,8 +160,8 @@ def _exact(s: int):
     a = [[sum(integral[j][k] * mp.legendre(k, 2 * c[i] - 1) for k in range(s + 1)) for j in range(s)]
          for i in range(s)]
     # N_j(θ) = Λ_j(θ)/θ, of degree s − 1: its Legendre coefficients by s-point Gauss quadrature (exact)
-    lam = lambda j, th: sum(integral[j][k] * mp.legendre(k, 2 * th - 1) for k in range(s + 1))  # noqa: E731
-    n = [[(2 * k + 1) * sum(b[i] * lam(j, c[i]) / c[i] * mp.legendre(k, nodes[i]) for i in range(s))
+    # Λ_j(c_i) is a_ij: evaluated once, not once per coefficient k (1.4 s of a 1.5 s tableau at s = 12)
+    n = [[(2 * k + 1) * sum(b[i] * a[i][j] / c[i] * mp.legendre(k, nodes[i]) for i in range(s))
           for k in range(s)] for j in range(s)]
     return c, b, d, integral, a, n
 
