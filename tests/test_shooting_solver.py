@@ -129,6 +129,14 @@ def test_bad_settings_are_one_line(pendulum, hh):
     with pytest.raises(ConfigError) as ei:
         ParametricGauss(hh, rtol=0.0)
     assert "rtol must be a positive number" in _msg(ei)
+    solve = ParametricGauss(hh)
+    with pytest.raises(ConfigError) as ei:
+        solve([0.1, 0.2], [1.0], 0.0, [1.0])
+    assert "a state of 4 and 1 parameters, got 2 and 1" in _msg(ei)
+    for times in ([1.0, -0.5], [1.0, np.nan]):
+        with pytest.raises(ConfigError) as ei:
+            solve(hh.initial_state(), [1.0], 0.0, times)
+        assert "finite times from t0 = 0 on" in _msg(ei)
 
 
 def test_shooting_estimates_are_the_dop853_paths(hh, pendulum):

@@ -6,9 +6,9 @@ derivative of f). f is built from ``system.parametric`` and jitted once per syst
 members' reference (:func:`reference_members`) uses it, and shooting where asked for it.
 
 :func:`parametric_solver` is the door shooting (:mod:`atlasnn.inverse`) goes through: ``"gauss"``
-(default) is the compiled Gauss collocation with sensitivities from JAX
-(:class:`atlasnn.solver.ParametricGauss`: 8–10× faster a solve with sensitivities, the same
-estimates; ``benchmarks/shooting_solver.py``), ``"dop853"`` this module's solve.
+(default) is the compiled Gauss collocation with the variational equations beside the state
+(:class:`atlasnn.solver.ParametricGauss`: shooting fits 6–9× faster, the same estimates;
+``benchmarks/shooting_solver.py``), ``"dop853"`` this module's solve.
 """
 
 from __future__ import annotations

@@ -132,7 +132,15 @@ class ParametricGauss:
     atol + rtol·|z| everywhere, found in a few marches from one window) and kept: a later call
     whose check exceeds the tolerance, or whose stage equations fail, shortens it (and keeps the
     shorter one), so every call of a fit marches the same windows unless the parameters demand
-    shorter ones. ``evaluations`` counts the field's evaluations of every call."""
+    shorter ones. ``evaluations`` counts the field's evaluations of every call.
+
+    Args:
+        rtol, atol: every window's error along it, as its Picard check bounds it (times
+            ``safety``), within atol + rtol·|z| per component of z.
+        stages, newton, max_iterations: as :class:`atlasnn.solver.GaussCollocation`'s.
+        max_windows: a length that would take more windows than this is refused (an orbit that
+            escapes is refused rather than marched on ever shorter windows).
+    """
 
     def __init__(self, system: HamiltonianSystem, *, rtol: float = 1e-10, atol: float = 1e-10, stages: int = 12,
                  newton: bool = True, max_iterations: int = 100, safety: float = 2.0, max_windows: int = 200_000):
@@ -214,10 +222,16 @@ class ParametricGauss:
         theta = np.asarray(theta, np.float64).reshape(-1)
         times = np.asarray(times, np.float64).reshape(-1)
         t0 = float(t0)
+        n, P = self.system.state_dim, len(self.system.param_names)
+        if z0.size != n or theta.size != P:
+            raise ConfigError(f"the parametric Gauss solve needs a state of {n} and {P} parameters, got "
+                              f"{z0.size} and {theta.size}")
+        if not np.all(np.isfinite(times)) or np.any(times < t0):
+            raise ConfigError(f"the parametric Gauss solve needs finite times from t0 = {t0:g} on")
         with_s = dtheta is not None
         if with_s:
-            S0 = np.asarray(S_init, np.float64).reshape(z0.size, -1)
-            D = np.asarray(dtheta, np.float64).reshape(theta.size, S0.shape[1])
+            S0 = np.asarray(S_init, np.float64).reshape(n, -1)
+            D = np.asarray(dtheta, np.float64).reshape(P, S0.shape[1])
         if times.size == 0 or float(times.max()) <= t0:
             Z = np.repeat(z0[None], times.size, axis=0)
             return Z, (np.repeat(S0[None], times.size, axis=0) if with_s else None)
