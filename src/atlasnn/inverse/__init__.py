@@ -1,9 +1,9 @@
 """Inverse problems: parameters of H (and initial-state components) identified from noisy,
 partial observations, through one door, :func:`fit`, which takes a method object:
 
-* :class:`Shooting` — least-squares shooting with DOP853 and forward sensitivities
-  (:func:`fit_shooting`; multiple shooting with ``segments``), by default a multistart over the
-  bounds (:func:`fit_multistart`);
+* :class:`Shooting` — least-squares shooting with forward sensitivities, the orbit by the compiled
+  Gauss collocation (or DOP853) (:func:`fit_shooting`; multiple shooting with ``segments``), by
+  default a multistart over the bounds (:func:`fit_multistart`);
 * :class:`CollocationFit` — parameters, trajectory and its network weights solved together in
   float64 (:func:`fit_collocation`), then polished by shooting;
 * :class:`Joint` — one network trained on the data and Hamilton's equations (:func:`fit_joint`);

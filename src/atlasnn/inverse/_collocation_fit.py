@@ -46,6 +46,7 @@ from scipy.interpolate import CubicSpline
 
 from atlasnn.compile_cache import program_cache
 from atlasnn.errors import AtlasError, ConfigError
+from atlasnn.evaluation import PARAMETRIC_SOLVERS
 from atlasnn.inverse._base import AbstractFitMethod
 from atlasnn.inverse._field import field_scale
 from atlasnn.inverse._fit_result import FitResult, distrust, flag_misfit
@@ -72,6 +73,8 @@ class CollocationFit(AbstractFitMethod):
         max_steps: Levenberg–Marquardt steps per stage at most.
         seed: the draw of the features.
         polish: finish with single shooting from the estimate (exact least squares and σ).
+        polish_solver: the orbit's solve in that shooting (:func:`fit_shooting`'s ``solver``:
+            ``"gauss"`` or ``"dop853"``).
     """
 
     windows: int | str = "auto"
@@ -82,6 +85,7 @@ class CollocationFit(AbstractFitMethod):
     max_steps: int = 200
     seed: int = 0
     polish: bool = True
+    polish_solver: str = "gauss"
     name: ClassVar[str] = "collocation"
 
     def fit(self, system, observations, unknowns, *, z0=None, t0=0.0, seed=0):
@@ -103,6 +107,9 @@ class CollocationFit(AbstractFitMethod):
                               f"got {self.points!r}")
         if not (math.isfinite(self.scale) and self.scale > 0):
             raise ConfigError(f"collocation fit: scale must be a positive number, got {self.scale!r}")
+        if self.polish_solver not in PARAMETRIC_SOLVERS:
+            raise ConfigError(f"collocation fit: polish_solver must be one of {list(PARAMETRIC_SOLVERS)}, "
+                              f"got {self.polish_solver!r}")
         mus = tuple(self.penalties)
         if not mus or any(not (math.isfinite(m) and m > 0) for m in mus) or list(mus) != sorted(mus):
             raise ConfigError(f"collocation fit: penalties must be positive and increasing, got {self.penalties!r}")
@@ -364,7 +371,8 @@ def fit_collocation(system: HamiltonianSystem, observations: Observations, unkno
         estimate = prob.estimate(x)
         search = {"collocation_estimate": estimate.tolist(), "windows": windows, "features": cfg.features,
                   "lm_steps": steps}
-        polished = _polish(system, observations, unknowns, estimate, z0, float(t0), search) if cfg.polish else None
+        polished = (_polish(system, observations, unknowns, estimate, z0, float(t0), search, cfg.polish_solver)
+                    if cfg.polish else None)
         if polished is None:
             cov, noise = _own_covariance(prob, x, cfg.penalties[-1], observations.n_values)
             fit = FitResult(names=tuple(u.name for u in unknowns), estimate=estimate,
@@ -382,12 +390,12 @@ def fit_collocation(system: HamiltonianSystem, observations: Observations, unkno
     return fit
 
 
-def _polish(system, observations, unknowns, estimate, z0, t0, search) -> FitResult | None:
+def _polish(system, observations, unknowns, estimate, z0, t0, search, solver) -> FitResult | None:
     """Single shooting from the collocation estimate (None, and the reason in ``search``, where
     the orbit cannot be integrated)."""
     start = [dataclasses.replace(u, guess=float(v)) for u, v in zip(unknowns, estimate)]
     try:
-        fit = fit_shooting(system, observations, start, z0, t0=t0)
+        fit = fit_shooting(system, observations, start, z0, t0=t0, solver=solver)
     except ConfigError:
         raise
     except AtlasError as exc:
@@ -395,6 +403,7 @@ def _polish(system, observations, unknowns, estimate, z0, t0, search) -> FitResu
         return None
     moved = np.abs(fit.estimate - estimate) / np.where(fit.std > 0, fit.std, np.inf)
     search["polish_moved_sigmas"] = float(np.max(moved)) if moved.size else 0.0
+    search["polish_seconds"] = fit.wall_time
     fit.method = "collocation"
     if search["polish_moved_sigmas"] > 10.0:
         distrust(fit, f"shooting moved the collocation estimate by {search['polish_moved_sigmas']:.3g}σ while "

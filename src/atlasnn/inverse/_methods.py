@@ -4,7 +4,7 @@ A method is a small frozen dataclass deriving :class:`AbstractFitMethod` — its
 (the word a config's ``[fit] methods`` uses) and ``fit(...)``; a new method is one such class and
 one :func:`register_fit_method` entry. The built-in ones:
 
-* :class:`Shooting` — least-squares shooting with DOP853 (multiple shooting with ``segments``), from
+* :class:`Shooting` — least-squares shooting (multiple shooting with ``segments``), from
   the guess alone (``starts=1``) or as a multistart over the bounds (default);
 * :class:`CollocationFit` — the simultaneous float64 collocation fit, polished by shooting;
 * :class:`Joint` — one network trained on the data and Hamilton's equations together;
@@ -37,21 +37,25 @@ __all__ = ["AbstractFitMethod", "Shooting", "Joint", "BundleFit", "FIT_METHODS",
 class Shooting(AbstractFitMethod):
     """Least-squares shooting (:func:`fit_shooting`); ``segments``: a count (1: single shooting) or
     ``"auto"`` (:func:`auto_segments`); ``starts``: ``"auto"`` (the guess and 12 more per unknown
-    over the bounds, :func:`fit_multistart`) or a count, 1 = the guess alone."""
+    over the bounds, :func:`fit_multistart`) or a count, 1 = the guess alone; ``solver``: the orbit's
+    solve, ``"gauss"`` (the compiled Gauss collocation) or ``"dop853"`` (SciPy's)."""
 
     segments: int | str = 1
     starts: int | str = "auto"
+    solver: str = "gauss"
     name: ClassVar[str] = "shooting"
 
     def fit(self, system, observations, unknowns, *, z0=None, t0=0.0, seed=0):
         if self.starts == 1:
-            return judge_fit(fit_shooting(system, observations, unknowns, z0, t0=t0, segments=self.segments), unknowns)
+            return judge_fit(fit_shooting(system, observations, unknowns, z0, t0=t0, segments=self.segments,
+                                          solver=self.solver), unknowns)
         return fit_multistart(system, observations, unknowns, z0, t0=t0, segments=self.segments, starts=self.starts,
-                              seed=seed)
+                              seed=seed, solver=self.solver)
 
     def describe(self, unknowns):
         count = auto_starts(len(unknowns)) if self.starts == "auto" else self.starts
         what = "shooting" if self.segments == 1 else f"multiple shooting ({self.segments} segments)"
+        what += " (DOP853)" if self.solver == "dop853" else ""
         return what + ("" if count == 1 else f" from {count} starts over the bounds")
 
 

@@ -5,14 +5,15 @@ parameters θ of H (and, if asked, unknown components of the initial state z0) t
 
     Σ_i ‖ z(t_i; θ, z0)[observed] − obs_i ‖²,
 
-where z(t; θ, z0) is the DOP853 solution of dz/dt = J∇H(z; θ) from t0. The minimiser is SciPy's
-``least_squares`` (trust-region reflective, bounds from the unknowns, ``x_scale="jac"``).
+where z(t; θ, z0) solves dz/dt = J∇H(z; θ) from t0. The minimiser is SciPy's ``least_squares``
+(trust-region reflective, bounds from the unknowns, ``x_scale="jac"``).
 
-The Jacobian of the residuals comes from **forward sensitivities**: the variational equations
-dS/dt = A(z, θ) S + ∂f/∂θ · D, with A = ∂f/∂z, are integrated together with z, one column per
-unknown (D selects the parameter of the column; a z0 column starts at a unit vector instead).
-The solve is :func:`atlasnn.evaluation.solve_parametric` (θ an argument: trying a new θ compiles
-nothing).
+The Jacobian of the residuals comes from **forward sensitivities** ∂z(t_i)/∂(θ, z0), one column
+per unknown. The solve (:func:`atlasnn.evaluation.parametric_solver`, θ an argument: trying a new
+θ compiles nothing) is ``solver="gauss"`` by default: the compiled Gauss collocation on windows of
+one length for the whole fit, its sensitivities the forward-mode derivatives of that same program
+(:class:`atlasnn.solver.ParametricGauss`); ``solver="dop853"``: SciPy's DOP853 with the
+variational equations dS/dt = A(z, θ) S + ∂f/∂θ · D, A = ∂f/∂z, integrated beside z.
 
 ``segments > 1`` gives **multiple shooting**: the observation times are split into consecutive
 segments, every segment after the first starts from its own unknown state, and the residuals are
@@ -35,7 +36,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from atlasnn.errors import AtlasError, ConfigError
-from atlasnn.evaluation import ParametricSolveFailed, solve_parametric
+from atlasnn.evaluation import PARAMETRIC_SOLVERS, ParametricSolveFailed, parametric_solver
 from atlasnn.inverse._field import field_scale
 from atlasnn.inverse._fit_result import FitResult, flag_misfit, gauss_newton_covariance
 from atlasnn.inverse._synthetic import finite_number
@@ -49,8 +50,9 @@ __all__ = ["fit_shooting", "predict_fit", "shooting_misfit", "check_shooting_inp
 class _Problem:
     """Residuals and their Jacobian for single (one segment) or multiple shooting."""
 
-    def __init__(self, system, obs, unknowns, z0, t0, segments, rtol, atol, weight):
-        self.system, self.obs, self.rtol, self.atol, self.w = system, obs, rtol, atol, weight
+    def __init__(self, system, obs, unknowns, z0, t0, segments, rtol, atol, weight, solver="gauss"):
+        self.system, self.obs, self.w = system, obs, weight
+        self.solve = parametric_solver(system, rtol, atol, solver)
         self.idx = obs.indices(system.state_names)
         self.theta0, self.z0 = system.param_vector(), z0
         pn, sn = list(system.param_names), list(system.state_names)
@@ -76,13 +78,13 @@ class _Problem:
 
     def system_solve(self, theta, z, start, end):
         """The state at ``end`` from ``z`` at ``start`` (one solve)."""
-        Z, _, nfev = solve_parametric(self.system, z, theta, start, np.array([end]), self.rtol, self.atol)
+        Z, _, nfev = self.solve(z, theta, start, np.array([end]))
         self.n_rhs, self.n_solves = self.n_rhs + nfev, self.n_solves + 1
         return Z[-1].copy()
 
     def trajectory(self, x, times):
         theta, z = self.theta_z0(x)
-        Z, _, nfev = solve_parametric(self.system, z, theta, self.starts[0], times, self.rtol, self.atol)
+        Z, _, nfev = self.solve(z, theta, self.starts[0], times)
         self.n_rhs, self.n_solves = self.n_rhs + nfev, self.n_solves + 1
         return Z
 
@@ -108,7 +110,7 @@ class _Problem:
             for c, (_, j) in enumerate(self.p_cols):
                 D[j, c] = 1.0
             S0[:, len(self.p_cols):] = np.eye(n)
-        Z, S, nfev = solve_parametric(self.system, z, theta, self.starts[k], times, self.rtol, self.atol, S0, D)
+        Z, S, nfev = self.solve(z, theta, self.starts[k], times, S0, D)
         self.n_rhs, self.n_solves = self.n_rhs + nfev, self.n_solves + 1
         return Z, S, cols
 
@@ -138,14 +140,15 @@ class _Problem:
 # ------------------------------------------------------------------------------------ fit
 def fit_shooting(system: HamiltonianSystem, observations: Observations, unknowns: Sequence[Unknown],
                  z0: Any = None, *, t0: float = 0.0, segments: int | str = 1, rtol: float = 1e-10,
-                 atol: float = 1e-10, max_nfev: int = 200, continuity_weight: float = 1e3) -> FitResult:
+                 atol: float = 1e-10, max_nfev: int = 200, continuity_weight: float = 1e3,
+                 solver: str = "gauss") -> FitResult:
     """Fit unknown parameters of H (and initial-state components) to observations by shooting.
 
     Minimises Σ (model(t_i) − obs_i)² over the unknowns with ``least_squares`` (method "trf",
-    bounds from the unknowns, ``x_scale="jac"``); the model is DOP853 (``rtol``, ``atol``) from
-    ``t0`` with the system's parameters and ``z0`` (default ``system.z0``) replaced where an
-    unknown names them. The Jacobian comes from forward sensitivities (the variational equations
-    integrated with the state), not finite differences.
+    bounds from the unknowns, ``x_scale="jac"``); the model is the orbit from ``t0`` (``solver``:
+    ``"gauss"``, the compiled Gauss collocation, or ``"dop853"``; ``rtol``, ``atol``) with the
+    system's parameters and ``z0`` (default ``system.z0``) replaced where an unknown names them.
+    The Jacobian comes from forward sensitivities (module docstring), not finite differences.
 
     ``segments > 1``: multiple shooting. The observation rows are split into that many
     consecutive groups; segment k ≥ 1 starts at its first observation time from its own unknown
@@ -166,13 +169,14 @@ def fit_shooting(system: HamiltonianSystem, observations: Observations, unknowns
     start = time.perf_counter()
     auto = isinstance(segments, str) and segments == "auto"
     _check_options(system, observations, t0, rtol, atol, continuity_weight, 1 if auto else segments, max_nfev)
+    _check_solver(solver)
     t0 = float(t0)
     unknowns = check_shooting_inputs(system, observations, unknowns, t0=t0, segments=segments)
     if auto:
         segments = auto_segments(system, observations, unknowns, z0, t0=t0)
         _check_segments(observations, segments, t0)
     prob = _Problem(system, observations, unknowns, system.initial_state(z0).copy(), t0, int(segments),
-                    float(rtol), float(atol), float(continuity_weight))
+                    float(rtol), float(atol), float(continuity_weight), solver)
     try:
         res, r, J = _minimise(prob, *_start(prob, unknowns), int(max_nfev))
     except ParametricSolveFailed as exc:
@@ -209,11 +213,14 @@ def check_shooting_inputs(system: HamiltonianSystem, observations: Observations,
 
 
 def shooting_misfit(system: HamiltonianSystem, observations: Observations, unknowns: Sequence[Unknown],
-                    values: Any, z0: Any = None, *, t0: float = 0.0, rtol: float = 1e-10, atol: float = 1e-10) -> float:
-    """Σ (model(t_i) − obs_i)² with the unknowns set to ``values`` (one DOP853 solve from t0, as
-    single shooting sees it); inf when the orbit cannot be integrated to the last observation."""
+                    values: Any, z0: Any = None, *, t0: float = 0.0, rtol: float = 1e-10, atol: float = 1e-10,
+                    solver: str = "gauss") -> float:
+    """Σ (model(t_i) − obs_i)² with the unknowns set to ``values`` (one solve from t0, as single
+    shooting sees it); inf when the orbit cannot be integrated to the last observation."""
     unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values)
-    prob = _Problem(system, observations, unknowns, system.initial_state(z0).copy(), float(t0), 1, rtol, atol, 1.0)
+    _check_solver(solver)
+    prob = _Problem(system, observations, unknowns, system.initial_state(z0).copy(), float(t0), 1, rtol, atol, 1.0,
+                    solver)
     try:
         Z = prob.trajectory(np.asarray(values, np.float64), observations.t)
     except ParametricSolveFailed:
@@ -235,6 +242,11 @@ def _check_options(system, observations, t0, rtol, atol, continuity_weight, segm
     for name, val in (("segments", segments), ("max_nfev", max_nfev)):
         if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
             raise ConfigError(f"{name} must be a positive integer, got {val!r}")
+
+
+def _check_solver(solver) -> None:
+    if not isinstance(solver, str) or solver not in PARAMETRIC_SOLVERS:
+        raise ConfigError(f"solver must be one of {list(PARAMETRIC_SOLVERS)}, got {solver!r}")
 
 
 def _minimise(prob: _Problem, x0, lo, hi, max_nfev: int):
@@ -318,12 +330,14 @@ def auto_segments(system: HamiltonianSystem, observations: Observations, unknown
 
 
 # -------------------------------------------------------------------------------- predict
-def predict_fit(system: HamiltonianSystem, fit: FitResult, z0: Any, t: Any) -> np.ndarray:
-    """The fitted trajectory at the times ``t`` (sorted, ≥ ``fit.t0``): DOP853 at rtol = atol =
-    1e-12 from ``z0`` (``None``: the system's) with the fitted unknowns put in; shape (len(t), 2d)."""
+def predict_fit(system: HamiltonianSystem, fit: FitResult, z0: Any, t: Any, *, solver: str = "gauss") -> np.ndarray:
+    """The fitted trajectory at the times ``t`` (sorted, ≥ ``fit.t0``): ``solver`` (``"gauss"``
+    or ``"dop853"``) at rtol = atol = 1e-12 from ``z0`` (``None``: the system's) with the fitted
+    unknowns put in; shape (len(t), 2d)."""
     if not isinstance(fit, FitResult):
         raise ConfigError(f"fit must be a FitResult, got {type(fit).__name__}")
     system.require_parametric("predict_fit")
+    _check_solver(solver)
     try:
         times = np.asarray(t, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
@@ -342,6 +356,6 @@ def predict_fit(system: HamiltonianSystem, fit: FitResult, z0: Any, t: Any) -> n
         else:
             theta[pn.index(u.name)] = u.guess
     try:
-        return solve_parametric(system, z, theta, fit.t0, times, 1e-12, 1e-12)[0]
+        return parametric_solver(system, 1e-12, 1e-12, solver)(z, theta, fit.t0, times)[0]
     except ParametricSolveFailed as exc:
         raise AtlasError(f"predict_fit: cannot integrate system {system.name!r}: {exc}") from None

@@ -6,6 +6,9 @@ symplectic and of order 2s — as one compiled program. :class:`Collocation` sol
 tanh features by Gauss–Newton; :class:`AdamMarch` is the paper's network trained by Adam window by
 window. A new solver is one :class:`AbstractSolver` subclass and one :func:`register_solver` entry.
 
+:class:`ParametricGauss` solves one orbit at given times for parameters θ passed as arguments, with
+its forward sensitivities ∂z/∂(θ, z0) (the model of least-squares shooting).
+
 :func:`solve_bundle` solves a whole bundle (every initial state and parameter of a box) with a method
 object: one float64 flow map (:class:`FlowMap`, the default) or a trained network
 (:class:`NetworkBundle`).
@@ -16,6 +19,7 @@ from atlasnn.solver._collocation import Collocation, require_float64
 from atlasnn.solver._bundle import NetworkBundle, solve_bundle
 from atlasnn.solver._flowmap import FlowMap, FlowMapProblem, flowmap_bundle, flowmap_problem
 from atlasnn.solver._gauss import GaussCollocation
+from atlasnn.solver._parametric import ParametricGauss, ParametricSolveFailed
 from atlasnn.solver._features import WINDOW_SCALINGS, RandomFeatures, collocation_nodes
 from atlasnn.solver._solve import solve, solve_batch
 from atlasnn.solver._trained import AdamMarch, Transfer
@@ -31,6 +35,8 @@ __all__ = [
     "solve_batch",
     "AbstractSolver",
     "GaussCollocation",
+    "ParametricGauss",
+    "ParametricSolveFailed",
     "Collocation",
     "AdamMarch",
     "Transfer",
