@@ -23,10 +23,12 @@ rounds (every configuration once a round, so that a slow spell of a shared machi
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import statistics
 import time
 from importlib import metadata
+from pathlib import Path
 
 import diffrax
 import jax
@@ -38,7 +40,7 @@ from atlasnn.solver import GaussCollocation
 from atlasnn.solver.diffrax import GaussLegendre
 from atlasnn.systems import expression_system, henon_heiles
 
-from benchmarks.common import machine_info, write_result
+from benchmarks.common import machine_info, replace_generated, write_result
 
 E = 0.6
 PERIOD = 2 * math.pi
@@ -280,13 +282,89 @@ def overhead(repeats, n=32, periods=100):
     return out
 
 
+# ------------------------------------------------------------------ the docs page's tables
+def _setting(r) -> str:
+    if r["method"] == "gauss-legendre":
+        return f"ConstantStepSize, h = {r['h_label']}, s = {r['stages']}"
+    return f"PIDController, rtol = atol = {r['tol']:.0e}"
+
+
+def _work_table(part: dict, other: bool = False) -> list[str]:
+    head = "| method | setting | steps | error | " + ("error vs DOP853 | " if other else "") + "ms | compile s |"
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for r in part["rows"]:
+        extra = f"{r['error_rel_other_reference']:.1e} | " if other else ""
+        lines.append(f"| {r['method']} | {_setting(r)} | {r['steps']} | {r['error_rel']:.1e} | {extra}"
+                     f"{r['seconds'] * 1e3:.1f} | {r['compile_seconds']:.1f} |")
+    return lines
+
+
+def _at(part: dict, key: str, target: str) -> str:
+    best = part[key]
+    gauss, dopri = best.get("gauss-legendre"), best.get("dopri8")
+    words = []
+    for name, b in best.items():
+        words.append(f"{name} " + ("none reaches it" if b is None
+                                   else f"{b['seconds'] * 1e3:.1f} ms ({b['error_rel']:.1e})"))
+    line = f"Fastest at error ≤ {target}: " + "; ".join(words) + "."
+    if gauss and dopri:
+        line += f" Dopri8 takes {dopri['seconds'] / gauss['seconds']:.1f}× GaussLegendre's time."
+    return line
+
+
+def doc_body(results: dict) -> str:
+    m = results["machine"]
+    out = [f"Machine: {m.get('lscpu', {}).get('Model name', '?') if m.get('lscpu') else '?'}, "
+           f"{m.get('cores_available')} core available, XLA_FLAGS={m.get('XLA_FLAGS')}, load average "
+           f"{', '.join(f'{x:.1f}' for x in m.get('load_average') or [])} (a machine shared with other jobs: "
+           f"compare rows, not absolute times); jax {m['versions'].get('jax')}, "
+           f"diffrax {m['versions'].get('diffrax')}. Record: `docs/benchmarks/diffrax_gauss.json`.", ""]
+    if "kepler" in results:
+        k = results["kepler"]
+        out += [f"**Kepler e = 0.6, 100 periods** (against the exact solution; range {k['range']:.3g}):", ""]
+        out += _work_table(k) + ["", _at(k, "at_1e-10", "1e-10"), ""]
+    if "henon-heiles" in results:
+        h = results["henon-heiles"]
+        out += [f"**Hénon–Heiles [0, 24π]** (against `atlasnn.solve` with GaussCollocation(stages=16, h=0.05); "
+                f"the other reference, DOP853 at rtol 2.3e-14, differs from it by {h['reference_gap_rel']:.1e} of the "
+                "range, which is the floor of the last column):", ""]
+        out += _work_table(h, other=True) + ["", _at(h, "at_1e-10", "1e-10"), ""]
+    if "energy" in results:
+        e = results["energy"]
+        decades = [f"[{d['from']:g}, {d['to']:.0f})" for d in e["runs"][0]["decades"]]
+        out += [f"**Energy over {e['periods']} periods of Kepler e = 0.6**: max |H/H0 − 1| over each decade of time "
+                "(at every step's end):", "",
+                "| method | setting | steps | " + " | ".join(decades) + " |",
+                "|" + "---|" * (3 + len(decades))]
+        for r in e["runs"]:
+            out.append(f"| {r['method']} | {r['setting']} | {r['steps']} | "
+                       + " | ".join(f"{d['max_rel_energy_error']:.1e}" for d in r["decades"]) + " |")
+        out.append("")
+    if "overhead" in results:
+        o = results["overhead"]
+        out += [f"**The cost of a step, two doors** ({o['problem']}; {o['steps']} steps, "
+                f"{o['iterations_per_step']:.1f} fixed-point iterations a step in the march; the step is the same "
+                "function either way):", "",
+                "| door | µs a step |", "|---|---|"]
+        out += [f"| {k} | {v:.2f} |" for k, v in o["per_step_us"].items()]
+        out += ["", f"Diffrax adds {100 * (o['diffrax_over_march'] - 1):+.0f} % to a step of the march "
+                "(`diffeqsolve` with `SaveAt(t1=True)` against the march's own time; `atlasnn.solve` adds building "
+                "the solution on the host)."]
+    return "\n".join(out)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="docs/benchmarks/diffrax_gauss.json")
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--periods", type=int, default=10_000, help="periods of the energy run")
     ap.add_argument("--parts", nargs="*", default=["kepler", "henon-heiles", "energy", "overhead"])
+    ap.add_argument("--doc", default="docs/FROM_DIFFRAX.md", help="the page whose tables are written ('' for none)")
+    ap.add_argument("--doc-only", action="store_true", help="rewrite the page's tables from --out")
     args = ap.parse_args(argv)
+    if args.doc_only:
+        replace_generated(args.doc, "diffrax-gauss", doc_body(json.loads(Path(args.out).read_text())))
+        return
     machine = machine_info()
     machine["versions"]["diffrax"] = metadata.version("diffrax")
     results = {"command": "python -m benchmarks.diffrax_gauss " + " ".join(argv or []), "machine": machine}
@@ -300,6 +378,8 @@ def main(argv=None):
         if "overhead" in args.parts:
             results["overhead"] = overhead(args.repeats)
     write_result(args.out, results)
+    if args.doc:
+        replace_generated(args.doc, "diffrax-gauss", doc_body(results))
 
 
 if __name__ == "__main__":
