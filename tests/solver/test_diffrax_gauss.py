@@ -167,6 +167,21 @@ def test_time_dependent_fields_are_evaluated_at_the_nodes_times():
     assert np.abs(ys[:, 1] - np.sin(ts)).max() < 1e-5
 
 
+def test_steps_across_a_jump_of_the_field():
+    """y' = c(t) cos y with c = 1 before t = 1 and 2 after, the jump declared to the controller
+    (the step after it starts from a fresh guess, not from the previous polynomial)."""
+    def field(t, y, args):
+        return jnp.where(t < 1.0, 1.0, 2.0) * jnp.cos(y)
+
+    controller = diffrax.ClipStepSizeController(diffrax.PIDController(rtol=1e-12, atol=1e-12),
+                                                jump_ts=jnp.array([1.0]))
+    sol = diffrax.diffeqsolve(diffrax.ODETerm(field), GaussLegendre(stages=6), 0.0, 2.0, 0.3, jnp.zeros(1),
+                              stepsize_controller=controller, saveat=diffrax.SaveAt(ts=jnp.array([1.0, 2.0])))
+    y1 = 2 * np.arctan(np.tanh(0.5))  # y = 2 atan(tanh(c t/2 + atanh(tan(y0/2))))
+    y2 = 2 * np.arctan(np.tanh(1.0 + np.arctanh(np.tan(y1 / 2))))
+    np.testing.assert_allclose(np.asarray(sol.ys)[:, 0], [y1, y2], rtol=1e-11)
+
+
 def test_a_pytree_state_gives_the_flat_states_numbers():
     def split(t, y, lam):
         dz = henon_heiles(t, jnp.concatenate([y["q"], y["p"]]), lam)

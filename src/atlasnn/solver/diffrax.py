@@ -32,6 +32,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx  # a dependency of Diffrax: the results of a nonlinear solve
 from jax import lax
 from jax.flatten_util import ravel_pytree
 
@@ -198,7 +199,7 @@ class GaussLegendre(diffrax.AbstractAdaptiveSolver):
     def step(self, terms, t0, t1, y0, args, solver_state: GaussLegendreState, made_jump):
         flat, unravel = self._flat(y0)
         tab = self._tableau()
-        h = t1 - t0
+        h = jnp.asarray(t1 - t0, flat.dtype)
         st = solver_state
         e = jnp.where(jnp.all(flat == st.z), st.e, jnp.zeros_like(st.e))
         L_prev, h_prev = st.L, st.h
@@ -217,19 +218,11 @@ class GaussLegendre(diffrax.AbstractAdaptiveSolver):
         ok = r.converged & finite
         result = diffrax.RESULTS.where(
             ok, diffrax.RESULTS.successful,
-            diffrax.RESULTS.where(finite, diffrax.RESULTS.promote(_NOT_SOLVED), diffrax.RESULTS.promote(_DIVERGED)))
+            diffrax.RESULTS.where(finite, diffrax.RESULTS.promote(optx.RESULTS.nonlinear_max_steps_reached),
+                                  diffrax.RESULTS.promote(optx.RESULTS.nonlinear_divergence)))
         y_error = jnp.where(ok, bound, jnp.inf)
         dense_info = dict(y0=y0, e0=e, L=r.L)
         return unravel(r.z), unravel(y_error), dense_info, GaussLegendreState(r.z, r.e, r.L, h), result
 
     def func(self, terms, t0, y0, args):
         return terms.vf(t0, y0, args)
-
-
-def _results():
-    import optimistix as optx  # a dependency of Diffrax
-
-    return optx.RESULTS.nonlinear_max_steps_reached, optx.RESULTS.nonlinear_divergence
-
-
-_NOT_SOLVED, _DIVERGED = _results()
