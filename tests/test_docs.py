@@ -22,7 +22,10 @@ Markers (an HTML comment on the line(s) just before the fence, invisible on the 
   target, a pip install). It is reported as a skipped test with its reason; its ``atlasnn``
   commands are still parsed and their configs validated, and its Python is compiled;
 * ``<!-- docs-test: file NAME -->`` — the block's text is written to NAME first, as the page
-  tells the reader to save it.
+  tells the reader to save it;
+* ``<!-- docs-test: needs MODULE -->`` — the block runs where MODULE (an optional extra, such as
+  ``diffrax``) is installed and is reported as skipped, with that reason, where it is not (its
+  Python is still compiled).
 
 The blocks of one page run in order in one temporary directory (holding a copy of
 ``examples/`` and ``scripts/``), as a reader following the page would; a block may use files an
@@ -40,6 +43,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import importlib.util
 import io
 import json
 import os
@@ -67,7 +71,7 @@ SHELL_LANGS = {"bash", "sh", "shell", "console"}
 KNOWN_LANGS = SHELL_LANGS | {"python", "toml", "json", "text"}
 
 _FENCE = re.compile(r"^(?P<indent>\s*)(?P<fence>`{3,}|~{3,})(?P<lang>[\w+-]*)\s*$")
-_MARKER = re.compile(r"^\s*<!--\s*docs-test:\s*(?P<kind>skip|file)\s*(?P<arg>.*?)\s*-->\s*$")
+_MARKER = re.compile(r"^\s*<!--\s*docs-test:\s*(?P<kind>skip|file|needs)\s*(?P<arg>.*?)\s*-->\s*$")
 
 
 @dataclass
@@ -78,6 +82,7 @@ class Block:
     code: str
     skip: str | None = None  # the reason, when marked skip
     file: str | None = None  # the file name, when marked file
+    needs: str | None = None  # the optional module it needs, when marked needs
 
     @property
     def id(self) -> str:
@@ -113,6 +118,10 @@ def extract_blocks(text: str, page: str = "page.md") -> list[Block]:
                         raise AssertionError(f"{page}:{k + 1}: a skip marker needs a reason: "
                                              "<!-- docs-test: skip (why) -->")
                     block.skip = reason.group(1)
+                elif mk.group("kind") == "needs":
+                    if not re.fullmatch(r"[A-Za-z_]\w*(\.\w+)*", arg):
+                        raise AssertionError(f"{page}:{k + 1}: bad module name {arg!r} in a needs marker")
+                    block.needs = arg
                 else:
                     if not re.fullmatch(r"[\w./-]+", arg) or arg.startswith("/") or ".." in arg:
                         raise AssertionError(f"{page}:{k + 1}: bad file name {arg!r} in a file marker")
@@ -328,6 +337,9 @@ def test_block(block: Block, workspaces, epoch_cap, monkeypatch):
     if block.skip is not None:
         check_skipped_block(block)
         pytest.skip(f"docs-test: skip ({block.skip}); commands parsed and configs validated only")
+    if block.needs is not None and importlib.util.find_spec(block.needs) is None:
+        check_skipped_block(block)
+        pytest.skip(f"docs-test: needs {block.needs}, which is not installed (an optional extra)")
     workspace = workspaces(block.page)
     monkeypatch.chdir(workspace)
     run_block(block, workspace)
@@ -416,6 +428,13 @@ def test_extractor_finds_blocks_and_markers():
     assert blocks[2].file == "tiny.toml" and blocks[2].skip is None
     assert shell_commands(blocks[3]) == ["atlasnn systems", "atlasnn report runs/a  # a comment"]
     assert _argv(shell_commands(blocks[3])[1]) == ["atlasnn", "report", "runs/a"]
+
+
+def test_a_needs_marker_names_a_module():
+    blocks = extract_blocks("<!-- docs-test: needs diffrax -->\n```python\nimport diffrax\n```\n")
+    assert blocks[0].needs == "diffrax" and blocks[0].skip is None
+    with pytest.raises(AssertionError, match="bad module name"):
+        extract_blocks("<!-- docs-test: needs pip install x -->\n```python\nprint(1)\n```\n")
 
 
 def test_extractor_refuses_markers_without_reason_and_open_fences():

@@ -13,7 +13,8 @@ from atlasnn.solutions._polynomial import PolynomialSolution
 from atlasnn.solutions._piecewise import PiecewiseSolution, WindowRecord, stack_models, unstack_models, window_edges
 from atlasnn.solutions._base import INTERVAL_SLACK, ExtrapolationError, ExtrapolationWarning
 from atlasnn.solutions._solution import OUTSIDE_MODES, Solution
-from atlasnn.solutions._tableau import MAX_STAGES, GaussTableau, gauss_tableau, legendre_integral, shifted_legendre
+from atlasnn.solutions._tableau import (MAX_STAGES, GaussTableau, gauss_tableau, legendre_integral, shifted_legendre,
+                                        window_value)
 
 __all__ = [
     "ChebyshevBasis",
@@ -46,6 +47,7 @@ __all__ = [
     "gauss_tableau",
     "shifted_legendre",
     "legendre_integral",
+    "window_value",
     "MAX_STAGES",
     "bucket_size",
 ]

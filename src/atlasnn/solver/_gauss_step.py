@@ -27,8 +27,8 @@ from jax import lax
 
 from atlasnn.solutions import shifted_legendre
 
-__all__ = ["StepResult", "gauss_step", "compensated_add", "small_matmul", "continued_stages", "local_error", "tableau_arrays",
-           "FIXED_POINT_FLOOR"]
+__all__ = ["StepResult", "gauss_step", "solve_stages", "compensated_add", "small_matmul", "continued_stages",
+           "local_error", "tableau_arrays", "FIXED_POINT_FLOOR"]
 
 #: fixed-point iterations per trip of the loop (measured on Hénon–Heiles, s = 12: 6.1 µs a window
 #: with 1, 4.1 µs with 3)
@@ -104,10 +104,10 @@ def _iterate(update, L0, max_iterations, unroll=1):
     return L, k, jnp.max(dmin), dlast
 
 
-def _fixed_point(field, tab, z, e, hb, Y0, max_iterations):
-    """L from the stage guess Y0 by fixed-point iteration: (L, iterations, smallest update)."""
+def _fixed_point(field, tab, z, e, hb, L0, max_iterations):
+    """L by fixed-point iteration from L0 = hb ⊙ f(Y0), Y0 the stage guess: (L, iterations counting
+    L0's evaluation, whether it reached round-off)."""
     mu = tab["mu"]
-    L0 = hb[:, None] * field(Y0)
     L, k, dmin, dlast = _iterate(lambda L: hb[:, None] * field(z + (e + small_matmul(mu, L))), L0, max_iterations,
                                  unroll=FIXED_POINT_UNROLL)
     return L, k + 1, _solved(L, L0, dmin, dlast)
@@ -140,27 +140,66 @@ def _solved(L, L0, dmin, dlast):
             & (dlast <= 100 * FIXED_POINT_FLOOR * scale))
 
 
-def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Array, e: jax.Array, h, Y0: jax.Array,
-               *, max_iterations: int = 100) -> StepResult:
-    """One window of length ``h`` from (z, e) with the stage guess Y0 (s, n).
-
-    ``field`` maps stage values (s, n) to f(Y) (s, n); ``jacobian`` maps a state (n,) to A(z)
-    (n, n), for the simplified Newton iteration (None: fixed-point only); ``tab`` holds the
-    tableau's arrays (:func:`tableau_arrays`)."""
-    hb = h * tab["b"]
-    L, k, ok = _fixed_point(field, tab, z, e, hb, Y0, max_iterations)
+def solve_stages(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Array, e: jax.Array, hb: jax.Array,
+                 L0: jax.Array, max_iterations: int) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+    """The stage equations L = hb ⊙ f(z + (e + μL)) solved from L0 = hb ⊙ f(Y0): by fixed-point
+    iteration, and by simplified Newton where that fails and ``jacobian`` is given. Returns (L,
+    iterations, whether it reached round-off, whether Newton was used). Forward only: its loops
+    cannot be differentiated in reverse (:func:`gauss_step` with ``implicit_gradients``)."""
+    L, k, ok = _fixed_point(field, tab, z, e, hb, L0, max_iterations)
     used_newton = jnp.asarray(False)
     if jacobian is not None:
         # a loop that runs once when the fixed-point iteration failed and not at all otherwise: in a
         # batch (vmap) only a member that needs it makes the batch pay for the factorisation
-        L0 = hb[:, None] * field(Y0)
-
         def newton(carry):
             _, _, k_fp, _, _ = carry
             L_n, k_n, ok_n = _newton(field, jacobian, tab, z, e, hb, L0, max_iterations)
             return L_n, ok_n, k_fp + k_n, jnp.asarray(False), jnp.asarray(True)
 
         L, ok, k, _, used_newton = lax.while_loop(lambda c: c[3], newton, (L, ok, k, ~ok, used_newton))
+    return L, k, ok, used_newton
+
+
+def _dense_tangent_solve(linear: Callable, y: jax.Array) -> jax.Array:
+    """x with linear(x) = y, ``linear`` the stage equations' residual linearised at their solution
+    (I − the derivative of hb ⊙ f(z + (e + μL)) in L): its (sn × sn) matrix from sn products with
+    the unit vectors, then one LU solve (s n is a few dozen to a few hundred)."""
+    shape = y.shape
+    size = y.size
+    columns = jax.vmap(linear)(jnp.eye(size, dtype=y.dtype).reshape((size,) + shape))
+    return jnp.linalg.solve(columns.reshape(size, size).T, y.reshape(-1)).reshape(shape)
+
+
+def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Array, e: jax.Array, h, Y0: jax.Array,
+               *, max_iterations: int = 100, implicit_gradients: bool = False) -> StepResult:
+    """One window of length ``h`` from (z, e) with the stage guess Y0 (s, n).
+
+    ``field`` maps stage values (s, n) to f(Y) (s, n); ``jacobian`` maps a state (n,) to A(z)
+    (n, n), for the simplified Newton iteration (None: fixed-point only); ``tab`` holds the
+    tableau's arrays (:func:`tableau_arrays`).
+
+    ``implicit_gradients``: differentiable (forward and reverse) with respect to z, e, h and
+    whatever ``field`` closes over, by the implicit function theorem on the stage equations
+    (``lax.custom_root``: the solve is not differentiated; the derivative of its solution is one
+    linear solve with the equations' Jacobian at the solution). The values are the same either way."""
+    hb = h * tab["b"]
+    L0 = hb[:, None] * field(Y0)
+    if implicit_gradients:
+        mu = tab["mu"]
+
+        def residual(L):
+            return L - hb[:, None] * field(z + (e + small_matmul(mu, L)))
+
+        def solve(_, guess):
+            # the counts travel as floats: custom_root gives its auxiliary outputs zero tangents of their
+            # own dtype, which JAX refuses for integers and booleans (their tangents must be float0)
+            L, k, ok, used = solve_stages(field, jacobian, tab, z, e, hb, guess, max_iterations)
+            return L, jnp.stack([k, ok, used]).astype(L.dtype)
+
+        L, aux = lax.custom_root(residual, L0, solve, _dense_tangent_solve, has_aux=True)
+        k, ok, used_newton = aux[0].astype(jnp.int32), aux[1] > 0, aux[2] > 0
+    else:
+        L, k, ok, used_newton = solve_stages(field, jacobian, tab, z, e, hb, L0, max_iterations)
     z1, e1 = compensated_add(z, e, jnp.sum(L, axis=0))
     return StepResult(z1, e1, L, k, ok, used_newton)
 
