@@ -66,12 +66,12 @@ def test_clear_programs_drops_the_compiled_programs_held_in_memory(ho):
 
     from atlasnn import solve
     from atlasnn.compile_cache import clear_programs
-    from atlasnn.solver import _program
+    from atlasnn.solver import _gauss_march
 
-    solve(ho, [1.0, 0.0], (0.0, 1.0))
-    assert _program._cached.cache_info().currsize >= 1
+    solve(ho, [1.0, 0.0], (0.0, 1.0))  # the default solver: the Gauss collocation's march
+    assert _gauss_march._cached.cache_info().currsize >= 1
     clear_programs()
-    assert _program._cached.cache_info().currsize == 0
+    assert _gauss_march._cached.cache_info().currsize == 0
     assert np.isfinite(solve(ho, [1.0, 0.0], (0.0, 1.0))(0.5)).all()  # and compiles again when needed
 
 
