@@ -83,7 +83,7 @@ ONE_CORE := taskset -c 0 env XLA_FLAGS=--xla_cpu_multi_thread_eigen=false OMP_NU
 BENCH ?= throughput seed_batch device_accuracy time_to_accuracy compile_once cold_start chain_cost rerun_drift \
 	estimate_effectivity window_optimisers bundle_eval bundle_cost flowmap_estimate flowmap_gauss_newton \
 	inverse_starts inverse_collocation_untuned inverse_noise solver_workprecision solver_suite solver_batch \
-	solver_first_run solver_local_error solver_scalings solver_sin_mlp energy_long step_modes
+	solver_first_run gauss_stages energy_long step_modes diffrax_gauss shooting_solver
 BR := docs/benchmarks
 
 bench: $(BIN)/atlasnn
@@ -135,12 +135,15 @@ bench-solver_workprecision:
 	$(BIN)/python -m benchmarks.solver_workprecision
 bench-solver_suite:
 	$(BIN)/python -m benchmarks.solver_suite --out docs/runs/solver/suite.json
-bench-solver_batch bench-solver_first_run bench-solver_local_error bench-solver_scalings bench-step_modes: bench-%:
+bench-solver_batch bench-solver_first_run bench-step_modes bench-gauss_stages bench-shooting_solver: bench-%:
 	$(BIN)/python -m benchmarks.$* --out $(BR)/$*.json
-bench-solver_sin_mlp:
-	$(BIN)/python -m benchmarks.solver_sin_mlp --widths 8 16 --max-steps 100 --out $(BR)/solver_sin_mlp.json
 bench-energy_long:
 	$(BIN)/python -m benchmarks.energy_long
+bench-diffrax_gauss:
+	taskset -c 0 env XLA_FLAGS=--xla_cpu_multi_thread_eigen=false $(BIN)/python -m benchmarks.diffrax_gauss --repeats 11
+# the tables of docs/SOLVER.md and docs/CHOOSING.md from the solver records above
+solver-doc: $(BIN)/atlasnn
+	$(BIN)/python scripts/solver_doc.py
 
 clean-venv:
 	rm -rf $(VENV)

@@ -54,7 +54,7 @@ CASES = {
     "dw-release-1500": _dw(1_500, 5e-3, RELEASE_BETAS, sigma_per_T=0.03) + _dw(1_500, 1e-3, RELEASE_BETAS, sigma_per_T=0.03),
     "dw-release-5k-sigma0.4": [c for c in _dw(5_000, 5e-3, RELEASE_BETAS, sigma=0.4) if c["scaling"] == "rational_exp"],
     "dw-adam-10k": _dw(10_000, 5e-3, (0.9, 0.999)) + _dw(10_000, 1e-3, (0.9, 0.999)),
-    # the passing case of tests/test_quality.py
+    # the passing case of tests/evaluation/test_quality.py
     "dw-adam-5k-sigma0.4": [c for c in _dw(5_000, 1e-3, (0.9, 0.999), sigma=0.4) if c["scaling"] == "rational_exp"],
     "osc-3k": _osc(3_000),
     "osc-10k": _osc(10_000),

@@ -1,7 +1,7 @@
 """The measured tables of docs/SOLVER.md and docs/CHOOSING.md, made from the committed records.
 
 Each table sits between ``<!-- solver-doc: NAME -->`` and ``<!-- /solver-doc -->`` in a page; this
-script rewrites what is between them from the record it names (tests/test_solver_doc.py checks that
+script rewrites what is between them from the record it names (tests/solver/test_solver_doc.py checks that
 the pages hold what it makes, so no number on them can drift from its record):
 
 * ``suite``: docs/runs/solver/suite.json (``python -m benchmarks.solver_suite``);

@@ -30,7 +30,7 @@ def _fit_sincos_coefficients() -> tuple[tuple[np.float32, ...], tuple[np.float32
 
     sin r = r + r·z·(s0 + s1 z + s2 z² + s3 z³) and cos r = 1 − z/2 + z²·(c0 + c1 z + c2 z²),
     z = r², by least squares on 400 Chebyshev nodes in z (max error 3e-12 for sin and 1e-10 for
-    cos in float64, far below float32's rounding; tests/test_model_loss.py checks the float32
+    cos in float64, far below float32's rounding; tests/training/test_model_and_loss.py checks the float32
     result against jnp.sin/cos).
     """
     zmax = (np.pi / 4) ** 2

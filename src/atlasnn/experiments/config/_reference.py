@@ -149,7 +149,7 @@ def reference_markdown() -> str:
         "# Config reference",
         "",
         f"<!-- Generated from src/atlasnn/experiments/config/_schema.py by `{GENERATED_BY}`. Do not edit:",
-        "     tests/test_config_reference.py checks that this file equals the command's output. -->",
+        "     tests/experiments/test_config_reference.py checks that this file equals the command's output. -->",
         "",
         INTRO.replace("src/atlasnn/experiments/configs/", "`src/atlasnn/experiments/configs/`"),
         "",
