@@ -117,7 +117,7 @@ class FitSettings:
     alone), the bundle's (``bundle_*``), the simultaneous collocation fit's (``collocation_*``,
     :func:`atlasnn.inverse.fit_collocation`)."""
 
-    methods: tuple[str, ...] = ("joint", "collocation", "shooting")
+    methods: tuple[str, ...] = ("shooting",)  # the measured default, as fit()'s (docs/CHOOSING.md)
     joint: JointConfig = JointConfig()
     # the defaults are the method objects' own (one home for each)
     segments: int | str = Shooting.segments
@@ -288,7 +288,7 @@ FAMILY_TABLES: dict[str, TableSpec] = {
                      "objects' (atlasnn.inverse: Joint, Shooting, BundleFit, CollocationFit).", (
         Key("methods", NameList(lambda: f"expected a non-empty list of {sorted(FIT_METHODS)}",
                                 lambda: tuple(sorted(FIT_METHODS))), list(_F.methods),
-            "The methods run on every seed's data, each through atlasnn.inverse.fit."),
+            "The methods run on every seed's data, each through atlasnn.fit (default: shooting, as fit's own)."),
         Key("width", Integer(1, 1024), _J.width, "Joint network: neurons per hidden layer."),
         Key("depth", Integer(1, 8), _J.depth, "Joint network: hidden layers."),
         Key("epochs", Integer(0, 10**7), _J.epochs, "Joint network: Adam epochs."),
