@@ -146,7 +146,7 @@ def test_run_command_trains_a_bundle_from_a_config(tmp_path):
     from atlasnn.cli import main
 
     toml = tmp_path / "b.toml"
-    toml.write_text('name = "b"\nseeds = [0, 1]\n[system]\nname = "nonlinear_oscillator"\n[bundle]\nT = 1.0\n'
+    toml.write_text('name = "b"\nseeds = [0, 1]\n[system]\nname = "nonlinear_oscillator"\n[bundle]\nmethod = "network"\nT = 1.0\n'
                     'ranges = { lam = [0.8, 1.2] }\nwindows = 2\nwidth = 8\nepochs = 400\nlm_steps = 5\n'
                     'lm_points = 32\ntest_members = 6\ntest_times = 11\n')
     out = tmp_path / "run"
@@ -171,7 +171,7 @@ def test_an_interrupted_bundle_run_resumes_from_the_seeds_it_finished(tmp_path, 
     from atlasnn.cli import main
 
     toml = tmp_path / "b.toml"
-    toml.write_text('name = "b"\nseeds = [0, 1]\n[system]\nname = "nonlinear_oscillator"\n[bundle]\nT = 1.0\n'
+    toml.write_text('name = "b"\nseeds = [0, 1]\n[system]\nname = "nonlinear_oscillator"\n[bundle]\nmethod = "network"\nT = 1.0\n'
                     'ranges = { lam = [0.8, 1.2] }\nwidth = 8\nepochs = 200\nlm_steps = 0\n'
                     'test_members = 6\ntest_times = 11\n')
     out, real, trained = tmp_path / "run", family_run._bundle_seed, []
