@@ -10,7 +10,8 @@ one :func:`register_fit_method` entry. The built-in ones:
 * :class:`Joint` — one network trained on the data and Hamilton's equations together;
 * :class:`BundleFit` — a bundle trained over the unknowns' bounds, then least squares on it.
 
-Every one returns a :class:`FitResult`, judged by the rules of :func:`judge_fit` that need no other fit.
+Every one returns a :class:`FitResult`, judged by :func:`fit` with the same rules whatever the
+method: :func:`flag_misfit` and those of :func:`judge_fit` that need no other fit.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from atlasnn.errors import ConfigError
 from atlasnn.inverse._base import AbstractFitMethod
 from atlasnn.inverse._bundle_fit import bundle_box_for, fit_with_bundle
 from atlasnn.inverse._collocation_fit import CollocationFit
-from atlasnn.inverse._fit_result import FitResult
+from atlasnn.inverse._fit_result import FitResult, flag_misfit
 from atlasnn.inverse._joint import JointConfig, fit_joint
 from atlasnn.inverse._multistart import auto_starts, fit_multistart, judge_fit
 from atlasnn.inverse._shooting import fit_shooting
@@ -127,4 +128,7 @@ def fit(system: HamiltonianSystem, observations: Observations, unknowns: Sequenc
         hint = f" (use {FIT_METHODS[method].__name__}())" if isinstance(method, str) and method in FIT_METHODS else ""
         raise ConfigError(f"method must be a fit method object, one of {sorted(c.__name__ for c in FIT_METHODS.values())}, "
                           f"got {method!r}{hint}")
-    return method.fit(system, observations, unknowns, z0=z0, t0=t0, seed=seed)
+    result = method.fit(system, observations, unknowns, z0=z0, t0=t0, seed=seed)
+    # one set of trust rules for every method: the misfit, an estimate at its bound, a second
+    # minimum as good (a method that applied some already says each reason once)
+    return judge_fit(flag_misfit(result, observations), unknowns)
