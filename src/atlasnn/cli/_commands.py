@@ -173,19 +173,18 @@ def cmd_run(args) -> int:
     return _run_config(cfg, args, text, _default_out(cfg, args), str(args.config))
 
 
-def _run_family(path, args) -> int:
-    """A bundle or inverse experiment (a config with [bundle] or [observations])."""
+def _run_family(path, args, resumed=None) -> int:
+    """A bundle or inverse experiment (a config with [bundle] or [observations]); ``resumed``:
+    the config of the unfinished run in ``args.resume``, as it was started."""
     from atlasnn.experiments import run_family
     from atlasnn.experiments.config import load_family
 
     import dataclasses
 
-    resume = getattr(args, "resume", None) if hasattr(args, "resume_seeds") else None
-    cfg = load_family(path, quick=args.quick)
+    resume = args.resume if resumed is not None else None
+    cfg = resumed if resumed is not None else load_family(path, quick=args.quick)
     if args.seeds is not None:
         cfg = dataclasses.replace(cfg, seeds=_seeds(args))
-    if resume is not None:  # the seeds it was started with
-        cfg = dataclasses.replace(cfg, seeds=tuple(args.resume_seeds))
     for flag in ("seed_batch", "profile"):
         if getattr(args, flag, None) not in (None, False):
             raise AtlasError(f"--{flag.replace('_', '-')} is not available for bundle and inverse experiments")
@@ -193,7 +192,8 @@ def _run_family(path, args) -> int:
     args.run_dir = out
     start = time.perf_counter()
     try:
-        run_family(cfg, out, overwrite=args.overwrite, config_text=Path(path).read_text(encoding="utf-8"),
+        run_family(cfg, out, overwrite=args.overwrite,
+                   config_text=None if resume is not None else Path(path).read_text(encoding="utf-8"),
                    progress=not args.no_progress, resume=resume is not None, jobs=_jobs(args),
                    scheduler=getattr(args, "scheduler", None))
     except KeyboardInterrupt:
@@ -205,8 +205,9 @@ def _run_family(path, args) -> int:
 
 
 def _resume_family(args, named: str | None) -> int:
-    """``--resume DIR`` on an unfinished bundle or inverse run: as it was started."""
-    from atlasnn.experiments import check_resumable_family
+    """``--resume DIR`` on an unfinished bundle or inverse run: as it was started, from the run's
+    own copy of its config."""
+    from atlasnn.experiments import load_resumable_family
 
     if named is not None or args.overwrite:
         raise AtlasError("--resume DIR runs DIR's run as it was started: give no config and no --overwrite")
@@ -214,9 +215,9 @@ def _resume_family(args, named: str | None) -> int:
         raise AtlasError(f"--out {args.out} differs from --resume {args.resume}")
     if args.seeds is not None or args.quick:
         raise AtlasError("--resume DIR runs as DIR's run was started: give no --seeds and no --quick")
-    started = check_resumable_family(args.resume)
-    args.quick, args.resume_seeds = bool(started["quick"]), started["seeds"]
-    return _run_family(Path(started["config"]), args)
+    cfg = load_resumable_family(args.resume)
+    args.quick = cfg.quick
+    return _run_family(None, args, resumed=cfg)
 
 
 def cmd_family(args) -> int:
