@@ -66,3 +66,15 @@ def test_an_edited_copy_is_refused_in_one_line_and_the_kept_seed_stays(stopped, 
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "resolves differently" in err and "observations.T: 8.0 → 5.0" in err
     assert "--overwrite" in err and (out / "partial" / "seed0.json").is_file() and not (out / "results.json").exists()
+
+
+def test_a_kept_seed_cut_short_is_run_again(stopped, capsys):
+    """Before, a truncated partial/seedN.json made --resume print a JSONDecodeError traceback."""
+    path, out = stopped
+    kept = out / "partial" / "seed0.json"
+    kept.write_text(kept.read_text()[:40], encoding="utf-8")
+    assert main(["family", "--resume", str(out), "--no-progress"]) == 0
+    said = capsys.readouterr().out
+    assert "seed 0: its kept output" in said and "running the seed again" in said
+    records = json.loads((out / "results.json").read_text())["records"]
+    assert [r["seed"] for r in records] == [0, 1, 2]

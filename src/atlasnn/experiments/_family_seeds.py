@@ -99,9 +99,20 @@ def check_resumable_family(out: str | Path) -> dict[str, Any]:
     return started
 
 
-def _kept(out: Path, seed: int) -> dict[str, Any] | None:
+def _kept(out: Path, seed: int, log: Callable[[str], None]) -> dict[str, Any] | None:
+    """A seed's kept output; one that cannot be read (a file cut short, say) is run again."""
     path = out / _PARTIAL / f"seed{seed}.json"
-    return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else None
+    if not path.is_file():
+        return None
+    try:
+        kept = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        kept = exc
+    if isinstance(kept, dict):
+        return kept
+    why = f"{type(kept).__name__}: {kept}".splitlines()[0] if isinstance(kept, Exception) else "not a seed's record"
+    log(f"  seed {seed}: its kept output {path} is unreadable ({why}); running the seed again")
+    return None
 
 
 def _seed_work(work: Callable[[int], dict], out: Path, task: SeedTask) -> dict[str, Any]:
@@ -119,7 +130,7 @@ def run_seeds(seeds: tuple[int, ...], work: Callable[[int], dict], out: Path, ki
     each finished seed's ``lines``, as it finishes."""
     outputs: dict[int, dict[str, Any]] = {}
     for seed in seeds:
-        kept = _kept(out, seed)
+        kept = _kept(out, seed, log)
         if kept is not None:
             outputs[seed] = kept
             log(f"  seed {seed}: done before (resumed)")
