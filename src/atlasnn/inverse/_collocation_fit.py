@@ -229,9 +229,13 @@ class _Problem:
         for u, j in zip(self.states, self.sidx):
             block[:, j] = u.guess
         for col, j in enumerate(observations.indices(system.state_names)):
-            t, v = observations.t, observations.values[:, col]
+            # repeated times (replicate measurements) enter the spline once, as their mean
+            t, which = np.unique(observations.t, return_inverse=True)
+            v = np.bincount(which, weights=observations.values[:, col]) / np.bincount(which)
             if t[0] > self.t0:  # anchored at the initial value, not extrapolated back to t0
                 t, v = np.concatenate([[self.t0], t]), np.concatenate([[block[0, j]], v])
+            if t.size < 2:  # every value at t0: the component starts held at it
+                continue
             spline = CubicSpline(t, v)
             block[1:, j] = spline(starts[1:])
             rates = spline(starts[:, None] + self.h * self.nodes[None, :], 1)  # (K, P)
