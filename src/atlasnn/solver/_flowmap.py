@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
@@ -85,16 +85,22 @@ class FlowMap:
                           ("iterations", 1), ("region_rounds", 1), ("max_unknowns", 1)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
-                raise ConfigError(f"flow map {name} must be an integer >= {low}, got {v!r}")
+                raise ConfigError(f"flow map {name} must be an integer >= {low}, got {_plain(v)!r}")
         for name, low in (("oversampling", 1.0), ("shell_margin", 0.0)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < low:
-                raise ConfigError(f"flow map {name} must be a finite number >= {low:g}, got {v!r}")
+            if (isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v)
+                    or v < low):
+                raise ConfigError(f"flow map {name} must be a finite number >= {low:g}, got {_plain(v)!r}")
 
     def unknowns(self, state_dim: int, n_params: int) -> int:
         basis = ChebyshevBasis(self.time_degree, self.state_degree, self.param_degree, state_dim,
                                (0.0,) * (state_dim + n_params), (1.0,) * (state_dim + n_params), 1.0)
         return state_dim * basis.n_features
+
+
+def _plain(v: Any) -> Any:
+    """A NumPy scalar as the Python number it holds (what a message shows: 0.5, not np.float64(0.5))."""
+    return v.item() if isinstance(v, np.generic) else v
 
 
 class _Physics:
