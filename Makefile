@@ -3,7 +3,7 @@ PY ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: quick test docs reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc solve-runs bench clean-venv
+.PHONY: quick test test-isa docs reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc solve-runs bench clean-venv
 
 $(BIN)/atlasnn: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -17,8 +17,19 @@ quick: $(BIN)/atlasnn
 # two workers (pytest-xdist), a test file per worker at a time: 5.7 min on the 2-core machine
 # against 9.6 min in one process (CONTRIBUTING.md); TEST_WORKERS=0 runs them in this process
 TEST_WORKERS ?= 2
+PYTEST = $(BIN)/python -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile)
 test: $(BIN)/atlasnn
-	$(BIN)/python -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile)
+	$(PYTEST)
+
+# The suite again with XLA's code limited to older x86 instruction sets, as on a CPU without
+# AVX-512 (AVX2) or without AVX (SSE4_2): results move in the last bits with the instruction set,
+# and through a training further, so a test fitted to one machine's digits fails here. XLA_FLAGS
+# is part of JAX's compilation-cache key: each set's programs are kept apart in the one cache
+# (tests/test_compile_cache_isa.py). `make test-isa ISAS=AVX2` runs one set.
+ISAS ?= AVX2 SSE4_2
+test-isa: $(BIN)/atlasnn
+	@for isa in $(ISAS); do echo "== XLA_FLAGS=--xla_cpu_max_isa=$$isa"; \
+	  XLA_FLAGS="--xla_cpu_max_isa=$$isa" $(PYTEST) || exit 1; done
 
 # The paper's four experiments at full settings, 5 seeds, both profiles (docs/REPRODUCTION.md).
 # `make reproduce-all` is the paper profile; its wall time goes to runs/paper/timing.json.

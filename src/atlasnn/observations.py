@@ -30,7 +30,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 
-__all__ = ["Observations", "load_observations", "Unknown", "check_unknowns", "INITIAL_STATE_PREFIX"]
+__all__ = ["Observations", "load_observations", "Unknown", "check_unknowns", "fixed_values", "INITIAL_STATE_PREFIX"]
 
 #: an unknown named ``z0.<state name>`` is a component of the initial state
 INITIAL_STATE_PREFIX = "z0."
@@ -307,12 +307,23 @@ class Unknown:
         return self.name[len(INITIAL_STATE_PREFIX):] if self.is_initial_state else ""
 
 
+def fixed_values(observations: Observations, unknowns: Sequence[Unknown], t0: float) -> np.ndarray:
+    """(M, C) booleans: the observed values that no unknown can change, so that they inform no
+    fit: those at t = ``t0`` of a component whose initial value is not an unknown (every model
+    starts at the known z0 there, whatever the parameters)."""
+    free = {u.component for u in unknowns if u.is_initial_state}
+    known = np.array([n not in free for n in observations.names], dtype=bool)
+    return (observations.t == float(t0))[:, None] & known[None, :]
+
+
 def check_unknowns(unknowns: Any, system_state_names: Sequence[str], system_param_names: Sequence[str],
-                   n_data: int) -> tuple[Unknown, ...]:
+                   n_data: int, *, observations: Observations | None = None,
+                   t0: float | None = None) -> tuple[Unknown, ...]:
     """Check the unknowns against a system's names and the amount of data; return them as a tuple.
 
     Each name must be a parameter of H or ``z0.<state name>``, no name twice, and there must be
-    more observed scalar values than unknowns (``n_data ≥ len(unknowns) + 1``).
+    more observed scalar values than unknowns (``n_data ≥ len(unknowns) + 1``), counting only the
+    values an unknown can change when ``observations`` and ``t0`` are given (:func:`fixed_values`).
     """
     if isinstance(unknowns, Unknown):
         unknowns = [unknowns]
@@ -332,7 +343,12 @@ def check_unknowns(unknowns: Any, system_state_names: Sequence[str], system_para
         if u.name in seen:
             raise ConfigError(f"unknown {u.name!r} is given more than once")
         seen.add(u.name)
-    if n_data < len(out) + 1:
+    fixed = 0 if observations is None or t0 is None else int(fixed_values(observations, out, t0).sum())
+    if n_data - fixed < len(out) + 1:
+        why = (f" ({fixed} of the {n_data} observed values are at t0 = {float(t0)!r} of components whose initial "
+               "value is known: the model equals z0 there whatever the unknowns, so they inform no fit)"
+               if fixed else "")
         raise ConfigError(f"more unknowns than the data can determine: {len(out)} unknowns need at least "
-                          f"{len(out) + 1} observed values, got {n_data}")
+                          f"{len(out) + 1} observed values that depend on them, got {n_data - fixed}{why}; "
+                          "add observations (after t0) or fit fewer unknowns")
     return out

@@ -122,7 +122,9 @@ def test_a_wrong_solution_is_not_ok_and_an_accurate_one_is(oscillator_runs):
     assert _judge(system, T, bad, bad_sol).status == "failed"
     verdict = _judge(system, T, good, good_sol)
     assert verdict.status == "ok", verdict.reasons
-    assert verdict.measures["estimate_relative"] == pytest.approx(good_err, rel=0.3)
+    # the estimate's documented contract (docs/ESTIMATE.md): within a factor 3 of the true error;
+    # the ratio itself moves with the machine's round-off (0.70 on one CPU, ~1 on another)
+    assert 1 / 3 <= verdict.measures["estimate_relative"] / good_err <= 3
 
 
 def test_without_an_estimate_the_loss_rules_still_decide(oscillator_runs):

@@ -173,19 +173,18 @@ def cmd_run(args) -> int:
     return _run_config(cfg, args, text, _default_out(cfg, args), str(args.config))
 
 
-def _run_family(path, args) -> int:
-    """A bundle or inverse experiment (a config with [bundle] or [observations])."""
+def _run_family(path, args, resumed=None) -> int:
+    """A bundle or inverse experiment (a config with [bundle] or [observations]); ``resumed``:
+    the config of the unfinished run in ``args.resume``, as it was started."""
     from atlasnn.experiments import run_family
     from atlasnn.experiments.config import load_family
 
     import dataclasses
 
-    resume = getattr(args, "resume", None) if hasattr(args, "resume_seeds") else None
-    cfg = load_family(path, quick=args.quick)
+    resume = args.resume if resumed is not None else None
+    cfg = resumed if resumed is not None else load_family(path, quick=args.quick)
     if args.seeds is not None:
         cfg = dataclasses.replace(cfg, seeds=_seeds(args))
-    if resume is not None:  # the seeds it was started with
-        cfg = dataclasses.replace(cfg, seeds=tuple(args.resume_seeds))
     for flag in ("seed_batch", "profile"):
         if getattr(args, flag, None) not in (None, False):
             raise AtlasError(f"--{flag.replace('_', '-')} is not available for bundle and inverse experiments")
@@ -193,7 +192,8 @@ def _run_family(path, args) -> int:
     args.run_dir = out
     start = time.perf_counter()
     try:
-        run_family(cfg, out, overwrite=args.overwrite, config_text=Path(path).read_text(encoding="utf-8"),
+        run_family(cfg, out, overwrite=args.overwrite,
+                   config_text=None if resume is not None else Path(path).read_text(encoding="utf-8"),
                    progress=not args.no_progress, resume=resume is not None, jobs=_jobs(args),
                    scheduler=getattr(args, "scheduler", None))
     except KeyboardInterrupt:
@@ -205,8 +205,9 @@ def _run_family(path, args) -> int:
 
 
 def _resume_family(args, named: str | None) -> int:
-    """``--resume DIR`` on an unfinished bundle or inverse run: as it was started."""
-    from atlasnn.experiments import check_resumable_family
+    """``--resume DIR`` on an unfinished bundle or inverse run: as it was started, from the run's
+    own copy of its config."""
+    from atlasnn.experiments import load_resumable_family
 
     if named is not None or args.overwrite:
         raise AtlasError("--resume DIR runs DIR's run as it was started: give no config and no --overwrite")
@@ -214,9 +215,9 @@ def _resume_family(args, named: str | None) -> int:
         raise AtlasError(f"--out {args.out} differs from --resume {args.resume}")
     if args.seeds is not None or args.quick:
         raise AtlasError("--resume DIR runs as DIR's run was started: give no --seeds and no --quick")
-    started = check_resumable_family(args.resume)
-    args.quick, args.resume_seeds = bool(started["quick"]), started["seeds"]
-    return _run_family(Path(started["config"]), args)
+    cfg = load_resumable_family(args.resume)
+    args.quick = cfg.quick
+    return _run_family(None, args, resumed=cfg)
 
 
 def cmd_family(args) -> int:
@@ -317,130 +318,6 @@ def cmd_report(args) -> int:
     for line in summary_lines(load_results(Path(args.dir)), run_dir=Path(args.dir)):
         print(line)
     print(f"wrote {len(paths)} files in {args.dir}")
-    return 0
-
-
-def _integrate_problem(args):
-    """(system, z0, t0, T, steps) from --system/--T/--steps, or from a config file (its system,
-    z0 and evaluation interval; --T and --steps still override)."""
-    from atlasnn.experiments.config import load_config, parse_end_time
-    from atlasnn.systems import builtin_system
-
-    config = args.config_pos or args.config
-    if args.config_pos and args.config and args.config_pos != args.config:
-        raise AtlasError(f"two configs given ({args.config_pos} and --config {args.config}); give one")
-    if config is None:
-        system = builtin_system(args.system or "nonlinear_oscillator")
-        T = parse_end_time("--T", args.T or "4*pi")
-        return system, system.initial_state(), 0.0, T, args.steps or 199
-    if args.system is not None:
-        raise AtlasError(f"--system {args.system} and a config ({config}) both name a system; give one")
-    cfg = load_config(config)
-    stage = cfg.eval_stage
-    system = cfg.system.build()
-    z0 = system.initial_state(cfg.system.z0)
-    T = stage.T if args.T is None else parse_end_time("--T", args.T)
-    if T <= stage.t0:
-        raise AtlasError(f"--T {args.T}: must be greater than the config's t0 = {stage.t0:g}")
-    steps = args.steps or cfg.evaluation.se_steps or stage.train.n_points - 1
-    return system, z0, stage.t0, T, steps
-
-
-def cmd_integrate(args) -> int:
-    import numpy as np
-
-    from atlasnn.evaluation import INTEGRATORS, REFERENCE_DESCRIPTION, energy_drift, error_table, integrate, reference_solution
-    from atlasnn.limits import check_integration_memory
-
-    if args.steps is not None and args.steps < 1:
-        raise AtlasError(f"--steps must be >= 1, got {args.steps}")
-    system, z0, t0, T, steps = _integrate_problem(args)
-    check_integration_memory(steps, 2 * system.dim, key="--steps", value=steps)
-    print(f"{system.name}: z0 = {z0.tolist()}, [{t0:g}, {T:.4f}], {steps} steps; reference: {REFERENCE_DESCRIPTION}")
-    E0 = float(system.energy64(z0))
-    if not system.separable:
-        print(f"skipping {', '.join(INTEGRATORS)}: they need a separable H = T(p) + V(q) and "
-              f"{system.name!r} is not declared separable")
-        t = np.linspace(t0, T, steps + 1)
-        ref = reference_solution(system, z0, t)
-        drift = energy_drift(system.energy64(ref), E0)
-        state = ", ".join(f"{n} = {v:.6g}" for n, v in zip(system.state_names, ref[-1]))
-        print(f"reference: energy drift {drift:.3e} on {steps + 1} points; at t = {T:.4f}: {state}")
-        return 0
-    print(f"{'method':18s}" + "".join(f"{'L2(' + n + ')':>12s}" for n in system.state_names) + f"{'max|err|':>12s}{'energy drift':>14s}")
-    unstable, refs = [], {}
-    for method in INTEGRATORS:
-        with np.errstate(all="ignore"):
-            t, z = integrate(method, system, z0, t0, T, steps)
-            key = t.tobytes()  # every method has the same grid: solve the reference once
-            ref = refs[key] = refs[key] if key in refs else reference_solution(system, z0, t)
-            tab = error_table(t, z, ref, system.state_names)
-            drift = energy_drift(system.energy64(z), E0)
-        if not np.all(np.isfinite(z)):
-            unstable.append(method)
-        cells = "".join(f"{tab['components'][n]['l2_discrete']:12.3e}" for n in system.state_names)
-        print(f"{method:18s}{cells}{tab['whole']['max_abs']:12.3e}{drift:14.3e}")
-    print("L2 = sqrt(sum_i err_i^2) on each method's own grid (the release's tabulated form)")
-    if unstable:
-        print(f"nan: {', '.join(unstable)} blew up (step {(T - t0) / steps:.3g} is too large for it); raise --steps")
-    return 0
-
-
-def _solver_from_args(args):
-    """The solver object of ``atlasnn solve``'s options (an option of the other solver is refused)."""
-    from atlasnn.solver import solver_from_name
-
-    own = {"gauss": ("stages", "steps", "h"), "collocation": ("features", "seed")}[args.solver]
-    options = {"stages": "stages", "step_mode": "steps", "h": "h", "features": "features", "seed": "seed",
-               "rtol": "rtol", "atol": "atol"}
-    given = {key: getattr(args, dest) for dest, key in options.items() if getattr(args, dest) is not None}
-    for key in sorted(set(given) - set(own) - {"rtol", "atol"}):
-        raise AtlasError(f"--{key} is a setting of another solver than --solver {args.solver}; drop it or choose "
-                         f"--solver {'collocation' if args.solver == 'gauss' else 'gauss'}")
-    return solver_from_name(args.solver, **given)
-
-
-def cmd_solve(args) -> int:
-    import numpy as np
-
-    from atlasnn.evaluation import reference_solution
-    from atlasnn.solver import solve
-
-    from atlasnn.experiments.config import builtin_config_path, builtin_experiments
-
-    args.steps = 1  # the problem's reading shares integrate's; its steps are not used here
-    if args.config_pos in builtin_experiments() and not Path(args.config_pos).exists():
-        args.config_pos = str(builtin_config_path(args.config_pos))  # a built-in experiment by name
-    system, z0, t0, T, _ = _integrate_problem(args)
-    solver = _solver_from_args(args)
-    if args.save is not None and Path(args.save).exists():
-        raise AtlasError(f"--save {args.save}: the file exists; choose another path or remove it")
-    sol = solve(system, z0, (t0, T), solver=solver)
-    info = sol.info
-    work = (f"{info['rejected']} rejected, {info['iterations']} iterations" if "iterations" in info else
-            f"{info['rejected']} rejected, {info['newton_iterations']} Gauss-Newton iterations")
-    print(f"{system.name}: [{t0:g}, {T:.6g}] in {sol.n_windows} windows ({work}), {info['solve_time'] * 1e3:.1f} ms "
-          f"(first call, with compilation or cache load: {info['first_call_time']:.2f} s)")
-    if info.get("advice"):
-        print(f"note: {info['advice']}")
-    est = sol.estimate(z0=z0)
-    trust = "" if est.trusted else f" (quantitative only up to t = {est.trusted_until:.4g}: past it the error is large)"
-    print(f"estimated max error: {est.max_abs:.3e} = {est.relative_max:.3e} of the state's range{trust}")
-    if args.check:
-        t = np.linspace(t0, T, 2000)
-        ref = reference_solution(system, z0, t, rtol=2.5e-14, atol=1e-14)  # DOP853 at its tightest
-        # the reference's own error, as far as it can be told: how far the next looser run is from it
-        blur = float(np.abs(reference_solution(system, z0, t, rtol=1e-13, atol=1e-13) - ref).max())
-        err, scale = float(np.abs(sol(t) - ref).max()), float(np.ptp(ref, axis=0).max())
-        print(f"true max error against DOP853 at rtol 2.5e-14 (2000 times): {err:.3e} = {err / scale:.3e} of the range"
-              + (f"; estimate / true = {est.max_abs / err:.2f}" if err > 3 * blur else
-                 f": within what the reference resolves ({blur:.1e}, its distance from DOP853 at 1e-13), so the "
-                 "true error is not known better than that"))
-    if args.save is not None:
-        from atlasnn.checkpoint import save_piecewise
-
-        save_piecewise(args.save, sol, extra={"interval": [t0, T]})
-        print(f"wrote {args.save}")
     return 0
 
 

@@ -10,15 +10,14 @@ from atlasnn.cli._commands import (
     cmd_experiments,
     cmd_family,
     cmd_init,
-    cmd_integrate,
     cmd_report,
     cmd_reproduce,
     cmd_run,
-    cmd_solve,
     cmd_suite,
     cmd_sweep,
     cmd_systems,
 )
+from atlasnn.cli._solve_commands import cmd_integrate, cmd_solve
 from atlasnn.version import __version__
 
 def build_parser() -> argparse.ArgumentParser:

@@ -3,7 +3,7 @@ with results.json, tables and figures; resume, sweeps, and the training schemes'
 
 from atlasnn.experiments._executor import Executor
 from atlasnn.experiments._executors import EXECUTORS, open_executor, scheduler_address
-from atlasnn.experiments._family_run import rewrite_family_summary, run_family
+from atlasnn.experiments._family_run import load_resumable_family, rewrite_family_summary, run_family
 from atlasnn.experiments._family_seeds import check_resumable_family, is_unfinished_family_run
 from atlasnn.experiments._local import LocalExecutor
 from atlasnn.experiments._plan import columns_of, plan_tasks
@@ -19,6 +19,7 @@ __all__ = [
     "run_experiment",
     "run_family",
     "check_resumable_family",
+    "load_resumable_family",
     "is_unfinished_family_run",
     "rewrite_family_summary",
     "resume_experiment",

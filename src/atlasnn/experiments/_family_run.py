@@ -24,6 +24,7 @@ from atlasnn.errors import AtlasError
 from atlasnn.evaluation import reference_members
 from atlasnn.experiments._family_seeds import (
     check_resumable_family,
+    check_same_problem,
     finish_partial,
     in_process,
     jsonable,
@@ -31,6 +32,7 @@ from atlasnn.experiments._family_seeds import (
     start_partial,
 )
 from atlasnn.experiments._store import check_run_dir
+from atlasnn.experiments.config import parse_family, read_config
 from atlasnn.experiments.config._family import FamilyConfig
 from atlasnn.fileio import write_json, write_text
 from atlasnn.inverse import FitResult, check_shooting_inputs, fit, judge_fit, predict_fit, synthetic_observations
@@ -41,7 +43,7 @@ from atlasnn.solver import solve_bundle
 from atlasnn.training import train_bundle
 from atlasnn.version import __version__
 
-__all__ = ["run_family", "rewrite_family_summary", "EVAL_MEMBERS", "EVAL_TIMES"]
+__all__ = ["run_family", "load_resumable_family", "rewrite_family_summary", "EVAL_MEMBERS", "EVAL_TIMES"]
 
 #: the evaluation-cost measurement: members × times
 EVAL_MEMBERS, EVAL_TIMES = 100_000, 100
@@ -55,10 +57,11 @@ def run_family(cfg: FamilyConfig, out: str | Path, *, overwrite: bool = False, l
     when the seeds run in this process; the results' lines are printed either way. The seeds run
     as tasks of the run's executor (``jobs`` local processes, or the Dask ``scheduler``'s
     workers), each kept in ``out/partial/`` as it finishes; ``resume``: continue a run in ``out``
-    that was interrupted, from the seeds it kept (``cfg`` should be the one it ran)."""
+    that was interrupted, from the seeds it kept (``cfg`` must resolve as the one it ran, or the
+    resume is refused: :func:`load_resumable_family` reads it from the run's own copy)."""
     out = Path(out)
     if resume:
-        check_resumable_family(out)
+        check_same_problem(out, _problem(cfg))
     else:
         check_run_dir(out, overwrite)
     system = cfg.system.build()
@@ -69,7 +72,7 @@ def run_family(cfg: FamilyConfig, out: str | Path, *, overwrite: bool = False, l
     if not resume:
         if config_text is not None:
             write_text(out / "config.toml", config_text)
-        start_partial(out, cfg.source, cfg.quick, cfg.seeds)
+        start_partial(out, cfg.source, cfg.quick, cfg.seeds, _problem(cfg))
     say = print if progress and in_process(jobs, scheduler) else _silent
     runner = _run_bundle if cfg.kind == "bundle" else _run_inverse
     results = runner(cfg, system, out, log, say, {"jobs": jobs, "scheduler": scheduler})
@@ -80,6 +83,34 @@ def run_family(cfg: FamilyConfig, out: str | Path, *, overwrite: bool = False, l
     finish_partial(out)
     log(f"wrote {out / 'results.json'} and {out / 'summary.md'}")
     return results
+
+
+def _problem(cfg: FamilyConfig) -> Any:
+    """What a run's seeds compute, as JSON: the resolved config without where it was read from
+    (an observation file by its absolute path)."""
+    problem = jsonable(dataclasses.asdict(dataclasses.replace(cfg, source="")))
+    if problem.get("observations") and problem["observations"].get("file"):
+        problem["observations"]["file"] = str(Path(problem["observations"]["file"]).resolve())
+    return problem
+
+
+def load_resumable_family(out: str | Path, log: Callable[[str], None] = print) -> FamilyConfig:
+    """The config of the unfinished bundle or inverse run in ``out``, as it was started: the run's
+    own copy ``config.toml`` (paths in it relative to the original file's folder), its --quick
+    flag and its seeds. A changed original is ignored, with a note; a changed copy is refused
+    by :func:`run_family`."""
+    out = Path(out)
+    started = check_resumable_family(out)
+    original, copy = Path(started.get("config", "config.toml")), out / "config.toml"
+    read = copy if copy.is_file() else original
+    cfg = parse_family(read_config(read), source=str(original), quick=bool(started.get("quick")))
+    try:
+        changed = read == copy and original.is_file() and original.read_bytes() != copy.read_bytes()
+    except OSError:
+        changed = False
+    if changed:
+        log(f"note: {original} changed since the run started; the run resumes with its own copy {copy}")
+    return dataclasses.replace(cfg, seeds=tuple(started["seeds"]))
 
 
 # ------------------------------------------------------------------------------ bundles

@@ -22,7 +22,7 @@ from atlasnn.experiments._executors import open_executor, scheduler_address
 from atlasnn.fileio import write_json
 
 __all__ = ["SeedTask", "run_seeds", "start_partial", "finish_partial", "is_unfinished_family_run",
-           "check_resumable_family", "jsonable"]
+           "check_resumable_family", "check_same_problem", "jsonable"]
 
 _PARTIAL = "partial"  # the finished seeds of a run not yet written whole
 
@@ -40,12 +40,34 @@ def jsonable(d: Any) -> Any:
     return json.loads(json.dumps(d, default=lambda o: list(o) if isinstance(o, tuple) else str(o)))
 
 
-def start_partial(out: Path, source: str, quick: bool, seeds: tuple[int, ...]) -> None:
-    """A fresh run: no seed of an older run is reused; how this one was started is kept."""
+def start_partial(out: Path, source: str, quick: bool, seeds: tuple[int, ...], problem: Any = None) -> None:
+    """A fresh run: no seed of an older run is reused; how this one was started is kept, with
+    ``problem`` (the resolved config, as JSON) so that a resume can tell it runs the same one."""
     shutil.rmtree(out / _PARTIAL, ignore_errors=True)
     (out / _PARTIAL).mkdir(parents=True)
     write_json(out / _PARTIAL / "run.json", {"config": str(Path(source).resolve()), "quick": quick,
-                                             "seeds": list(seeds)})
+                                             "seeds": list(seeds), "problem": problem})
+
+
+def check_same_problem(out: Path, problem: Any) -> None:
+    """A resume runs the problem the finished seeds ran, or nothing: refused in one line when the
+    config now resolves differently (a run started before the problem was recorded is not checked)."""
+    started = check_resumable_family(out)
+    recorded = started.get("problem")
+    if recorded is not None and recorded != problem:
+        differ = _first_difference(recorded, problem)
+        raise ConfigError(f"--resume {out}: the config now resolves differently from when the run started "
+                          f"({differ}); the seeds kept in {out / _PARTIAL} ran the old problem: restore "
+                          f"{out / 'config.toml'}, or start a new run with --overwrite")
+
+
+def _first_difference(old: Any, new: Any, where: str = "") -> str:
+    """Where two JSON values first differ, as "key: old → new"."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        for key in [*old, *(k for k in new if k not in old)]:
+            if old.get(key) != new.get(key):
+                return _first_difference(old.get(key), new.get(key), f"{where}.{key}" if where else str(key))
+    return f"{where or 'config'}: {old!r} → {new!r}"
 
 
 def finish_partial(out: Path) -> None:
@@ -69,14 +91,28 @@ def check_resumable_family(out: str | Path) -> dict[str, Any]:
     except (OSError, ValueError):
         raise ConfigError(f"--resume {out}: no {_PARTIAL}/run.json there, so not an unfinished bundle or inverse "
                           "run") from None
-    if not Path(started.get("config", "")).is_file():
-        raise ConfigError(f"--resume {out}: the run's config file {started.get('config')!r} is gone")
+    if not isinstance(started, dict) or not isinstance(started.get("seeds"), list):
+        raise ConfigError(f"--resume {out}: {_PARTIAL}/run.json is not a record of how a run was started")
+    if not (out / "config.toml").is_file() and not Path(started.get("config", "")).is_file():
+        raise ConfigError(f"--resume {out}: neither the run's copy config.toml nor its config file "
+                          f"{started.get('config')!r} is there")
     return started
 
 
-def _kept(out: Path, seed: int) -> dict[str, Any] | None:
+def _kept(out: Path, seed: int, log: Callable[[str], None]) -> dict[str, Any] | None:
+    """A seed's kept output; one that cannot be read (a file cut short, say) is run again."""
     path = out / _PARTIAL / f"seed{seed}.json"
-    return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else None
+    if not path.is_file():
+        return None
+    try:
+        kept = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        kept = exc
+    if isinstance(kept, dict):
+        return kept
+    why = f"{type(kept).__name__}: {kept}".splitlines()[0] if isinstance(kept, Exception) else "not a seed's record"
+    log(f"  seed {seed}: its kept output {path} is unreadable ({why}); running the seed again")
+    return None
 
 
 def _seed_work(work: Callable[[int], dict], out: Path, task: SeedTask) -> dict[str, Any]:
@@ -94,7 +130,7 @@ def run_seeds(seeds: tuple[int, ...], work: Callable[[int], dict], out: Path, ki
     each finished seed's ``lines``, as it finishes."""
     outputs: dict[int, dict[str, Any]] = {}
     for seed in seeds:
-        kept = _kept(out, seed)
+        kept = _kept(out, seed, log)
         if kept is not None:
             outputs[seed] = kept
             log(f"  seed {seed}: done before (resumed)")

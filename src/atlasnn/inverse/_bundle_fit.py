@@ -19,7 +19,7 @@ from scipy.optimize import least_squares
 
 from atlasnn.errors import ConfigError
 from atlasnn.inverse._fit_result import FitResult, flag_misfit, gauss_newton_covariance
-from atlasnn.observations import Observations, Unknown, check_unknowns
+from atlasnn.observations import Observations, Unknown, check_unknowns, fixed_values
 from atlasnn.solutions import BundleSolution
 from atlasnn.systems import BundleBox
 
@@ -66,7 +66,8 @@ def fit_with_bundle(bundle: BundleSolution, observations: Observations, unknowns
     if system is None:
         raise ConfigError("the bundle has no system attached; load it with its system")
     observations.check_interval(bundle.t0, bundle.T)
-    unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values)
+    unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values,
+                              observations=observations, t0=bundle.t0)
     _check_cover(bundle, system, unknowns)
     cols = observations.indices(system.state_names)
     z_base = np.array(system.initial_state(z0), np.float64)
@@ -101,11 +102,12 @@ def fit_with_bundle(bundle: BundleSolution, observations: Observations, unknowns
     res = least_squares(residual, guess, jac=jacobian, bounds=bounds, method="trf", x_scale="jac",
                         max_nfev=max_nfev)
     r = res.fun
-    m, n = observations.n_values, len(unknowns)
-    cov, cond, weak = gauss_newton_covariance(res.jac, float(r @ r), m - n)
+    informs = ~fixed_values(observations, unknowns, bundle.t0).reshape(-1)  # a bundle starts at z0 too
+    m, n, rss = int(informs.sum()), len(unknowns), float(r[informs] @ r[informs])
+    cov, cond, weak = gauss_newton_covariance(res.jac, rss, m - n)
     names = tuple(u.name for u in unknowns)
     return flag_misfit(FitResult(names=names, estimate=np.asarray(res.x, np.float64), std=np.sqrt(np.abs(np.diag(cov))),
-                     covariance=cov, noise_estimate=math.sqrt(float(r @ r) / (m - n)),
+                     covariance=cov, noise_estimate=math.sqrt(rss / (m - n)),
                      residual_rms=float(np.sqrt(np.mean(r**2))), wall_time=time.perf_counter() - start,
                      n_rhs=0, n_solves=int(res.nfev), method="network (bundle)", success=bool(res.success),
                      message=" ".join(str(res.message).split()), identifiable=not weak,

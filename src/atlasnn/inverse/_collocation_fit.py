@@ -51,7 +51,7 @@ from atlasnn.inverse._base import AbstractFitMethod
 from atlasnn.inverse._field import field_scale
 from atlasnn.inverse._fit_result import FitResult, distrust, flag_misfit
 from atlasnn.inverse._shooting import check_shooting_inputs, fit_shooting
-from atlasnn.observations import INITIAL_STATE_PREFIX, Observations, Unknown
+from atlasnn.observations import INITIAL_STATE_PREFIX, Observations, Unknown, fixed_values
 from atlasnn.solver import RandomFeatures, collocation_nodes, require_float64
 from atlasnn.systems import HamiltonianSystem, parametric_field
 
@@ -236,9 +236,13 @@ class _Problem:
         for u, j in zip(self.states, self.sidx):
             block[:, j] = u.guess
         for col, j in enumerate(observations.indices(system.state_names)):
-            t, v = observations.t, observations.values[:, col]
+            # repeated times (replicate measurements) enter the spline once, as their mean
+            t, which = np.unique(observations.t, return_inverse=True)
+            v = np.bincount(which, weights=observations.values[:, col]) / np.bincount(which)
             if t[0] > self.t0:  # anchored at the initial value, not extrapolated back to t0
                 t, v = np.concatenate([[self.t0], t]), np.concatenate([[block[0, j]], v])
+            if t.size < 2:  # every value at t0: the component starts held at it
+                continue
             spline = CubicSpline(t, v)
             block[1:, j] = spline(starts[1:])
             rates = spline(starts[:, None] + self.h * self.nodes[None, :], 1)  # (K, P)
@@ -334,7 +338,7 @@ def _own_covariance(prob: _Problem, x, mu, n_data: int):
     unit = np.zeros((J.shape[1], p))
     unit[cols, np.arange(p)] = 1.0
     block = lu.solve(unit)[cols] / prob.scale ** 2
-    s2 = data_rss / max(n_data - p, 1)
+    s2 = data_rss / (n_data - p)  # n_data > p: check_shooting_inputs
     return s2 * block, math.sqrt(s2)
 
 
@@ -374,12 +378,13 @@ def fit_collocation(system: HamiltonianSystem, observations: Observations, unkno
         polished = (_polish(system, observations, unknowns, estimate, z0, float(t0), search, cfg.polish_solver)
                     if cfg.polish else None)
         if polished is None:
-            cov, noise = _own_covariance(prob, x, cfg.penalties[-1], observations.n_values)
+            n_data = int(observations.n_values - fixed_values(observations, unknowns, float(t0)).sum())
+            cov, noise = _own_covariance(prob, x, cfg.penalties[-1], n_data)
             fit = FitResult(names=tuple(u.name for u in unknowns), estimate=estimate,
                             std=np.sqrt(np.abs(np.diag(cov))), covariance=cov, noise_estimate=noise,
                             residual_rms=noise, wall_time=0.0, n_rhs=0, n_solves=0, method="collocation",
                             success=bool(np.all(np.isfinite(estimate))), message="collocation fit (not polished)",
-                            identifiable=True, t0=float(t0), n_data=observations.n_values)
+                            identifiable=True, t0=float(t0), n_data=n_data)
             if cfg.polish:
                 fit.notes.append(f"not polished by shooting ({search['polish']}): σ from the collocation problem")
             fit = flag_misfit(fit, observations)

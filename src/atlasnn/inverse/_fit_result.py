@@ -104,11 +104,12 @@ MISFIT_LIMIT = 0.1
 
 
 def flag_misfit(fit: FitResult, observations: Observations) -> FitResult:
-    """Mark a fit whose residual RMS exceeds MISFIT_LIMIT × the data's RMS (``success`` False,
-    untrusted, a note): its σ are then the curvature of a wrong valley (a Toda pair's c from a
+    """Mark a fit untrusted whose σ says nothing (:func:`_flag_no_sigma`), or whose residual RMS
+    exceeds MISFIT_LIMIT × the data's RMS (``success`` False, untrusted, a note): its σ are then the curvature of a wrong valley (a Toda pair's c from a
     guess of 0.5: 0.336 ± 0.014, truth 0.8, residual 75 % of the data's RMS; from 0.7: 0.8004,
     residual 1 %). The advice skips what the fit already did (a multistart tried other guesses)."""
     scale = float(np.sqrt(np.mean(observations.values ** 2)))
+    _flag_no_sigma(fit, scale)
     ratio = fit.residual_rms / scale if scale > 0 else 0.0
     if ratio > MISFIT_LIMIT:
         fit.success = False
@@ -118,6 +119,21 @@ def flag_misfit(fit: FitResult, observations: Observations) -> FitResult:
         distrust(fit, f"the fit does not explain the data: residual RMS {fit.residual_rms:.3g} is {ratio:.0%} of "
                       f"the data's RMS (a local minimum, or the wrong model): {remedy}")
     return fit
+
+
+def _flag_no_sigma(fit: FitResult, scale: float) -> None:
+    """A fit whose σ says nothing is not trusted: an unknown the data cannot determine (σ = inf
+    already), or residuals at round-off (the fit passes through the data: s² = 0 and σ = 0 would
+    claim an exact estimate; it is set to inf)."""
+    if not fit.identifiable:
+        distrust(fit, "an unknown is not identifiable from these data (its σ is inf): fix it, or add "
+                      "observations that depend on it")
+    if not math.isfinite(fit.noise_estimate) or fit.noise_estimate <= np.finfo(np.float64).eps * scale:
+        fit.std = np.full_like(np.asarray(fit.std, np.float64), np.inf)
+        fit.covariance = np.full_like(np.asarray(fit.covariance, np.float64), np.nan)
+        np.fill_diagonal(fit.covariance, np.inf)
+        distrust(fit, f"no σ: the residuals are at round-off (noise estimate {fit.noise_estimate:.3g}), so the "
+                      "fit passes through the data and nothing is left to measure the noise; add observations")
 
 
 def distrust(fit: FitResult, reason: str) -> FitResult:

@@ -42,7 +42,7 @@ from jax.flatten_util import ravel_pytree
 from atlasnn.errors import ConfigError
 from atlasnn.inverse._fit_result import FitResult, flag_misfit, gauss_newton_covariance
 from atlasnn.nn import make_model
-from atlasnn.observations import Observations, Unknown, check_unknowns
+from atlasnn.observations import Observations, Unknown, check_unknowns, fixed_values
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.training import LMConfig, lm_minimise, trainable_filter
 
@@ -172,8 +172,9 @@ def _chebyshev(t0: float, T: float, k: int) -> np.ndarray:
     return t0 + (T - t0) * (1 - np.cos(np.pi * np.arange(k) / (k - 1))) / 2
 
 
-def _uncertainty(prob: _Problem, x, t_col):
-    """(covariance of φ, s, RSS) from the tangent Gauss–Newton estimate (module docstring)."""
+def _uncertainty(prob: _Problem, x, t_col, informs: np.ndarray):
+    """(covariance of φ, s, RSS) from the tangent Gauss–Newton estimate (module docstring), over
+    the data values ``informs`` marks (those an unknown can change)."""
     jac = jax.jacfwd(lambda v: prob.parts(v, t_col), argnums=0)
     with jax.enable_x64(True):
         x64 = jnp.asarray(np.asarray(x), jnp.float64)
@@ -183,8 +184,8 @@ def _uncertainty(prob: _Problem, x, t_col):
     jd = np.asarray(jd).reshape(-1, x.size)
     n = prob.n_net
     tangent = -np.linalg.lstsq(jp[:, :n], jp[:, n:], rcond=1e-10)[0]
-    G = jd[:, n:] + jd[:, :n] @ tangent
-    d = np.asarray(data).reshape(-1)
+    G = (jd[:, n:] + jd[:, :n] @ tangent)[informs]
+    d = np.asarray(data).reshape(-1)[informs]
     rss, dof = float(d @ d), d.size - G.shape[1]
     cov_u, cond, weak = gauss_newton_covariance(G, rss, dof)
     u = np.asarray(x[n:], np.float64)
@@ -207,7 +208,8 @@ def fit_joint(system: HamiltonianSystem, observations: Observations, unknowns: S
     system.require_parametric("parameter identification")
     T = float(observations.t[-1]) if T is None else float(T)
     observations.check_interval(float(t0), T)
-    unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values)
+    unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values,
+                              observations=observations, t0=float(t0))
     prob = _Problem(system, observations, unknowns, system.initial_state(z0), float(t0), T, config, seed)
     x = jnp.concatenate([prob.x_net, jnp.asarray(prob.u0, prob.x_net.dtype)])
     if config.epochs:
@@ -219,10 +221,11 @@ def fit_joint(system: HamiltonianSystem, observations: Observations, unknowns: S
         jac = lambda v, t: jax.jacrev(prob.residual)(v, t)  # noqa: E731
         out = lm_minimise(res, jac, x, jnp.asarray(t_col, x.dtype), LMConfig(steps=config.lm_steps, patience=40))
         x, stop = out.x, out.stop_reason
-    cov, s, rss, cond, weak = _uncertainty(prob, x, t_col)
+    informs = ~fixed_values(observations, unknowns, float(t0)).reshape(-1)  # the network starts at z0 too
+    cov, s, rss, cond, weak = _uncertainty(prob, x, t_col, informs)
     names = tuple(u.name for u in unknowns)
     notes = [f"{names[j]} is not identifiable from these data (condition number {cond:.3g})" for j in weak]
-    m = observations.n_values
+    m = int(informs.sum())
     return flag_misfit(FitResult(names=names, estimate=np.asarray(prob.phi(np.asarray(x[prob.n_net:], np.float64))),
                      std=np.sqrt(np.abs(np.diag(cov))), covariance=cov, noise_estimate=s,
                      residual_rms=math.sqrt(rss / m), wall_time=time.perf_counter() - start, n_rhs=0, n_solves=0,

@@ -27,7 +27,8 @@ from atlasnn.inverse._fit_result import FitResult, flag_misfit
 from atlasnn.inverse._joint import JointConfig, fit_joint
 from atlasnn.inverse._multistart import auto_starts, fit_multistart, judge_fit
 from atlasnn.inverse._shooting import fit_shooting
-from atlasnn.observations import Observations, Unknown
+from atlasnn.inverse._synthetic import finite_number
+from atlasnn.observations import Observations, Unknown, check_unknowns
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.training import BundleTrainConfig, train_bundle
 
@@ -128,6 +129,10 @@ def fit(system: HamiltonianSystem, observations: Observations, unknowns: Sequenc
         hint = f" (use {FIT_METHODS[method].__name__}())" if isinstance(method, str) and method in FIT_METHODS else ""
         raise ConfigError(f"method must be a fit method object, one of {sorted(c.__name__ for c in FIT_METHODS.values())}, "
                           f"got {method!r}{hint}")
+    if isinstance(system, HamiltonianSystem) and isinstance(observations, Observations):
+        # data that cannot determine the unknowns are refused before any method trains anything
+        check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values,
+                       observations=observations, t0=finite_number(t0, "t0"))
     result = method.fit(system, observations, unknowns, z0=z0, t0=t0, seed=seed)
     # one set of trust rules for every method: the misfit, an estimate at its bound, a second
     # minimum as good (a method that applied some already says each reason once)

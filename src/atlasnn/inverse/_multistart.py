@@ -85,7 +85,8 @@ def fit_multistart(system: HamiltonianSystem, observations: Observations, unknow
     """Shooting from the guess and from ``starts − 1`` more points over the bounds; the fit of
     lowest misfit, judged (:func:`judge_fit`), with the search in ``search``."""
     tic = time.perf_counter()
-    unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values)
+    unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values,
+                              observations=observations, t0=t0)
     count = auto_starts(len(unknowns)) if starts == "auto" else starts
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
         raise ConfigError(f"starts must be a positive integer or \"auto\", got {starts!r}")

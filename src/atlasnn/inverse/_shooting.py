@@ -40,7 +40,7 @@ from atlasnn.evaluation import PARAMETRIC_SOLVERS, ParametricSolveFailed, parame
 from atlasnn.inverse._field import field_scale
 from atlasnn.inverse._fit_result import FitResult, flag_misfit, gauss_newton_covariance
 from atlasnn.inverse._synthetic import finite_number
-from atlasnn.observations import Observations, Unknown, check_unknowns
+from atlasnn.observations import Observations, Unknown, check_unknowns, fixed_values
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["fit_shooting", "predict_fit", "shooting_misfit", "check_shooting_inputs", "auto_segments"]
@@ -181,8 +181,11 @@ def fit_shooting(system: HamiltonianSystem, observations: Observations, unknowns
         res, r, J = _minimise(prob, *_start(prob, unknowns), int(max_nfev))
     except ParametricSolveFailed as exc:
         raise AtlasError(f"shooting cannot integrate system {system.name!r} {exc}") from None
-    n_data, n_user = observations.n_values, len(unknowns)
-    cov, cond, weak = gauss_newton_covariance(J, float(r @ r), n_data - n_user)
+    # the values no unknown can change (at t0, of known components) count neither in s² nor in its dof
+    fixed = fixed_values(observations, unknowns, t0).reshape(-1)
+    informs = np.concatenate([~fixed, np.ones(r.size - fixed.size, bool)])
+    n_data, n_user, rss = int(observations.n_values - fixed.sum()), len(unknowns), float(r[informs] @ r[informs])
+    cov, cond, weak = gauss_newton_covariance(J, rss, n_data - n_user)
     notes = [f"{unknowns[j].name} is not identifiable from these data (condition number {cond:.3g})"
              for j in weak if j < n_user]
     if any(j >= n_user for j in weak):
@@ -190,8 +193,8 @@ def fit_shooting(system: HamiltonianSystem, observations: Observations, unknowns
     return flag_misfit(FitResult(
         names=tuple(u.name for u in unknowns), estimate=np.asarray(res.x[:n_user], np.float64),
         std=np.sqrt(np.diag(cov)[:n_user]), covariance=cov[:n_user, :n_user],
-        noise_estimate=float(math.sqrt(float(r @ r) / (n_data - n_user))),
-        residual_rms=float(np.sqrt(np.mean(r[:n_data] ** 2))), wall_time=time.perf_counter() - start,
+        noise_estimate=float(math.sqrt(rss / (n_data - n_user))),
+        residual_rms=float(np.sqrt(np.mean(r[:observations.n_values] ** 2))), wall_time=time.perf_counter() - start,
         n_rhs=prob.n_rhs, n_solves=prob.n_solves,
         method=("shooting" if segments == 1 else f"multiple shooting ({segments} segments)") + (" (auto)" if auto else ""),
         success=bool(res.success), message=" ".join(str(res.message).split()), identifiable=not weak,
@@ -202,11 +205,13 @@ def fit_shooting(system: HamiltonianSystem, observations: Observations, unknowns
 def check_shooting_inputs(system: HamiltonianSystem, observations: Observations, unknowns: Sequence[Unknown], *,
                           t0: float = 0.0, segments: int | str = 1) -> tuple[Unknown, ...]:
     """Refuse, as one line, what no shooting fit of these inputs could run with: observed names or
-    unknowns the system lacks, observations before t0, more unknowns than data, more segments than
+    unknowns the system lacks, observations before t0, more unknowns than data that depend on them
+    (:func:`~atlasnn.observations.fixed_values`), more segments than
     the observation times allow. Returns the unknowns as a tuple."""
     observations.indices(system.state_names)
     observations.check_interval(float(t0), float(observations.t[-1]))
-    unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values)
+    unknowns = check_unknowns(unknowns, system.state_names, system.param_names, observations.n_values,
+                              observations=observations, t0=float(t0))
     if not (isinstance(segments, str) and segments == "auto"):
         _check_segments(observations, int(segments), float(t0))
     return unknowns

@@ -110,6 +110,11 @@ class ChebyshevBasis:
         return np.all((inputs >= low - pad) & (inputs <= high + pad), axis=1)
 
 
+def _shown(values: np.ndarray) -> str:
+    """Numbers as a message shows them: [1.2, -0.5], four significant digits."""
+    return "[" + ", ".join(f"{v:.4g}" for v in np.asarray(values, np.float64).tolist()) + "]"
+
+
 @dataclass
 class FlowMapBundle:
     """The solution of :func:`atlasnn.solver.solve_bundle`: ``W`` (2d, S + 1, M_space) over
@@ -176,9 +181,11 @@ class FlowMapBundle:
         inside = self.basis.contains(np.concatenate([z0, lam], axis=1))
         if not np.all(inside):
             i = int(np.nonzero(~inside)[0][0])
-            raise ConfigError(f"member {i} (z0 = {z0[i].tolist()}, lam = {lam[i].tolist()}) lies outside the region the "
-                              f"flow map was fitted on (states {list(self.basis.low[:d])} to {list(self.basis.high[:d])}, "
-                              f"parameters {list(self.basis.low[d:])} to {list(self.basis.high[d:])})")
+            low, high = np.asarray(self.basis.low), np.asarray(self.basis.high)
+            raise ConfigError(f"member {i} (z0 = {_shown(z0[i])}, lam = {_shown(lam[i])}) lies outside the region the "
+                              f"flow map was fitted on (states {_shown(low[:d])} to {_shown(high[:d])}, "
+                              f"parameters {_shown(low[d:])} to {_shown(high[d:])}); give members inside it, or "
+                              "solve the bundle over a box that holds them")
         return t, z0, lam
 
     def compose(self, t: np.ndarray, z0: np.ndarray, lam: np.ndarray) -> np.ndarray:

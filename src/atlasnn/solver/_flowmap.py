@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
@@ -86,16 +86,22 @@ class FlowMap:
                           ("iterations", 1), ("region_rounds", 1), ("max_unknowns", 1)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
-                raise ConfigError(f"flow map {name} must be an integer >= {low}, got {v!r}")
+                raise ConfigError(f"flow map {name} must be an integer >= {low}, got {_plain(v)!r}")
         for name, low in (("oversampling", 1.0), ("shell_margin", 0.0)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < low:
-                raise ConfigError(f"flow map {name} must be a finite number >= {low:g}, got {v!r}")
+            if (isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v)
+                    or v < low):
+                raise ConfigError(f"flow map {name} must be a finite number >= {low:g}, got {_plain(v)!r}")
 
     def unknowns(self, state_dim: int, n_params: int) -> int:
         basis = ChebyshevBasis(self.time_degree, self.state_degree, self.param_degree, state_dim,
                                (0.0,) * (state_dim + n_params), (1.0,) * (state_dim + n_params), 1.0)
         return state_dim * basis.n_features
+
+
+def _plain(v: Any) -> Any:
+    """A NumPy scalar as the Python number it holds (what a message shows: 0.5, not np.float64(0.5))."""
+    return v.item() if isinstance(v, np.generic) else v
 
 
 class _Physics:
@@ -164,12 +170,12 @@ def _draw_points(n: int, region: tuple[np.ndarray, np.ndarray], box: BundleBox, 
     zlo, zhi = region
     plo = np.asarray([a for a, _ in box.params.values()])
     phi = np.asarray([b for _, b in box.params.values()])
-    zs, ls, tries = [], [], 0
+    zs, ls, tries, drawn = [], [], 0, 0
     while sum(len(z) for z in zs) < n:
         tries += 1
         if tries > 200:
-            raise ConfigError("flow map: could not draw collocation states on the box's energy shell inside the "
-                              "region (is H conserved and the region right?)")
+            raise ConfigError(_off_shell(region, box, shell, h, sum(len(z) for z in zs) / drawn,
+                                         (float(lo.min()), float(hi.max()))))
         z = rng.uniform(zlo, zhi, (4 * n, zlo.size))
         lam = rng.uniform(plo, phi, (4 * n, plo.size))
         lo, hi = shell.bounds(lam)
@@ -177,9 +183,23 @@ def _draw_points(n: int, region: tuple[np.ndarray, np.ndarray], box: BundleBox, 
         keep = (H >= lo) & (H <= hi)
         zs.append(z[keep])
         ls.append(lam[keep])
+        drawn += len(z)
     z, lam = np.concatenate(zs)[:n], np.concatenate(ls)[:n]
     s = np.where(np.arange(n) % 2 == 0, rng.uniform(0, h, n), h * (1 - np.cos(rng.uniform(0, np.pi, n))) / 2)
     return s, z, lam
+
+
+def _off_shell(region, box: BundleBox, shell: _Shell, h: float, fraction: float, energies) -> str:
+    """The refusal when almost no state of the region lies on the box's energy shell: the maps
+    carried the members far off it (too long a window for the box's fastest members)."""
+    names = shell.physics.system.state_names
+    where = ", ".join(f"{n} in [{a:.3g}, {b:.3g}]" for n, a, b in zip(names, np.asarray(region[0]).tolist(),
+                                                                        np.asarray(region[1]).tolist()))
+    windows = round((box.T - box.t0) / h)
+    return (f"flow map: the states the members reach ({where}) lie far off the box's energy shell (H from "
+            f"{energies[0]:.3g} to {energies[1]:.3g}; {fraction:.2%} of them on it): at h = {h:.3g} ({windows} "
+            f"windows) the maps of this box's fastest members drift; use more windows than {windows} or a smaller "
+            "box (z0_rel or z0_low/z0_high, ranges)")
 
 
 def _gauss_newton(basis: ChebyshevBasis, physics: _Physics, s, z, lam, iterations: int, say) -> tuple[np.ndarray, float]:

@@ -13,6 +13,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from atlasnn.errors import SystemError_
+from atlasnn.systems._compile import CompiledExpression
 from atlasnn.systems._expression import expression_system
 from atlasnn.systems._hamiltonian import HamiltonianSystem
 from atlasnn.systems._python import python_system
@@ -207,10 +208,42 @@ def defined_by_data(system: HamiltonianSystem) -> bool:
         rebuilt = system_from_spec(spec)
     except Exception:  # noqa: BLE001 - a spec that does not rebuild fixes nothing
         return False
-    mine, its = system.hamiltonian, rebuilt.hamiltonian
-    if getattr(mine, "__code__", None) is None or mine.__code__ is not its.__code__:
+    if system.dim != rebuilt.dim:
         return False
-    if spec["kind"] == "builtin":  # the parameters sit in the closure: numbers, compared by value
-        cells = [c.cell_contents for c in (mine.__closure__ or ())], [c.cell_contents for c in (its.__closure__ or ())]
-        return all(isinstance(a, (int, float)) and a == b for a, b in zip(*cells)) and len(cells[0]) == len(cells[1])
-    return True
+    # every function that defines the equations is the one the spec builds: the same code, and the
+    # same values in its closure (a built-in's parameters; an expression's text, variables and
+    # parameters): not one of another system put in by, e.g., ``dataclasses.replace``
+    return (_same_function(system.hamiltonian, rebuilt.hamiltonian)
+            and (system.parametric is None) == (rebuilt.parametric is None)
+            and (system.parametric is None or _same_function(system.parametric, rebuilt.parametric)))
+
+
+def _same_function(mine: Any, its: Any) -> bool:
+    """Whether two functions compute the same thing, judged by their code and, value by value,
+    what their closures and defaults hold; anything this cannot compare counts as different."""
+    code = getattr(mine, "__code__", None)
+    if code is None or code is not getattr(its, "__code__", None):
+        return False
+    try:
+        cells = [[c.cell_contents for c in (f.__closure__ or ())] for f in (mine, its)]
+    except ValueError:  # an empty cell
+        return False
+    return (len(cells[0]) == len(cells[1]) and all(_same_value(a, b) for a, b in zip(*cells))
+            and _same_value(mine.__defaults__, its.__defaults__) and _same_value(mine.__kwdefaults__, its.__kwdefaults__))
+
+
+def _same_value(a: Any, b: Any) -> bool:
+    if a is None or b is None:
+        return a is b
+    if isinstance(a, (bool, int, float, str, np.floating, np.integer)):
+        return type(a) is type(b) and a == b
+    if isinstance(a, (tuple, list)):
+        return type(a) is type(b) and len(a) == len(b) and all(_same_value(x, y) for x, y in zip(a, b))
+    if isinstance(a, dict):
+        return type(b) is dict and list(a) == list(b) and all(_same_value(a[k], b[k]) for k in a)
+    if isinstance(a, CompiledExpression):
+        return (isinstance(b, CompiledExpression) and a.text == b.text and a.variables == b.variables
+                and _same_value(dict(a.params), dict(b.params)))
+    if callable(a) and hasattr(a, "__code__"):
+        return _same_function(a, b)
+    return False

@@ -83,6 +83,7 @@ class HamiltonianSystem:
         object.__setattr__(self, "params", dict(self.params))
         if self.parametric is not None and not callable(self.parametric):
             raise SystemError_(f"parametric must be callable, got {type(self.parametric).__name__}")
+        _probe(self)
 
     # ------------------------------------------------------------------ basics
     @property
@@ -233,6 +234,45 @@ class HamiltonianSystem:
             "separable": bool(self.separable),
             "spec": None if self.spec is None else dict(self.spec),
         }
+
+
+def _probe(system: HamiltonianSystem) -> None:
+    """Refuse, in one line, a user's H that JAX cannot trace (it turns q or p into a NumPy array or
+    a Python number) or that indexes past the d components of q or p (JAX would clamp ``q[1]`` to
+    ``q[0]`` with d = 1 and solve another system without a word): H, and ``parametric`` when
+    given, traced once at the default state (0.5 everywhere without one) with index checks.
+    atlasnn's own functions (built-ins, expressions) index by d and are not probed; any other
+    failure is left to the computation that meets it."""
+    from jax.experimental import checkify
+
+    d = system.dim
+    with np.errstate(over="ignore", invalid="ignore"):  # parameters beyond float32 are judged elsewhere
+        z = jnp.full(2 * d, 0.5) if system.z0 is None else jnp.asarray(system.z0)
+        theta = jnp.asarray([float(v) for v in system.params.values()])
+    calls = [("H(q, p)", system.hamiltonian, (z[:d], z[d:]))]
+    if system.parametric is not None:
+        calls.append(("parametric(q, p, theta)", system.parametric, (z[:d], z[d:], theta)))
+    for what, fn, args in calls:
+        if str(getattr(fn, "__module__", "")).startswith("atlasnn."):
+            continue
+        try:
+            traced = str(jax.make_jaxpr(fn)(*args))  # what JAX cannot trace raises here
+            problem = None
+            if "gather" in traced or "dynamic_slice" in traced:  # indexing by a number: checked, op by op
+                error, _ = checkify.checkify(fn, errors=checkify.index_checks)(*args)
+                problem = error.get()
+        except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError,
+                jax.errors.TracerBoolConversionError, jax.errors.TracerIntegerConversionError) as exc:
+            raise SystemError_(f"system {system.name!r}: {what} cannot be traced by JAX ({type(exc).__name__}: it "
+                               "turns q, p or theta into a NumPy array or a Python number, e.g. np.asarray, float(), "
+                               "math.*, or a Python if on them); write it with jax.numpy (jnp.asarray, jnp.cos, "
+                               "jnp.where, ...)") from None
+        except Exception:  # noqa: BLE001 - not this probe's to judge: the computation that meets it says
+            continue
+        if problem:
+            raise SystemError_(f"system {system.name!r}: {what} indexes past the state with dim = {d} "
+                               f"({problem.strip().rstrip('.')}): q and p have {d} component(s) each, "
+                               f"{list(system.q_names)} and {list(system.p_names)}; give the right dim or fix the index")
 
 
 @program_cache

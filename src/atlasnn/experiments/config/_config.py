@@ -326,6 +326,10 @@ def parse_config(data: dict[str, Any], *, quick: bool = False, source: str = "co
     """
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: expected a table at the top level")
+    if "bundle" in data or "observations" in data:  # a family file (experiments.config._family) met here
+        what = "a bundle file ([bundle])" if "bundle" in data else "an inverse-problem file ([observations])"
+        raise ConfigError(f"{source} is {what}, not a trajectory experiment ([system] and [interval]) as this "
+                          f"command needs: run it with `atlasnn family {source}` or `atlasnn run {source}`")
     _table("", data, {k.name for k in SCHEMA[""].keys})
     data = apply_profile(data, profile, source)
     if quick:
