@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import functools
 import json
-import math
 import time
 from pathlib import Path
 
@@ -40,7 +39,7 @@ from atlasnn.solver import Collocation, GaussCollocation
 
 from benchmarks.common import machine_info, write_result
 from benchmarks.numpy_fields import numpy_rhs
-from benchmarks.solver_workprecision import kepler_system
+from benchmarks.problems import kepler_system
 
 E = 0.6
 BINS = 60

@@ -16,7 +16,8 @@ from atlasnn import solve
 from atlasnn.solver import GaussCollocation
 
 from benchmarks.common import machine_info, write_result
-from benchmarks.solver_workprecision import problem, timed
+from benchmarks.problems import timed
+from benchmarks.solver_workprecision import problem
 
 STAGES = (4, 6, 8, 10, 12, 14, 16)
 TOLS = (1e-9, 1e-11)

@@ -1,4 +1,5 @@
-"""Right-hand sides written out in NumPy for the benchmark problems: SciPy's DOP853 at its best
+"""Right-hand sides written out in NumPy for the benchmark problems that are not built-in systems
+(a built-in's is atlasnn.systems.numpy_field): SciPy's DOP853 at its best
 calls a NumPy function, not a compiled JAX one (3–4× slower per call)."""
 
 from __future__ import annotations
@@ -21,13 +22,13 @@ def numpy_rhs(name, system):
 
 
 def _written(name, system):
-    if name.startswith("henon-heiles"):
-        lam = float(system.params.get("lam", 1.0))
+    from atlasnn.systems import builtin_system, numpy_field
 
-        def rhs(t, z):
-            q1, q2, p1, p2 = z
-            return np.array([p1, p2, -q1 - 2 * lam * q1 * q2, -q2 - lam * (q1 * q1 - q2 * q2)])
-        return rhs, "numpy"
+    built_in = numpy_field(system)  # the built-in systems' own (Hénon–Heiles, the oscillators)
+    if built_in is not None:
+        return built_in, "numpy"
+    if name.startswith("henon-heiles"):  # Hénon–Heiles written as an expression: the built-in's field
+        return numpy_field(builtin_system("henon_heiles", lam=float(system.params.get("lam", 1.0)))), "numpy"
     if name.startswith("kepler") and system.dim == 2:
         def rhs(t, z):
             q1, q2, p1, p2 = z

@@ -22,7 +22,7 @@ from atlasnn.solver import GaussCollocation
 from atlasnn.systems import henon_heiles
 
 from benchmarks.common import machine_info, write_result
-from benchmarks.solver_workprecision import timed
+from benchmarks.problems import timed
 
 
 def members(count: int, seed: int = 0) -> np.ndarray:

@@ -18,37 +18,24 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import time
 
 import numpy as np
 
 from atlasnn import solve
-from atlasnn.evaluation import reference_solution
-from atlasnn.experiments.config import builtin_config_path, load_config
-from atlasnn.solver import GaussCollocation, solver_from_name
+from atlasnn.solver import solver_from_name
 from atlasnn.systems import expression_system
 
 from benchmarks.common import machine_info, write_result
+from benchmarks.problems import HARD, LONG, builtin_problem, gauss_reference, kepler_eccentricity, kepler_exact, kepler_system
 
-HARD = ["figure-eight", "fpu-stiff", "henon-heiles-chaotic", "kepler-e06", "kepler-e09", "pendulum-separatrix",
-        "toda-3"]
-LONG = ["oscillator-long", "henon-heiles-long"]
 TARGET = 1e-10
-
-
-def builtin_problem(name: str):
-    cfg = load_config(builtin_config_path(name))
-    system = cfg.system.build()
-    return system, np.asarray(system.z0), (float(cfg.eval_stage.t0), float(cfg.eval_stage.T))
 
 
 def other_problems():
     """Problems not among the built-in experiments (chosen before any run, not tuned on)."""
     e = 0.99
-    kepler = expression_system("(p1**2 + p2**2)/2 - 1/sqrt(q1**2 + q2**2)", ["q1", "q2"], ["p1", "p2"],
-                               z0=[1 - e, 0.0, 0.0, float(np.sqrt((1 + e) / (1 - e)))], separable=True,
-                               name="kepler-e099")
+    kepler = kepler_system(e, name="kepler-e099")
     pendulum = expression_system(
         "(p1**2 + 2*p2**2 - 2*p1*p2*cos(q1 - q2)) / (2*(1 + sin(q1 - q2)**2)) - 2*cos(q1) - cos(q2)",
         ["q1", "q2"], ["p1", "p2"], z0=[1.0, 0.5, 0.0, 0.0], name="double-pendulum")
@@ -61,27 +48,12 @@ def other_problems():
             "morse-chain": (morse, np.asarray(morse.z0), (0.0, 30.0))}
 
 
-def _kepler_e(system, z0) -> float | None:
-    """The eccentricity of a Kepler problem started at pericentre (a = 1), else None."""
-    if not system.name.startswith("kepler") or z0[1] != 0.0 or z0[2] != 0.0:
-        return None
-    e = 1.0 - float(z0[0])
-    return e if math.isclose(float(z0[3]), math.sqrt((1 + e) / (1 - e)), rel_tol=1e-12) else None
-
-
 def reference(system, z0, interval, t):
     """(reference at t, description, its gap to the second reference relative to the range)."""
-    e = _kepler_e(system, z0)
+    e = kepler_eccentricity(system, z0)
     if e is not None:
-        from benchmarks.solver_workprecision import kepler_exact
-
         return kepler_exact(t, e), "exact", 0.0
-    default = solve(system, z0, interval)
-    h = float(np.diff(default.edges).min()) / 4
-    ref = solve(system, z0, interval, solver=GaussCollocation(stages=16, h=h))(t)
-    dop = reference_solution(system, z0, t, rtol=2.3e-14, atol=1e-16)
-    gap = float(np.abs(ref - dop).max() / np.ptp(ref, axis=0).max())
-    return ref, f"Gauss s = 16, h = {h:.3g}", gap
+    return gauss_reference(system, z0, interval, t)
 
 
 def run_one(name, system, z0, interval, solver, n_eval=2000):

@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import statistics
 import time
 from pathlib import Path
 
@@ -37,12 +36,11 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from atlasnn import solve
-from atlasnn.evaluation import reference_solution, yoshida4
+from atlasnn.evaluation import yoshida4
 from atlasnn.solver import Collocation, GaussCollocation
-from atlasnn.systems import expression_system
 
 from benchmarks.common import machine_info, write_result
-from benchmarks.solver_suite import HARD, LONG, builtin_problem
+from benchmarks.problems import HARD, LONG, builtin_problem, gauss_reference, kepler_exact, kepler_system, timed
 
 GAUSS_TOLS = (1e-6, 1e-8, 1e-10, 1e-11, 1e-12, 1e-13)
 RK_TOLS = (1e-6, 1e-8, 1e-10, 1e-12, 1e-13, 1e-14)
@@ -54,22 +52,6 @@ KEPLER = {"kepler-e06-100": (0.6, 100), "kepler-e09-10": (0.9, 10), "kepler-e095
 PROBLEMS = list(KEPLER) + LONG + HARD
 
 
-def kepler_system(e: float):
-    return expression_system("(p1**2 + p2**2)/2 - 1/sqrt(q1**2 + q2**2)", ["q1", "q2"], ["p1", "p2"],
-                             z0=[1 - e, 0.0, 0.0, math.sqrt((1 + e) / (1 - e))], separable=True, name=f"kepler-{e}")
-
-
-def kepler_exact(t, e: float) -> np.ndarray:
-    """The orbit from pericentre at t = 0 (a = 1, period 2π): Kepler's equation E − e sin E = M
-    solved by Newton's method to round-off."""
-    M = np.mod(np.asarray(t, np.float64), 2 * np.pi)
-    E = np.where(e < 0.8, M + e * np.sin(M), np.pi * np.ones_like(M))
-    for _ in range(60):
-        E = E - (E - e * np.sin(E) - M) / (1 - e * np.cos(E))
-    c, s, w = np.cos(E), np.sin(E), math.sqrt(1 - e * e)
-    return np.stack([c - e, w * s, -s / (1 - e * c), w * c / (1 - e * c)], axis=-1)
-
-
 def problem(name: str):
     """(system, z0, interval, times, reference, description of the reference, its gap)."""
     if name in KEPLER:
@@ -79,22 +61,8 @@ def problem(name: str):
         return system, np.asarray(system.z0), interval, t, kepler_exact(t, e), "exact (Kepler's equation)", 0.0
     system, z0, interval = builtin_problem(name)
     t = np.linspace(*interval, 2000)
-    default = solve(system, z0, interval)
-    h = float(np.diff(default.edges).min()) / 4
-    ref = solve(system, z0, interval, solver=GaussCollocation(stages=16, h=h))(t)
-    dop = reference_solution(system, z0, t, rtol=2.3e-14, atol=1e-16)
-    gap = float(np.abs(ref - dop).max() / np.ptp(ref, axis=0).max())
-    return system, z0, interval, t, ref, f"Gauss s = 16, h = {h:.3g}; DOP853 2.3e-14 within {gap:.1e}", gap
-
-
-def timed(fn, repeats=3):
-    """(the last result, the fastest time, the median time) of ``repeats`` calls of ``fn``."""
-    times, out = [], None
-    for _ in range(repeats):
-        tic = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - tic)
-    return out, min(times), statistics.median(times)
+    ref, described, gap = gauss_reference(system, z0, interval, t)
+    return system, z0, interval, t, ref, f"{described}; DOP853 2.3e-14 within {gap:.1e}", gap
 
 
 def _row(method, setting, seconds, median, z, ref, scale, **extra):

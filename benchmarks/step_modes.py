@@ -20,7 +20,7 @@ from atlasnn.solver import GaussCollocation
 
 from benchmarks.common import machine_info, write_result
 from benchmarks.energy_long import binned, growth, invariants
-from benchmarks.solver_workprecision import kepler_system
+from benchmarks.problems import kepler_system
 
 CASES = [(0.6, 1000), (0.9, 1000), (0.99, 40)]
 TOLS = (1e-6, GaussCollocation.rtol)

@@ -1,0 +1,73 @@
+"""The problems the solver instruments share: the hard suite's and the long experiments' names,
+Kepler's problem with its exact orbit, and the reference where no exact solution is known."""
+
+from __future__ import annotations
+
+import math
+import statistics
+import time
+
+import numpy as np
+
+from atlasnn import solve
+from atlasnn.evaluation import reference_solution
+from atlasnn.experiments.config import builtin_config_path, load_config
+from atlasnn.solver import GaussCollocation
+from atlasnn.systems import expression_system
+
+HARD = ["figure-eight", "fpu-stiff", "henon-heiles-chaotic", "kepler-e06", "kepler-e09", "pendulum-separatrix",
+        "toda-3"]
+LONG = ["oscillator-long", "henon-heiles-long"]
+
+
+def builtin_problem(name: str):
+    """(system, z0, interval) of a built-in experiment's evaluation stage."""
+    cfg = load_config(builtin_config_path(name))
+    system = cfg.system.build()
+    return system, np.asarray(system.z0), (float(cfg.eval_stage.t0), float(cfg.eval_stage.T))
+
+
+def kepler_system(e: float, name: str | None = None):
+    """Kepler's problem (a = 1, period 2π) started at pericentre with eccentricity ``e``."""
+    return expression_system("(p1**2 + p2**2)/2 - 1/sqrt(q1**2 + q2**2)", ["q1", "q2"], ["p1", "p2"],
+                             z0=[1 - e, 0.0, 0.0, math.sqrt((1 + e) / (1 - e))], separable=True, name=name or f"kepler-{e}")
+
+
+def kepler_exact(t, e: float) -> np.ndarray:
+    """The orbit from pericentre at t = 0 (a = 1, period 2π): Kepler's equation E − e sin E = M
+    solved by Newton's method to round-off."""
+    M = np.mod(np.asarray(t, np.float64), 2 * np.pi)
+    E = np.where(e < 0.8, M + e * np.sin(M), np.pi * np.ones_like(M))
+    for _ in range(60):
+        E = E - (E - e * np.sin(E) - M) / (1 - e * np.cos(E))
+    c, s, w = np.cos(E), np.sin(E), math.sqrt(1 - e * e)
+    return np.stack([c - e, w * s, -s / (1 - e * c), w * c / (1 - e * c)], axis=-1)
+
+
+def kepler_eccentricity(system, z0) -> float | None:
+    """The eccentricity of a Kepler problem started at pericentre (a = 1), else None."""
+    if not system.name.startswith("kepler") or z0[1] != 0.0 or z0[2] != 0.0:
+        return None
+    e = 1.0 - float(z0[0])
+    return e if math.isclose(float(z0[3]), math.sqrt((1 + e) / (1 - e)), rel_tol=1e-12) else None
+
+
+def gauss_reference(system, z0, interval, t):
+    """(reference at t, its description, its gap to DOP853 at rtol 2.3e-14 relative to the range):
+    the Gauss collocation with s = 16 on windows a quarter of the default's shortest."""
+    default = solve(system, z0, interval)
+    h = float(np.diff(default.edges).min()) / 4
+    ref = solve(system, z0, interval, solver=GaussCollocation(stages=16, h=h))(t)
+    dop = reference_solution(system, z0, t, rtol=2.3e-14, atol=1e-16)
+    gap = float(np.abs(ref - dop).max() / np.ptp(ref, axis=0).max())
+    return ref, f"Gauss s = 16, h = {h:.3g}", gap
+
+
+def timed(fn, repeats=3):
+    """(the last result, the fastest time, the median time) of ``repeats`` calls of ``fn``."""
+    times, out = [], None
+    for _ in range(repeats):
+        tic = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - tic)
+    return out, min(times), statistics.median(times)
