@@ -9,7 +9,8 @@ the pages hold what it makes, so no number on them can drift from its record):
 * ``energy``: docs/benchmarks/energy_long.json (``python -m benchmarks.energy_long``);
 * ``step_modes``: docs/benchmarks/step_modes.json (``python -m benchmarks.step_modes``);
 * ``batch``: docs/benchmarks/solver_batch.json (``python -m benchmarks.solver_batch``);
-* ``first_run``: docs/benchmarks/solver_first_run.json (``python -m benchmarks.solver_first_run``).
+* ``first_run``: docs/benchmarks/solver_first_run.json (``python -m benchmarks.solver_first_run``);
+* ``stages``: docs/benchmarks/gauss_stages.json (``python -m benchmarks.gauss_stages``).
 
     python scripts/solver_doc.py            # rewrite the tables in place
     python scripts/solver_doc.py --check    # exit 1 if a page is not what the records make
@@ -33,6 +34,7 @@ RECORDS = {
     "step_modes": "docs/benchmarks/step_modes.json",
     "batch": "docs/benchmarks/solver_batch.json",
     "first_run": "docs/benchmarks/solver_first_run.json",
+    "stages": "docs/benchmarks/gauss_stages.json",
 }
 METHODS = [("gauss-adaptive", "Gauss, adaptive"), ("diffrax-dopri8", "Diffrax Dopri8"),
            ("diffrax-tsit5", "Diffrax Tsit5"), ("dop853", "SciPy DOP853"), ("yoshida4", "Yoshida-4"),
@@ -125,8 +127,19 @@ def first_run(record: dict) -> str:
     return "\n".join(rows) + f"\n\nMedians of {len(next(iter(record['runs'].values())))} or more fresh processes each."
 
 
+def stages(record: dict) -> str:
+    counts = sorted({r["stages"] for r in record["rows"]})
+    rows = ["| problem | rtol | " + " | ".join(f"s = {s}" for s in counts) + " |", "|---|---|" + "---|" * len(counts)]
+    cases = sorted({(r["problem"], r["rtol"]) for r in record["rows"]}, key=lambda c: (c[0], -c[1]))
+    for name, rtol in cases:
+        got = {r["stages"]: r for r in record["rows"] if (r["problem"], r["rtol"]) == (name, rtol)}
+        cells = [f"{_ms(got[s]['seconds'])}, {got[s]['error_rel']:.0e}" if s in got else "—" for s in counts]
+        rows.append(f"| {name} | {rtol:.0e} | " + " | ".join(cells) + " |")
+    return "\n".join(rows) + "\n\nEach cell: the whole call's time after compilation (best of 3), then its max error / range."
+
+
 MAKERS = {"suite": suite, "workprecision": workprecision, "energy": energy, "step_modes": step_modes, "batch": batch,
-          "first_run": first_run}
+          "first_run": first_run, "stages": stages}
 
 
 def render(text: str) -> str:

@@ -14,6 +14,7 @@ from atlasnn import AtlasError, solve, solve_batch
 from atlasnn.checkpoint import load_piecewise, save_piecewise
 from atlasnn.solutions import PolynomialSolution, gauss_tableau
 from atlasnn.solver import GaussCollocation
+from atlasnn.solver import _gauss_march
 from atlasnn.solver._gauss_step import gauss_step, tableau_arrays
 from atlasnn.systems import expression_system, harmonic_oscillator, henon_heiles
 
@@ -156,7 +157,10 @@ def test_newton_takes_over_where_the_fixed_point_iteration_diverges():
     assert "\n" not in str(info.value)
 
 
-def test_a_batch_equals_its_members_solved_alone():
+@pytest.mark.parametrize("mode", ["sequential", "lockstep"])
+def test_a_batch_equals_its_members_solved_alone(mode, monkeypatch):
+    # both ways of marching members: one after the other (a CPU's) and in lock step (an accelerator's)
+    monkeypatch.setattr(_gauss_march, "batch_mode", lambda: mode)
     system = henon_heiles()
     z0s = np.array([[0.3, -0.3, 0.3, 0.15], [0.1, 0.2, -0.2, 0.1], [0.0, 0.4, 0.2, 0.0]])
     sols = solve_batch(system, z0s, (0.0, 10.0))

@@ -136,7 +136,7 @@ class GaussCollocation(AbstractSolver):
         require_float64()
         z0s = np.atleast_2d(np.asarray(z0s, np.float64))
         b, n = z0s.shape
-        # a batch padded to 8, 16, 32 … members (copies of the first: the same work, dropped): a few
+        # a batch padded to 8, 16, 32 … members (copies of the first, already at T, dropped): a few
         # compiled programs rather than one per batch size
         padded = b if b == 1 else bucket_size(b)
         per_window = 8 * (self.stages + 3) * n + 24
@@ -146,8 +146,10 @@ class GaussCollocation(AbstractSolver):
                                        safety=self.safety, warmup=self.warmup, max_rejects=self.max_rejects,
                                        members=padded)
         started = time.perf_counter()
+        # the padding members start at T: nothing to march
+        starts = np.concatenate([np.full(b, float(t0)), np.full(padded - b, float(T))])
         rows, state, first_call = self._march(program, np.concatenate([z0s, np.repeat(z0s[:1], padded - b, axis=0)]),
-                                              t0, T, progress)
+                                              starts, T, progress)
         wall = time.perf_counter() - started
         out = []
         for m in range(b):
@@ -180,11 +182,11 @@ class GaussCollocation(AbstractSolver):
                 "differ along the orbit): steps='adaptive' would take fewer windows (not symplectic: "
                 "docs/SOLVER.md, 'Window lengths')")
 
-    def _march(self, program, z0s, t0, T, progress):
+    def _march(self, program, z0s, starts, T, progress):
         """Call the compiled program until every member reaches T or fails: the accepted windows
         per call (each (B, ...) cut to the member's count), the final state, the first call's time."""
-        b = len(z0s)
-        stacked = [initial_state(z, t0, self.stages) for z in z0s]
+        b, t0 = len(z0s), float(np.min(starts))
+        stacked = [initial_state(z, t, self.stages) for z, t in zip(z0s, starts)]
         state = GaussState(*(np.stack(x) for x in zip(*stacked)))
         args = tuple(np.float64(x) for x in (T, self.rtol, self.atol, self.h or 0.0))
         rows, first_call = [], 0.0

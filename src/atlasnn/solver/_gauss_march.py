@@ -22,7 +22,8 @@ next length is h · clip(0.9 ε^(−1/(s+1)), 0.2, growth) with ε the bound ove
 The program marches at most ``chunk`` accepted windows per call (a batch: ``chunk`` tries per member)
 and returns them; the caller calls it again from where it stopped (one program serves every
 interval, and progress shows between calls). Members (initial states) on a leading axis: one
-program marches them all, each with windows of its own.
+program marches them all, each with windows of its own — on a CPU one after the other, elsewhere
+in lock step (every member one try per trip).
 """
 
 from __future__ import annotations
@@ -222,12 +223,28 @@ def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety
                                        (jnp.asarray(0), st, jnp.zeros(b, jnp.int32), buf))
         return GaussChunk(*(jnp.moveaxis(x, 0, 1) for x in buf), st)
 
-    return jax.jit(batched), jax.jit(alone)
+    def mapped(state: GaussState, T, rtol, atol, h_given):
+        """Members on a leading axis, marched one after the other inside the program (each its own
+        while loop, as :func:`alone`): on a CPU the lock-step loop of :func:`batched` gains nothing
+        from its vector width on these small states and pays for the slowest member's iterations,
+        so one member at a time is faster there (``benchmarks.solver_batch``)."""
+        def one(st):
+            out = alone(jax.tree_util.tree_map(lambda x: x[None], st), T, rtol, atol, h_given)
+            return jax.tree_util.tree_map(lambda x: x[0], out)
+
+        return lax.map(one, state)
+
+    return {"lockstep": jax.jit(batched), "alone": jax.jit(alone), "sequential": jax.jit(mapped)}
 
 
 #: the tree of a program's result, for its exported form
 _OUT_TREE = jax.tree_util.tree_structure(
     GaussChunk(*([0] * (len(GaussChunk._fields) - 1)), GaussState(*([0] * len(GaussState._fields)))))
+
+
+def batch_mode() -> str:
+    """How a batch's members are marched: "sequential" on a CPU, "lockstep" on an accelerator."""
+    return "sequential" if jax.default_backend() == "cpu" else "lockstep"
 
 
 def compiled_gauss_march(system: Any, *, stages: int, steps: str, chunk: int, max_iterations: int, newton: bool,
@@ -237,8 +254,9 @@ def compiled_gauss_march(system: Any, *, stages: int, steps: str, chunk: int, ma
     settings; served from its exported form on disk where the system qualifies."""
     settings = (int(stages), str(steps), int(chunk), int(max_iterations), bool(newton), float(growth), float(safety),
                 int(warmup), int(max_rejects), trace_settings())
-    jitted = _cached(system, *settings)[int(members == 1)]
-    return exported_program(jitted, system, {"settings": settings, "alone": members == 1, "method": "gauss"},
+    members_mode = "alone" if members == 1 else batch_mode()
+    jitted = _cached(system, *settings)[members_mode]
+    return exported_program(jitted, system, {"settings": settings, "members": members_mode, "method": "gauss"},
                             _OUT_TREE, host=True)
 
 
