@@ -53,7 +53,7 @@ def _ms(seconds: float) -> str:
 
 
 def suite(record: dict) -> str:
-    rows = ["| problem | max error / range | reference (its gap) | estimate / true | windows | time | verdict |",
+    rows = ["| problem | max error / range | reference (its gap) | estimate / true | windows | time (first call) | verdict |",
             "|---|---|---|---|---|---|---|"]
     for r in record["rows"]:
         if r["status"] != "ok":
