@@ -140,3 +140,16 @@ def interval_mismatch(stored: Any, expected: Any) -> str | None:
     if not _close(got, exp, _Z_RTOL):
         return f"it was trained on [{got[0]:g}, {got[1]:g}], not on [{exp[0]:g}, {exp[1]:g}]"
     return None
+
+
+def expectation_mismatch(meta: Mapping[str, Any], edges: np.ndarray, expect: Mapping[str, Any] | None) -> str | None:
+    """Why a stored solution with these window ``edges`` is not what ``expect`` asks (its
+    ``system``, its ``interval``), or None; an unknown key of ``expect`` is a TypeError."""
+    for key in sorted(set(expect or {}) - {"system", "interval"}):
+        raise TypeError(f"expect has unknown key {key!r} (known: interval, system)")
+    why = None
+    if (expect or {}).get("system") is not None and isinstance(meta.get("system"), dict):
+        why = system_mismatch(meta["system"], expect["system"], meta.get("system_probes"))
+    if why is None and "interval" in (expect or {}):
+        why = interval_mismatch((float(edges[0]), float(edges[-1])), expect["interval"])
+    return why

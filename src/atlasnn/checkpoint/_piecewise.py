@@ -32,7 +32,7 @@ from atlasnn.checkpoint._format import (
     _x64,
 )
 from atlasnn.errors import AtlasError, CheckpointError
-from atlasnn.checkpoint._identity import interval_mismatch, system_mismatch
+from atlasnn.checkpoint._identity import expectation_mismatch
 from atlasnn.checkpoint._polynomial import KIND_POLYNOMIAL, polynomial_from, polynomial_payload
 from atlasnn.solutions import PiecewiseSolution, PolynomialSolution, WindowRecord, stack_models, unstack_models
 from atlasnn.systems import HamiltonianSystem
@@ -155,13 +155,7 @@ def piecewise_from(p: str, arrays: Mapping[str, np.ndarray], meta: Mapping[str, 
     edges = arrays.get("piecewise_edges")
     if edges is None or edges.dtype != np.float64 or edges.shape != (n + 1,) or not np.all(np.diff(edges) > 0):
         raise _fail(p, f"piecewise_edges must be {n + 1} increasing float64 times")
-    for key in sorted(set(expect or {}) - {"system", "interval"}):
-        raise TypeError(f"expect has unknown key {key!r} (known: interval, system)")
-    why = None
-    if (expect or {}).get("system") is not None and isinstance(meta.get("system"), dict):
-        why = system_mismatch(meta["system"], expect["system"], meta.get("system_probes"))
-    if why is None and "interval" in (expect or {}):
-        why = interval_mismatch((float(edges[0]), float(edges[-1])), expect["interval"])
+    why = expectation_mismatch(meta, edges, expect)
     if why:
         raise _fail(p, f"not a model of {owner}: {why}")
     try:

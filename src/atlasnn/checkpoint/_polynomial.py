@@ -9,14 +9,13 @@ estimate back (its solver is rebuilt from the settings).
 
 from __future__ import annotations
 
-import os
 from typing import Any, Mapping
 
 import jax
 import numpy as np
 
 from atlasnn.checkpoint._format import FORMAT, FORMAT_VERSION, _describe_exc, _fail, _resolve_system, _to_json
-from atlasnn.checkpoint._identity import interval_mismatch, record_probes, system_mismatch
+from atlasnn.checkpoint._identity import expectation_mismatch, record_probes
 from atlasnn.errors import AtlasError, CheckpointError
 from atlasnn.solutions import PolynomialSolution
 from atlasnn.solver import GaussCollocation
@@ -66,13 +65,7 @@ def polynomial_from(p: str, arrays: Mapping[str, np.ndarray], meta: Mapping[str,
         raise _fail(p, f"holds no Gauss collocation windows ({_describe_exc(exc)})") from None
     if edges.dtype != np.float64 or edges.ndim != 1 or edges.size < 2 or not np.all(np.diff(edges) > 0):
         raise _fail(p, "poly_edges must be at least two increasing float64 times")
-    for key in sorted(set(expect or {}) - {"system", "interval"}):
-        raise TypeError(f"expect has unknown key {key!r} (known: interval, system)")
-    why = None
-    if (expect or {}).get("system") is not None and isinstance(meta.get("system"), dict):
-        why = system_mismatch(meta["system"], expect["system"], meta.get("system_probes"))
-    if why is None and "interval" in (expect or {}):
-        why = interval_mismatch((float(edges[0]), float(edges[-1])), expect["interval"])
+    why = expectation_mismatch(meta, edges, expect)
     if why:
         raise _fail(p, f"not a model of {owner}: {why}")
     try:
