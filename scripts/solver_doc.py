@@ -10,7 +10,8 @@ the pages hold what it makes, so no number on them can drift from its record):
 * ``step_modes``: docs/benchmarks/step_modes.json (``python -m benchmarks.step_modes``);
 * ``batch``: docs/benchmarks/solver_batch.json (``python -m benchmarks.solver_batch``);
 * ``first_run``: docs/benchmarks/solver_first_run.json (``python -m benchmarks.solver_first_run``);
-* ``stages``: docs/benchmarks/gauss_stages.json (``python -m benchmarks.gauss_stages``).
+* ``stages``: docs/benchmarks/gauss_stages.json (``python -m benchmarks.gauss_stages``);
+* ``roundoff``: docs/benchmarks/gauss_roundoff.json (``python -m benchmarks.gauss_roundoff``).
 
     python scripts/solver_doc.py            # rewrite the tables in place
     python scripts/solver_doc.py --check    # exit 1 if a page is not what the records make
@@ -35,6 +36,7 @@ RECORDS = {
     "batch": "docs/benchmarks/solver_batch.json",
     "first_run": "docs/benchmarks/solver_first_run.json",
     "stages": "docs/benchmarks/gauss_stages.json",
+    "roundoff": "docs/benchmarks/gauss_roundoff.json",
 }
 METHODS = [("gauss-adaptive", "Gauss, adaptive"), ("diffrax-dopri8", "Diffrax Dopri8"),
            ("diffrax-tsit5", "Diffrax Tsit5"), ("dop853", "SciPy DOP853"), ("yoshida4", "Yoshida-4"),
@@ -138,8 +140,18 @@ def stages(record: dict) -> str:
     return "\n".join(rows) + "\n\nEach cell: the whole call's time after compilation (best of 3), then its max error / range."
 
 
+def roundoff(record: dict) -> str:
+    rows = ["| e | periods | windows | estimate / range | true error / range | estimate / true | two tight solutions apart |",
+            "|---|---|---|---|---|---|---|"]
+    for r in record["rows"]:
+        rows.append(f"| {r['e']} | {r['periods']} | {r['windows']} | {r['estimate_rel']:.1e} | {r['error_rel']:.1e} | "
+                    f"{r['estimate_over_error']:.2f} | {r['floor_rel']:.1e} |")
+    return "\n".join(rows)
+
+
 MAKERS = {"suite": suite, "workprecision": workprecision, "energy": energy, "step_modes": step_modes, "batch": batch,
-          "first_run": first_run, "stages": stages}
+          "first_run": first_run, "stages": stages,
+          "roundoff": roundoff}
 
 
 def render(text: str) -> str:
