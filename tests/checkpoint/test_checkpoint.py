@@ -472,3 +472,14 @@ def test_failed_rename_without_previous_file_leaves_nothing(tmp_path, monkeypatc
 def test_save_into_missing_directory(tmp_path):
     with pytest.raises(CheckpointError, match="cannot write"):
         _save(tmp_path / "no" / "such" / "m.npz")
+
+
+def test_save_with_its_arguments_swapped_is_one_line(tmp_path, ho):
+    # save(solution, path), as numpy and torch order them, gave os.fspath's TypeError
+    from atlasnn import save, solve
+    from atlasnn.errors import CheckpointError
+
+    sol = solve(ho, None, (0.0, 1.0))
+    with pytest.raises(CheckpointError, match=r"save\(path, solution\)"):
+        save(sol, tmp_path / "sol.npz")
+    assert not list(tmp_path.iterdir())

@@ -14,16 +14,22 @@ from atlasnn.checkpoint._format import _fail, _read
 from atlasnn.checkpoint._piecewise import KIND_PIECEWISE, load_piecewise, save_piecewise
 from atlasnn.checkpoint._polynomial import KIND_POLYNOMIAL
 from atlasnn.checkpoint._single import KIND_MODEL, load_checkpoint, save_checkpoint
+from atlasnn.errors import CheckpointError
 from atlasnn.solutions import BundleSolution, FlowMapBundle, PiecewiseSolution, PolynomialSolution, Solution
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["save", "load"]
+
+_SOLUTIONS = (PolynomialSolution, PiecewiseSolution, FlowMapBundle, BundleSolution, Solution)
 
 
 def save(path: str | os.PathLike, solution: Any, *, extra: Mapping[str, Any] | None = None) -> str:
     """Save a solution — from :func:`atlasnn.solve` (any solver), :func:`atlasnn.solve_bundle` (any
     method), or a trained :class:`~atlasnn.solutions.Solution` — as one file; returns its content
     hash. ``extra``: a JSON-able dict kept beside it (``load(path).info["extra"]``)."""
+    if isinstance(path, _SOLUTIONS) or isinstance(solution, (str, os.PathLike)):
+        raise CheckpointError(f"save takes the path first, then the solution: save(path, solution), got "
+                              f"save({type(path).__name__}, {type(solution).__name__})")
     if isinstance(solution, (PolynomialSolution, PiecewiseSolution)):
         return save_piecewise(path, solution, extra=extra)
     if isinstance(solution, FlowMapBundle):

@@ -7,6 +7,7 @@ import abc
 import warnings
 from typing import Any
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -78,9 +79,11 @@ class AbstractSolution(abc.ABC):
         return self.system.energy64(self(t))
 
     def residual(self, t) -> np.ndarray:
-        """dẑ/dt − J∇H(ẑ) at t: how far the network is from Hamilton's equations there."""
+        """dẑ/dt − J∇H(ẑ) at t: how far the network is from Hamilton's equations there (J∇H in
+        the solution's own precision: a float64 solution's field is not rounded to float32)."""
         z, dz, _ = self._evaluate(t)
-        return dz - np.asarray(self.system.vector_field(jnp.asarray(z)))
+        with jax.enable_x64(np.asarray(z).dtype == np.float64):
+            return dz - np.asarray(self.system.vector_field(jnp.asarray(z)))
 
     def estimate(self, z0: Any = None) -> ErrorEstimate:
         """The a-posteriori error estimate over the whole interval (no reference needed; see

@@ -106,9 +106,13 @@ class PolynomialSolution(AbstractSolution):
         return np.asarray(rows)[where]
 
     def _evaluate(self, t) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
-        arr = np.asarray(t, np.float64)
+        try:
+            arr = np.asarray(t, np.float64)
+        except (TypeError, ValueError):
+            raise ConfigError(f"times must be finite numbers, got {t!r}") from None
         if not np.all(np.isfinite(arr)):
-            raise ValueError("times must be finite")
+            bad = float(arr[~np.isfinite(arr)].reshape(-1)[0])
+            raise ConfigError(f"times must be finite numbers, got {bad!r} among them")
         flat = arr.reshape(-1)
         check_inside(self, self.interval, flat)
         d = self.system.state_dim

@@ -160,7 +160,7 @@ class GaussCollocation(AbstractSolver):
                 raise ConfigError(
                     f"the Gauss march{'' if b == 1 else f' of member {m}'} stopped at t = {end:.6g} of "
                     f"[{t0:.6g}, {T:.6g}]: {why} (rtol={self.rtol:g}, atol={self.atol:g}, h={self.h}); "
-                    + ("try another h or newton=True" if self.h is not None else
+                    + (f"try a shorter h{'' if self.newton else ' or newton=True'}" if self.h is not None else
                        "loosen the tolerance, or the system may be singular there"))
             advice = self._advice(length)
             info = {"solver": self.name, "settings": self.settings(), "order": self.order, "windows": int(start.size),

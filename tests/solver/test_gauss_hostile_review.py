@@ -1,0 +1,35 @@
+"""Found by the hostile pass over the Gauss collocation (issue 40): a float64 solution's residual,
+non-finite or non-numeric times, the remedy of a given window length that cannot converge."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from atlasnn import AtlasError, builtin_system, solve
+from atlasnn.solver import GaussCollocation
+
+
+def test_a_float64_solution_has_a_float64_residual(ho):
+    # the field was evaluated in float32 (jnp.asarray outside x64): a residual of 1e-8 for a
+    # solution accurate to 1e-13 told the user it was 1e5 times worse than it is
+    sol = solve(ho, None, (0.0, 1.0))
+    assert np.abs(sol.residual(np.linspace(0.0, 1.0, 7))).max() < 1e-10
+    assert sol.residual(0.5).shape == (2,)
+
+
+@pytest.mark.parametrize("t", [np.nan, [0.1, np.inf], "a"])
+def test_times_that_are_not_finite_numbers_are_one_line(ho, t):
+    sol = solve(ho, None, (0.0, 1.0))
+    with pytest.raises(AtlasError, match="times must be finite numbers") as info:
+        sol(t)
+    assert "\n" not in str(info.value)
+
+
+def test_a_given_length_that_cannot_converge_says_shorten_it_not_newton_when_newton_is_on():
+    system = builtin_system("nonlinear_oscillator")
+    with pytest.raises(AtlasError, match="try a shorter h") as info:
+        solve(system, None, (0.0, 10.0), solver=GaussCollocation(h=3.0))
+    assert "newton=True" not in str(info.value) and "\n" not in str(info.value)
+    with pytest.raises(AtlasError, match="try a shorter h or newton=True"):
+        solve(system, None, (0.0, 10.0), solver=GaussCollocation(h=3.0, newton=False))
