@@ -1,5 +1,5 @@
-"""Found by the hostile pass over the Gauss collocation (issue 40): a float64 solution's residual,
-non-finite or non-numeric times, the remedy of a given window length that cannot converge."""
+"""A Gauss solution's residual in its own precision, times that are not finite numbers refused in
+one line, and the remedy a given window length that cannot converge is told."""
 
 from __future__ import annotations
 
