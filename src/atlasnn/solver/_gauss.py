@@ -18,7 +18,8 @@ import jax
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.solutions import MAX_STAGES, PolynomialSolution, bucket_size, gauss_tableau
+from atlasnn.limits import available_memory
+from atlasnn.solutions import PolynomialSolution, bucket_size, gauss_tableau
 from atlasnn.solver._base import AbstractSolver, register_solver
 from atlasnn.solver._collocation import require_float64
 from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, ReplayState, compiled_gauss_march,
@@ -128,7 +129,12 @@ class GaussCollocation(AbstractSolver):
     # ------------------------------------------------------------------ solving
     def solve(self, system: HamiltonianSystem, z0: np.ndarray, t0: float, T: float, *,
               progress: Callable[[float], None] | None = None) -> PolynomialSolution:
-        return self.solve_batch(system, np.asarray(z0)[None], t0, T, progress=progress)[0]
+        try:
+            return self.solve_batch(system, np.asarray(z0)[None], t0, T, progress=progress)[0]
+        except ConfigError as exc:
+            if isinstance(getattr(exc, "partial", None), list):
+                exc.partial = exc.partial[0]  # one solution: the part up to the stop, or None
+            raise
 
     def solve_batch(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float, *,
                     progress: Callable[[float], None] | None = None) -> list[PolynomialSolution]:
@@ -148,28 +154,44 @@ class GaussCollocation(AbstractSolver):
         started = time.perf_counter()
         # the padding members start at T: nothing to march
         starts = np.concatenate([np.full(b, float(t0)), np.full(padded - b, float(T))])
-        rows, state, first_call = self._march(program, np.concatenate([z0s, np.repeat(z0s[:1], padded - b, axis=0)]),
-                                              starts, T, progress)
+        rows, state, first_call, stopped = self._march(
+            program, np.concatenate([z0s, np.repeat(z0s[:1], padded - b, axis=0)]), starts, T, progress,
+            2 * per_window)
         wall = time.perf_counter() - started
-        out = []
+        out, problem = [], None
         for m in range(b):
             start, length, z, e, L, ratio = (np.concatenate([r[i][m] for r in rows]) for i in range(6))
             end, failed = float(state.t[m]), int(state.failed[m])
-            if failed or start.size == 0 or end < T:
-                why = FAILURES.get(failed, "the march stopped")
-                raise ConfigError(
-                    f"the Gauss march{'' if b == 1 else f' of member {m}'} stopped at t = {end:.6g} of "
-                    f"[{t0:.6g}, {T:.6g}]: {why} (rtol={self.rtol:g}, atol={self.atol:g}, h={self.h}); "
-                    + (f"try a shorter h{'' if self.newton else ' or newton=True'}" if self.h is not None else
-                       "loosen the tolerance, or the system may be singular there"))
-            advice = self._advice(length)
             info = {"solver": self.name, "settings": self.settings(), "order": self.order, "windows": int(start.size),
                     "rejected": int(state.rejected[m]), "iterations": int(state.iterations[m]),
                     "newton_windows": int(state.newton[m]), "check_worst": float(state.worst[m]),
-                    "h_min": float(length.min()), "h_max": float(length.max()), "solve_time": wall,
-                    "first_call_time": first_call, "batch": b, **({"advice": advice} if advice else {})}
-            out.append(self._solution(system, np.append(start, T), z, e, L, ratio, info))
+                    "h_min": float(length.min(initial=math.inf)), "h_max": float(length.max(initial=0.0)),
+                    "solve_time": wall, "first_call_time": first_call, "batch": b}
+            if failed or start.size == 0 or end < T:
+                problem = problem or self._stopped_line(m, b, end, t0, T, stopped or FAILURES.get(failed, "the march "
+                                                                                                   "stopped"))
+                # what was computed up to the stop is kept: the error's .partial
+                out.append(self._solution(system, np.append(start, end), z, e, L, ratio, info) if start.size else None)
+                continue
+            advice = self._advice(length)
+            out.append(self._solution(system, np.append(start, T), z, e, L, ratio,
+                                      {**info, **({"advice": advice} if advice else {})}))
+        if problem is not None:
+            error = ConfigError(problem + "; the solution" + ("s" if b > 1 else "") + " computed so far: the error's "
+                                ".partial")
+            error.partial = out
+            raise error
         return out
+
+    def _stopped_line(self, m: int, b: int, end: float, t0: float, T: float, why: str) -> str:
+        if why.startswith("it would need"):
+            remedy = "shorten the interval, loosen the tolerance or give a longer h"
+        elif self.h is not None:
+            remedy = f"try a shorter h{'' if self.newton else ' or newton=True'}"
+        else:
+            remedy = "loosen the tolerance, or the system may be singular there"
+        return (f"the Gauss march{'' if b == 1 else f' of member {m}'} stopped at t = {end:.6g} of [{t0:.6g}, {T:.6g}]: "
+                f"{why} (rtol={self.rtol:g}, atol={self.atol:g}, h={self.h}); {remedy}")
 
     def _advice(self, length: np.ndarray) -> str | None:
         """A line for a constant-length march whose length had to shrink far after its warm-up (an
@@ -182,10 +204,13 @@ class GaussCollocation(AbstractSolver):
                 "differ along the orbit): steps='adaptive' would take fewer windows (not symplectic: "
                 "docs/SOLVER.md, 'Window lengths')")
 
-    def _march(self, program, z0s, starts, T, progress):
+    def _march(self, program, z0s, starts, T, progress, window_bytes):
         """Call the compiled program until every member reaches T or fails: the accepted windows
-        per call (each (B, ...) cut to the member's count), the final state, the first call's time."""
+        per call (each (B, ...) cut to the member's count), the final state, the first call's time,
+        and why the march was stopped early (None: it was not) — when the windows it would take to
+        reach T, projected from the part done, would not fit in the memory available."""
         b, t0 = len(z0s), float(np.min(starts))
+        counts, room = np.zeros(b), available_memory()
         stacked = [initial_state(z, t, self.stages) for z, t in zip(z0s, starts)]
         state = GaussState(*(np.stack(x) for x in zip(*stacked)))
         args = tuple(np.float64(x) for x in (T, self.rtol, self.atol, self.h or 0.0))
@@ -204,7 +229,14 @@ class GaussCollocation(AbstractSolver):
                     progress(min(1.0, float(t_now.min() - t0) / (T - t0)))
                 if np.all((t_now >= T) | (failed != 0)):
                     break
-        return rows, state, first_call
+                counts += kept.sum(axis=1)
+                done = np.clip((t_now - starts) / np.maximum(T - starts, 1e-300), 1e-300, 1.0)
+                projected = float(np.sum(np.where(starts < T, counts / done, 0.0)))
+                if room is not None and projected * window_bytes > room:
+                    return rows, state, first_call, (
+                        f"it would need about {projected:.3g} windows ({projected * window_bytes / 2**30:.3g} GiB) "
+                        f"to reach T, more than the {room / 2**30:.3g} GiB of memory available")
+        return rows, state, first_call, None
 
     # ------------------------------------------------------------------ the solution
     def _solution(self, system, edges, z, e, L, ratio, info) -> PolynomialSolution:
