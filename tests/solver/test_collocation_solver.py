@@ -200,6 +200,10 @@ def test_cli_solve_prints_the_estimate_and_the_true_error(tmp_path, capsys):
     assert 1 / 3 <= ratio <= 3
     assert main(["solve", "--system", "henon_heiles", "--save", str(out)]) == 2  # never overwrites
     assert "the file exists" in capsys.readouterr().err
+    # a folder that is not there is refused before solving (the solution would be lost after)
+    assert main(["solve", "--system", "henon_heiles", "--save", str(tmp_path / "no" / "x.npz")]) == 2
+    err = capsys.readouterr()
+    assert "does not exist" in err.err and "estimated max error" not in err.out
 
 
 def test_a_batch_of_initial_states_and_seeds_in_one_program(ho):

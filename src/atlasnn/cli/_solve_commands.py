@@ -103,6 +103,9 @@ def cmd_solve(args) -> int:
     solver = _solver_from_args(args)
     if args.save is not None and Path(args.save).exists():
         raise AtlasError(f"--save {args.save}: the file exists; choose another path or remove it")
+    if args.save is not None and not Path(args.save).resolve().parent.is_dir():
+        raise AtlasError(f"--save {args.save}: the folder {Path(args.save).resolve().parent} does not exist; create it "
+                         "first (checked before solving, so nothing is lost)")
     sol = solve(system, z0, (t0, T), solver=solver)
     info = sol.info
     work = (f"{info['rejected']} rejected, {info['iterations']} iterations" if "iterations" in info else
