@@ -82,3 +82,9 @@ def test_checkpoint_solution_knows_its_interval(model, ho, tmp_path):
         ck.solution()(5.0)
     with pytest.raises(ExtrapolationError):
         ck.solution(outside="raise")(5.0)
+
+
+@pytest.mark.parametrize("t", [np.nan, [0.1, -np.inf], "a"])
+def test_times_that_are_not_finite_numbers_are_one_line_for_a_network_too(model, ho, t):
+    with pytest.raises(AtlasError, match="times must be finite numbers"):
+        Solution(model, ho, (0.0, 1.0))(t)

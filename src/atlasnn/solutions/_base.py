@@ -11,10 +11,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from atlasnn.errors import AtlasError
+from atlasnn.errors import AtlasError, ConfigError
 from atlasnn.solutions._estimate import ErrorEstimate, estimate_error
 
-__all__ = ["AbstractSolution", "INTERVAL_SLACK", "ExtrapolationWarning", "ExtrapolationError", "check_inside"]
+__all__ = ["AbstractSolution", "INTERVAL_SLACK", "ExtrapolationWarning", "ExtrapolationError", "check_inside",
+           "finite_times"]
 
 
 #: Relative slack at the interval's ends (times within it count as inside).
@@ -47,6 +48,18 @@ def check_inside(owner: Any, interval: tuple[float, float] | None, arr: np.ndarr
     if not owner._warned:
         owner._warned = True
         warnings.warn(msg + f" (warned once per {kind})", ExtrapolationWarning, stacklevel=5)
+
+
+def finite_times(t) -> np.ndarray:
+    """``t`` as float64 times, or a one-line refusal of what is not a finite number."""
+    try:
+        arr = np.asarray(t, np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"times must be finite numbers, got {t!r}") from None
+    if not np.all(np.isfinite(arr)):
+        bad = float(arr[~np.isfinite(arr)].reshape(-1)[0])
+        raise ConfigError(f"times must be finite numbers, got {bad!r} among them")
+    return arr
 
 
 class AbstractSolution(abc.ABC):

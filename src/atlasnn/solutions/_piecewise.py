@@ -27,7 +27,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
-from atlasnn.solutions._base import AbstractSolution
+from atlasnn.solutions._base import AbstractSolution, finite_times
 from atlasnn.solutions._evaluate import bucket_size
 from atlasnn.solutions._solution import check_inside, check_outside_mode, check_state_size
 from atlasnn.systems import HamiltonianSystem
@@ -178,9 +178,7 @@ class PiecewiseSolution(AbstractSolution):
         return np.searchsorted(self.edges[1:-1], arr, side="right").astype(np.int64)
 
     def _evaluate(self, t) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
-        arr = np.asarray(t, dtype=np.float64)
-        if not np.all(np.isfinite(arr)):
-            raise ValueError("times must be finite")
+        arr = finite_times(t)
         shape = arr.shape
         flat = arr.reshape(-1)
         check_inside(self, self.interval, flat)

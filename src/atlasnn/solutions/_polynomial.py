@@ -27,7 +27,7 @@ from typing import Any, Callable
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.solutions._base import AbstractSolution, check_inside
+from atlasnn.solutions._base import AbstractSolution, check_inside, finite_times
 from atlasnn.solutions._estimate import ErrorEstimate
 from atlasnn.solutions._solution import check_outside_mode
 from atlasnn.solutions._tableau import gauss_tableau, shifted_legendre
@@ -106,13 +106,7 @@ class PolynomialSolution(AbstractSolution):
         return np.asarray(rows)[where]
 
     def _evaluate(self, t) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
-        try:
-            arr = np.asarray(t, np.float64)
-        except (TypeError, ValueError):
-            raise ConfigError(f"times must be finite numbers, got {t!r}") from None
-        if not np.all(np.isfinite(arr)):
-            bad = float(arr[~np.isfinite(arr)].reshape(-1)[0])
-            raise ConfigError(f"times must be finite numbers, got {bad!r} among them")
+        arr = finite_times(t)
         flat = arr.reshape(-1)
         check_inside(self, self.interval, flat)
         d = self.system.state_dim

@@ -22,7 +22,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.nn import TrialSolution
-from atlasnn.solutions._base import AbstractSolution, check_inside
+from atlasnn.solutions._base import AbstractSolution, check_inside, finite_times
 from atlasnn.solutions._evaluate import value_and_rate_padded
 from atlasnn.systems import HamiltonianSystem
 
@@ -79,9 +79,7 @@ class Solution(AbstractSolution):
         check_inside(self, self.interval, arr)
 
     def _times(self, t) -> tuple[np.ndarray, tuple[int, ...]]:
-        arr = np.asarray(t, dtype=np.float64)
-        if not np.all(np.isfinite(arr)):
-            raise ValueError("times must be finite")
+        arr = finite_times(t)
         self._check_inside(arr)
         return arr.reshape(-1), arr.shape
 
