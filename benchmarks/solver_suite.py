@@ -52,7 +52,7 @@ def reference(system, z0, interval, t):
     """(reference at t, description, its gap to the second reference relative to the range)."""
     e = kepler_eccentricity(system, z0)
     if e is not None:
-        return kepler_exact(t, e), "exact", 0.0
+        return kepler_exact(t, e, z0), "exact", 0.0
     return gauss_reference(system, z0, interval, t)
 
 

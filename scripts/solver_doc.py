@@ -141,11 +141,12 @@ def stages(record: dict) -> str:
 
 
 def roundoff(record: dict) -> str:
-    rows = ["| e | periods | windows | estimate / range | true error / range | estimate / true | two tight solutions apart |",
-            "|---|---|---|---|---|---|---|"]
+    rows = ["| e | periods | windows | estimate / range | true error / range | estimate / true | two tight solutions apart "
+            "| h = shortest window: error (estimate) | h / 2: error (estimate) |", "|---|---|---|---|---|---|---|---|---|"]
     for r in record["rows"]:
+        given = [f"{r[k]['error_rel']:.1e} ({r[k]['estimate_rel']:.1e})" for k in ("given_h", "given_h_half")]
         rows.append(f"| {r['e']} | {r['periods']} | {r['windows']} | {r['estimate_rel']:.1e} | {r['error_rel']:.1e} | "
-                    f"{r['estimate_over_error']:.2f} | {r['floor_rel']:.1e} |")
+                    f"{r['estimate_over_error']:.2f} | {r['floor_rel']:.1e} | " + " | ".join(given) + " |")
     return "\n".join(rows)
 
 
