@@ -91,7 +91,7 @@ def summary(err: np.ndarray) -> dict:
 # ------------------------------------------------------------------------------ the bundle
 def load_run(run_dir: str, seed: int):
     """A network bundle (models/bundle_seedS.npz) or a float64 flow map (models/flowmap_seedS.npz)."""
-    from atlasnn.checkpoint import load_bundle, load_flowmap
+    from atlasnn import load
 
     results, model = Path(run_dir) / "results.json", Path(run_dir) / "models" / f"bundle_seed{seed}.npz"
     flowmap = Path(run_dir) / "models" / f"flowmap_seed{seed}.npz"
@@ -103,7 +103,7 @@ def load_run(run_dir: str, seed: int):
     record = json.loads(results.read_text(encoding="utf-8")).get("seeds", {}).get(str(seed))
     if not record or "train_time" not in record:
         raise SystemExit(f"bundle_cost: {results} has no train_time for seed {seed}")
-    loaded = load_flowmap(model) if model == flowmap else load_bundle(model)
+    loaded = load(model)  # a flow map or a trained bundle, by the file's kind
     return loaded, float(record["train_time"]), {"source": str(run_dir), "seed": seed,
                                                               "recorded_test": record.get("test")}
 

@@ -2,7 +2,7 @@
 
     python -m benchmarks.bundle_eval [--run docs/runs/families/oscillator-bundle] [--out docs/benchmarks/bundle_eval.json]
 
-Every ``models/bundle_seed*.npz`` of the run is loaded (``load_bundle``), 10⁵ members are drawn
+Every ``models/bundle_seed*.npz`` of the run is loaded (``atlasnn.load``), 10⁵ members are drawn
 from its box, and ``sol(t, z0, lam)`` at 100 times on [t0, T] is timed three times after a first
 call that compiles; the machine should be otherwise quiet.
 """
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from atlasnn.checkpoint import load_bundle
+from atlasnn import load
 from benchmarks.common import machine_info
 
 
@@ -27,7 +27,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     rows = []
     for path in sorted(Path(args.run, "models").glob("bundle_seed*.npz")):
-        sol = load_bundle(path)
+        sol = load(path)
         z0, lam = sol.box.draw(np.random.default_rng(12346), 100_000)
         t = np.linspace(sol.box.t0, sol.box.T, 100)
         seconds = []

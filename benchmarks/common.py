@@ -106,7 +106,7 @@ def replace_generated(page, name: str, body: str) -> None:
     """Write ``body`` between the ``<!-- generated:NAME -->`` markers of a docs page."""
     from pathlib import Path
 
-    from atlasnn.errors import AtlasError
+    from atlasnn import AtlasError
     from atlasnn.report import replace_generated as replace
 
     page = Path(page)

@@ -16,9 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from atlasnn.errors import AtlasError
+from atlasnn import AtlasError, Unknown
 from atlasnn.inverse import fit_collocation, fit_shooting, synthetic_observations
-from atlasnn.observations import Unknown
 from atlasnn.systems import expression_system
 
 from benchmarks.common import machine_info

@@ -27,7 +27,7 @@ import numpy as np
 
 from atlasnn.inverse import fit_shooting, synthetic_observations
 from atlasnn.inverse import fit_joint
-from atlasnn.observations import Unknown
+from atlasnn import Unknown
 from atlasnn.systems import expression_system
 from benchmarks.common import machine_info
 

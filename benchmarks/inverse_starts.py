@@ -30,10 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from atlasnn.errors import AtlasError
+from atlasnn import AtlasError, Unknown
 from atlasnn.inverse import fit_shooting, synthetic_observations
 from atlasnn.inverse import JointConfig, fit_collocation, fit_joint, fit_multistart, judge_fit
-from atlasnn.observations import Unknown
 from atlasnn.systems import expression_system
 
 from benchmarks.common import machine_info

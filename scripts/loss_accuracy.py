@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 
 from atlasnn.report import QUICK_TAG
-from atlasnn.errors import AtlasError, ConfigError
+from atlasnn import AtlasError
 from atlasnn.report import plot_loss_vs_accuracy
 from atlasnn.report import load_paper, load_results
 
@@ -58,7 +58,7 @@ def collect_points(run_dirs: list[Path], state: str = "x", overrides: dict[str, 
     for run_dir in run_dirs:
         res = load_results(run_dir)
         if state not in res.get("state_names", []):
-            raise ConfigError(f"{run_dir}: no state {state!r} (states: {res.get('state_names')})")
+            raise AtlasError(f"{run_dir}: no state {state!r} (states: {res.get('state_names')})")
         papers.add(res.get("paper_experiment") or res["experiment"])
         quick = quick or bool(res.get("quick"))
         profile = _profile(Path(run_dir), res, overrides or {})
@@ -72,7 +72,7 @@ def collect_points(run_dirs: list[Path], state: str = "x", overrides: dict[str, 
             points.append({"model": res["labels"].get(r["column"], r["column"]), "column": r["column"],
                            "profile": profile, "seed": r.get("seed"), "loss": loss, "l2": l2})
     if len(papers) != 1:
-        raise ConfigError(f"the runs compare with different experiments {sorted(papers)}; give runs of one experiment")
+        raise AtlasError(f"the runs compare with different experiments {sorted(papers)}; give runs of one experiment")
     return points, papers.pop(), quick
 
 

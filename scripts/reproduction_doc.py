@@ -33,7 +33,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from atlasnn.errors import AtlasError  # noqa: E402
+from atlasnn import AtlasError  # noqa: E402
 from atlasnn.report import claims_markdown, experiment_claims, format_number, load_paper  # noqa: E402
 from atlasnn.report import replace_generated as replace_marked  # noqa: E402
 

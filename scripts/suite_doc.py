@@ -22,7 +22,7 @@ import json
 import shutil
 from pathlib import Path
 
-from atlasnn.errors import AtlasError
+from atlasnn import AtlasError
 from atlasnn.report import replace_generated as replace_marked
 from atlasnn.report import suite_markdown
 

@@ -24,3 +24,9 @@ class CheckpointError(AtlasError):
 
 class ExpressionError(AtlasError, ValueError):
     """A Hamiltonian expression string is not allowed or does not parse."""
+
+
+class ParametricSolveFailed(Exception):
+    """An orbit of a parametric solve could not be integrated to its last time (a non-finite state,
+    stage equations that did not converge on any window length tried). Not a user's error: the
+    inverse fits catch it and try elsewhere, or say where the orbit failed."""

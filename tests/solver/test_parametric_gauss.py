@@ -10,7 +10,8 @@ import pytest
 
 from atlasnn.compile_cache import jax_time
 from atlasnn.errors import ConfigError
-from atlasnn.evaluation import parametric_solver, reference_solution
+from atlasnn.evaluation import reference_solution
+from atlasnn.inverse import parametric_solver
 from atlasnn.inverse import CollocationFit, Shooting, fit, fit_shooting, predict_fit, synthetic_observations
 from atlasnn.observations import Unknown
 from atlasnn.solver import ParametricGauss, ParametricSolveFailed

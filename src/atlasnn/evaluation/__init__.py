@@ -1,7 +1,7 @@
 """Judging solutions: the classical integrators and the reference solution, error metrics (one
 declaration each), the quality verdict, the work–precision numbers (no plotting here), and
-the parametric solves (θ an argument, forward sensitivities beside it: DOP853, or the compiled Gauss
-collocation through :func:`parametric_solver`) that shooting and the members' reference use."""
+the parametric DOP853 solve (θ an argument, forward sensitivities beside it) that the members'
+reference uses, and shooting where asked for it."""
 
 from atlasnn.evaluation import _workprecision as workprecision
 from atlasnn.evaluation._integrators import (
@@ -55,7 +55,7 @@ from atlasnn.evaluation._quality import (
 from atlasnn.evaluation._record import TABLE_ROLES, MarchSummary, TrainingRecord
 from atlasnn.evaluation._members import reference_members
 from atlasnn.evaluation._vectorised import MemberRun, verlet_members, yoshida4_members
-from atlasnn.evaluation._parametric import PARAMETRIC_SOLVERS, ParametricSolveFailed, parametric_solver, solve_parametric
+from atlasnn.evaluation._parametric import ParametricSolveFailed, solve_parametric
 from atlasnn.systems import parametric_field  # its home is systems; here for the callers of evaluation
 from atlasnn.evaluation._workprecision import SYMPLECTIC, WorkPoint
 
@@ -111,8 +111,6 @@ __all__ = [
     "SYMPLECTIC",
     "reference_members",
     "solve_parametric",
-    "parametric_solver",
-    "PARAMETRIC_SOLVERS",
     "parametric_field",
     "ParametricSolveFailed",
     "MemberRun",

@@ -3,12 +3,8 @@ sensitivities S = ∂z/∂(θ, z0) integrated beside it (the variational equatio
 dS/dt = A(z, θ) S + ∂f/∂θ · D, A = ∂f/∂z, one column per direction; a column is one forward-mode
 derivative of f). f is built from ``system.parametric`` and jitted once per system in float64;
 θ reaches it as an argument of SciPy's ``solve_ivp``, so a new θ compiles nothing. The vectorised
-members' reference (:func:`reference_members`) uses it, and shooting where asked for it.
-
-:func:`parametric_solver` is the door shooting (:mod:`atlasnn.inverse`) goes through: ``"gauss"``
-(default) is the compiled Gauss collocation with the variational equations beside the state
-(:class:`atlasnn.solver.ParametricGauss`: shooting fits 6–9× faster, the same estimates;
-``benchmarks/shooting_solver.py``), ``"dop853"`` this module's solve.
+members' reference (:func:`reference_members`) uses it, and shooting where asked for it
+(``solver="dop853"``, :func:`atlasnn.inverse.parametric_solver`).
 """
 
 from __future__ import annotations
@@ -21,14 +17,10 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from atlasnn.compile_cache import program_cache
-from atlasnn.errors import ConfigError
-from atlasnn.solver import ParametricGauss, ParametricSolveFailed
+from atlasnn.errors import ParametricSolveFailed
 from atlasnn.systems import HamiltonianSystem, parametric_field
 
-__all__ = ["solve_parametric", "ParametricSolveFailed", "parametric_solver", "PARAMETRIC_SOLVERS"]
-
-#: the solvers :func:`parametric_solver` offers
-PARAMETRIC_SOLVERS = ("gauss", "dop853")
+__all__ = ["solve_parametric", "ParametricSolveFailed"]
 
 
 @program_cache
@@ -79,26 +71,3 @@ def solve_parametric(system, z_init, theta, t0, times, rtol, atol, S_init=None, 
     Y = Y[inverse]
     S = Y[:, n:].reshape(len(times), n, -1) if with_s else None
     return Y[:, :n], S, nfev
-
-
-def parametric_solver(system: HamiltonianSystem, rtol: float, atol: float, solver: str = "gauss"):
-    """``solve(z_init, theta, t0, times, S_init=None, dtheta=None) -> (Z, S, evaluations)`` for one
-    fit: :func:`solve_parametric`'s tail, by ``solver`` (:data:`PARAMETRIC_SOLVERS`). The Gauss
-    solve keeps its window length from call to call (:class:`atlasnn.solver.ParametricGauss`), so
-    one ``solve`` serves one fit; ``evaluations`` counts the right-hand side's evaluations (DOP853:
-    of the augmented system; Gauss: of the field, the sensitivities' derivatives beside each)."""
-    if solver not in PARAMETRIC_SOLVERS:
-        raise ConfigError(f"solver must be one of {list(PARAMETRIC_SOLVERS)}, got {solver!r}")
-    if solver == "dop853":
-        def solve(z_init, theta, t0, times, S_init=None, dtheta=None):
-            return solve_parametric(system, z_init, theta, t0, times, rtol, atol, S_init, dtheta)
-
-        return solve
-    gauss = ParametricGauss(system, rtol=rtol, atol=atol)
-
-    def solve(z_init, theta, t0, times, S_init=None, dtheta=None):
-        before = gauss.evaluations
-        Z, S = gauss(z_init, theta, t0, times, S_init, dtheta)
-        return Z, S, gauss.evaluations - before
-
-    return solve

@@ -22,6 +22,7 @@ from atlasnn.inverse._methods import FIT_METHODS, BundleFit, Joint, Shooting, fi
 from atlasnn.inverse._multistart import auto_starts, fit_multistart, judge_fit
 from atlasnn.inverse._shooting import auto_segments, check_shooting_inputs, fit_shooting, predict_fit, shooting_misfit
 from atlasnn.inverse._synthetic import synthetic_observations
+from atlasnn.inverse._orbits import PARAMETRIC_SOLVERS, parametric_solver
 
 __all__ = [
     "fit",
@@ -51,4 +52,6 @@ __all__ = [
     "shooting_misfit",
     "predict_fit",
     "synthetic_observations",
+    "parametric_solver",
+    "PARAMETRIC_SOLVERS",
 ]

@@ -46,9 +46,9 @@ from scipy.interpolate import CubicSpline
 
 from atlasnn.compile_cache import program_cache
 from atlasnn.errors import AtlasError, ConfigError
-from atlasnn.evaluation import PARAMETRIC_SOLVERS
 from atlasnn.inverse._base import AbstractFitMethod
 from atlasnn.inverse._field import field_scale
+from atlasnn.inverse._orbits import PARAMETRIC_SOLVERS
 from atlasnn.inverse._fit_result import FitResult, distrust, flag_misfit
 from atlasnn.inverse._shooting import check_shooting_inputs, fit_shooting
 from atlasnn.observations import INITIAL_STATE_PREFIX, Observations, Unknown, fixed_values

@@ -9,7 +9,7 @@ where z(t; θ, z0) solves dz/dt = J∇H(z; θ) from t0. The minimiser is SciPy's
 (trust-region reflective, bounds from the unknowns, ``x_scale="jac"``).
 
 The Jacobian of the residuals comes from **forward sensitivities** ∂z(t_i)/∂(θ, z0), one column
-per unknown. The solve (:func:`atlasnn.evaluation.parametric_solver`, θ an argument: trying a new
+per unknown. The solve (:func:`atlasnn.inverse.parametric_solver`, θ an argument: trying a new
 θ compiles nothing) is ``solver="gauss"`` by default: the compiled Gauss collocation on windows of
 one length for the whole fit, its sensitivities the forward-mode derivatives of that same program
 (:class:`atlasnn.solver.ParametricGauss`); ``solver="dop853"``: SciPy's DOP853 with the
@@ -35,10 +35,10 @@ from typing import Any, Sequence
 import numpy as np
 from scipy.optimize import least_squares
 
-from atlasnn.errors import AtlasError, ConfigError
-from atlasnn.evaluation import PARAMETRIC_SOLVERS, ParametricSolveFailed, parametric_solver
+from atlasnn.errors import AtlasError, ConfigError, ParametricSolveFailed
 from atlasnn.inverse._field import field_scale
 from atlasnn.inverse._fit_result import FitResult, flag_misfit, gauss_newton_covariance
+from atlasnn.inverse._orbits import PARAMETRIC_SOLVERS, parametric_solver
 from atlasnn.inverse._synthetic import finite_number
 from atlasnn.observations import Observations, Unknown, check_unknowns, fixed_values
 from atlasnn.systems import HamiltonianSystem

@@ -35,7 +35,7 @@ import numpy as np
 from jax import lax
 
 from atlasnn.compile_cache import program_cache
-from atlasnn.errors import ConfigError
+from atlasnn.errors import ConfigError, ParametricSolveFailed
 from atlasnn.precision import trace_settings
 from atlasnn.solutions import gauss_tableau, shifted_legendre
 from atlasnn.solver._collocation import require_float64
@@ -48,11 +48,6 @@ __all__ = ["ParametricGauss", "ParametricSolveFailed"]
 #: the fewest observation times a program is compiled for; more are padded to the next power of two
 #: (one program serves data sets of similar size)
 _MIN_TIMES = 8
-
-
-class ParametricSolveFailed(Exception):
-    """The orbit could not be integrated to the last time (a non-finite state, stage equations that
-    did not converge on any window length tried)."""
 
 
 class _Marched(NamedTuple):
