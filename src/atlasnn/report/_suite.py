@@ -98,8 +98,9 @@ def suite_summary(run_dirs: Sequence[str | Path]) -> dict[str, Any]:
 
 
 def _scheme_name(column: str, profile: str, role: str) -> str:
-    if role == "solve":
-        return "float64 collocation (solved, not trained)"
+    if role == "solve":  # the column is the solver's name
+        kind = {"gauss": "Gauss collocation", "collocation": "random-feature collocation"}.get(column, column)
+        return f"{kind}, float64 (solved, not trained)"
     if column.endswith("_march"):
         return "time-marching, fixed windows" if profile == "fixed" else "time-marching, adaptive windows"
     return "direct training"
