@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import abc
 import warnings
-from typing import Any
+from typing import Any, ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -41,7 +41,8 @@ def check_inside(owner: Any, interval: tuple[float, float] | None, arr: np.ndarr
     if lo >= t0 - slack and hi <= T + slack:
         return
     kind = type(owner).__name__
-    msg = (f"evaluating the solution at times in [{lo:.6g}, {hi:.6g}], outside its training interval "
+    msg = (f"evaluating the solution at times in [{lo:.6g}, {hi:.6g}], outside its "
+           f"{getattr(owner, 'interval_name', 'training interval')} "
            f"[{t0:.6g}, {T:.6g}]: values there are an extrapolation")
     if owner.outside == "raise":
         raise ExtrapolationError(msg + f" ({kind}(..., outside='allow') permits it)")
@@ -70,6 +71,8 @@ class AbstractSolution(abc.ABC):
     """
 
     system: Any
+    #: what its interval is called in the warning outside it (a solved solution was not trained)
+    interval_name: ClassVar[str] = "training interval"
 
     @abc.abstractmethod
     def _evaluate(self, t) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:

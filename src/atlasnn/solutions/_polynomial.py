@@ -22,7 +22,7 @@ ends, so the difference is the error of this one (docs/SOLVER.md measures it).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, ClassVar
 
 import numpy as np
 
@@ -59,6 +59,8 @@ class PolynomialSolution(AbstractSolution):
         resolve: ``resolve(z, e, h) -> L`` for windows whose L is not kept.
         outside: what evaluating outside [t0, T] does (as for :class:`Solution`).
     """
+
+    interval_name: ClassVar[str] = "interval"
 
     system: HamiltonianSystem
     edges: np.ndarray

@@ -17,18 +17,19 @@ from typing import Any, Callable
 
 import jax
 
-from atlasnn.compile_cache import compiled_from_disk, program_cache
+from atlasnn.compile_cache import compile_lowered, compiled_from_disk, program_cache
 from atlasnn.systems import defined_by_data
 
 __all__ = ["exported_program"]
 
 
 class _Exported:
-    """A jitted program served from its exported form on disk, compiled once per argument shapes
-    (traced as usual where it cannot be exported)."""
+    """A jitted program compiled once per argument shapes with XLA's ``options``, served from its
+    exported form on disk where ``disk`` (the system qualifies), else traced here."""
 
-    def __init__(self, jitted: Callable, key: dict, out_tree, host: bool):
+    def __init__(self, jitted: Callable, key: dict, out_tree, host: bool, options: dict | None, disk: bool):
         self.jitted, self.key, self.out_tree, self.host = jitted, key, out_tree, host
+        self.options, self.disk = options, disk
         self.loaded: dict[Any, Callable] = {}
 
     def __call__(self, *args):
@@ -36,23 +37,30 @@ class _Exported:
         sig = (treedef, tuple((x.shape, str(x.dtype)) for x in leaves))
         fn = self.loaded.get(sig)
         if fn is None:
-            fn = compiled_from_disk(self.jitted, args, key=self.key, packages=("solver", "systems"),
-                                    out_tree=self.out_tree, prefix="march", host=self.host) or self.jitted
+            fn = None if not self.disk else compiled_from_disk(
+                self.jitted, args, key=self.key, packages=("solver", "systems"), out_tree=self.out_tree,
+                prefix="march", options=self.options, host=self.host)
+            if fn is None:
+                fn = compile_lowered(self.jitted.lower(*args), self.options) if self.options else self.jitted
             self.loaded[sig] = fn
         return fn(*args)
 
 
 @program_cache
 @functools.lru_cache(maxsize=32)
-def _exported(jitted: Callable, key_text: str, out_tree, host: bool) -> _Exported:
-    return _Exported(jitted, json.loads(key_text), out_tree, host)
+def _exported(jitted: Callable, key_text: str, out_tree, host: bool, options_text: str, disk: bool) -> _Exported:
+    return _Exported(jitted, json.loads(key_text), out_tree, host, json.loads(options_text), disk)
 
 
-def exported_program(jitted: Callable, system: Any, settings: dict, out_tree, host: bool = False) -> Callable:
-    """``jitted`` served from an exported program on disk where the system qualifies and the
-    cache is on (module docstring); else ``jitted`` itself. ``out_tree``: its result's tree;
-    ``host``: the kept program returns NumPy arrays (for a caller that copies them to the host)."""
-    if not defined_by_data(system):
+def exported_program(jitted: Callable, system: Any, settings: dict, out_tree, host: bool = False,
+                     options: dict | None = None) -> Callable:
+    """``jitted`` compiled with XLA's ``options`` (None: its defaults) and served from an exported
+    program on disk where the system qualifies and the cache is on (module docstring); without
+    options and off the disk, ``jitted`` itself. ``out_tree``: its result's tree; ``host``: the
+    kept program returns NumPy arrays (for a caller that copies them to the host)."""
+    disk = defined_by_data(system)
+    if not disk and not options:
         return jitted
-    return _exported(jitted, json.dumps({"system": system.describe(), "settings": settings}, sort_keys=True,
-                                        default=str), out_tree, host)
+    key = json.dumps({"system": system.describe() if disk else system.name, "settings": settings}, sort_keys=True,
+                     default=str)
+    return _exported(jitted, key, out_tree, host, json.dumps(options), disk)

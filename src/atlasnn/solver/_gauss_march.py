@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from atlasnn.compile_cache import program_cache
+from atlasnn.compile_cache import cpu_loop_options, program_cache
 from atlasnn.precision import trace_settings
 from atlasnn.solutions import gauss_tableau
 from atlasnn.solver._exported import exported_program
@@ -257,7 +257,7 @@ def compiled_gauss_march(system: Any, *, stages: int, steps: str, chunk: int, ma
     members_mode = "alone" if members == 1 else batch_mode()
     jitted = _cached(system, *settings)[members_mode]
     return exported_program(jitted, system, {"settings": settings, "members": members_mode, "method": "gauss"},
-                            _OUT_TREE, host=True)
+                            _OUT_TREE, host=True, options=cpu_loop_options())
 
 
 class ReplayState(NamedTuple):

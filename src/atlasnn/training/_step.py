@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from atlasnn.compile_cache import compile_lowered, compiled_from_disk, program_cache
+from atlasnn.compile_cache import compile_lowered, compiled_from_disk, cpu_loop_options, program_cache
 from atlasnn.precision import on_device, trace_settings
 from atlasnn.training._collocation import jittered, uniform_grid, with_release_fixed_point
 from atlasnn.training._loss import causal_physics_loss, physics_loss
@@ -261,7 +261,7 @@ def training_compiler_options() -> dict | None:
     from XLA's defaults, as they do from one machine to another, with no difference in accuracy
     resolved over those seeds (measured when this was chosen: CHANGELOG.md, 2026-11-27, and git's
     history of docs/benchmarks/). Elsewhere (a GPU): XLA's defaults."""
-    return {"xla_cpu_use_fusion_emitters": False} if jax.default_backend() == "cpu" else None
+    return cpu_loop_options()
 
 
 def compile_training_program(fn: Callable, args: tuple, system: HamiltonianSystem, *, key: dict, out_tree,
