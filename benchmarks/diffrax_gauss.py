@@ -39,8 +39,9 @@ import numpy as np
 from atlasnn import solve
 from atlasnn.solver import GaussCollocation
 from atlasnn.solver.diffrax import GaussLegendre
-from atlasnn.systems import expression_system, henon_heiles
+from atlasnn.systems import henon_heiles
 
+from benchmarks import problems
 from benchmarks.common import machine_info, replace_generated, write_result
 
 E = 0.6
@@ -64,19 +65,14 @@ def kepler_z0() -> np.ndarray:
 
 
 def kepler_exact(t) -> np.ndarray:
-    M = np.mod(np.asarray(t, np.float64), PERIOD)
-    Ea = M + E * np.sin(M)
-    for _ in range(50):
-        Ea = Ea - (Ea - E * np.sin(Ea) - M) / (1 - E * np.cos(Ea))
-    c, s, w = np.cos(Ea), np.sin(Ea), math.sqrt(1 - E * E)
-    return np.stack([c - E, w * s, -s / (1 - E * c), w * c / (1 - E * c)], axis=-1)
+    """The exact orbit from kepler_z0() (benchmarks.problems: its elements from the float64 start)."""
+    return problems.kepler_exact(t, E, kepler_z0())
 
 
 def kepler_system():
     """The same Kepler problem as an atlasnn system (J∇H by autodiff), for the runs that compare
     with atlasnn.solve: both doors then evaluate the very same vector field."""
-    return expression_system("(p1**2 + p2**2)/2 - 1/sqrt(q1**2 + q2**2)", ["q1", "q2"], ["p1", "p2"],
-                             z0=list(kepler_z0()), separable=True, name="kepler-bench")
+    return problems.kepler_system(E, name="kepler-bench")
 
 
 def system_field(system):
