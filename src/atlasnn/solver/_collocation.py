@@ -23,17 +23,21 @@ from atlasnn.solutions import PiecewiseSolution, WindowRecord
 from atlasnn.solver._base import AbstractSolver, register_solver
 from atlasnn.solver._features import RandomFeatures, check_grid, collocation_nodes, window_scaling
 from atlasnn.solver._program import MarchState, compiled_march
-from atlasnn.systems import HamiltonianSystem
+from atlasnn.systems import HamiltonianSystem, require_float64_field
 
 __all__ = ["Collocation", "require_float64"]
 
 
-def require_float64() -> None:
-    """Refuse, in one line, a device on which JAX cannot compute in float64."""
+def require_float64(system: HamiltonianSystem | None = None) -> None:
+    """Refuse, in one line, a device on which JAX cannot compute in float64, and a ``system`` whose H
+    traced in float64 holds a float32 constant or computes in float32
+    (:func:`atlasnn.systems.require_float64_field`)."""
     with jax.enable_x64(True):
         if jax.device_put(np.zeros(1, np.float64)).dtype != jnp.float64:  # a transfer, not a program
             raise ConfigError(f"the collocation solver needs float64, which the {jax.default_backend()} device "
                               "does not offer; run on the CPU (JAX_PLATFORMS=cpu) or use solver=AdamMarch()")
+    if system is not None:
+        require_float64_field(system)
 
 
 def _positive_int(name: str, value: Any, low: int = 1) -> int:
@@ -138,7 +142,7 @@ class Collocation(AbstractSolver):
                     progress: Callable[[float], None] | None = None) -> list[PiecewiseSolution]:
         """One solution per row of ``z0s`` (shape (B, 2d)), all marched by one compiled program;
         member b uses the features of ``seeds[b]`` (default: this solver's seed for every member)."""
-        require_float64()
+        require_float64(system)
         rtol, atol = self.rtol, self.atol
         z0s = np.atleast_2d(np.asarray(z0s, np.float64))
         seeds = [self.seed] * len(z0s) if seeds is None else [int(s) for s in seeds]

@@ -139,7 +139,7 @@ class GaussCollocation(AbstractSolver):
     def solve_batch(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float, *,
                     progress: Callable[[float], None] | None = None) -> list[PolynomialSolution]:
         """One solution per row of ``z0s`` (shape (B, 2d)), all marched by one compiled program."""
-        require_float64()
+        require_float64(system)
         z0s = np.atleast_2d(np.asarray(z0s, np.float64))
         b, n = z0s.shape
         # a batch padded to 8, 16, 32 … members (copies of the first, already at T, dropped): a few

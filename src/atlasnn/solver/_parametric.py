@@ -41,7 +41,7 @@ from atlasnn.solutions import gauss_tableau, shifted_legendre
 from atlasnn.solver._collocation import require_float64
 from atlasnn.solver._exported import exported_program
 from atlasnn.solver._gauss_step import continued_stages, gauss_step, local_error, small_matmul, tableau_arrays
-from atlasnn.systems import HamiltonianSystem, parametric_field
+from atlasnn.systems import HamiltonianSystem, parametric_field, require_float64_field
 
 __all__ = ["ParametricGauss", "ParametricSolveFailed"]
 
@@ -142,6 +142,7 @@ class ParametricGauss:
         if not isinstance(system, HamiltonianSystem):
             raise ConfigError(f"system must be a HamiltonianSystem, got {type(system).__name__}")
         system.require_parametric("the parametric Gauss solve")
+        require_float64_field(system)
         for name, val in (("rtol", rtol), ("atol", atol)):
             if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val) or val <= 0:
                 raise ConfigError(f"{name} must be a positive number, got {val!r}")

@@ -21,12 +21,15 @@ from atlasnn.systems._builtins import (
 from atlasnn.systems._bundle_box import BundleBox
 from atlasnn.systems._compile import CompiledExpression, compile_expression
 from atlasnn.systems._expression import expression_system, is_syntactically_separable
+from atlasnn.systems._float64 import narrow_floats, require_float64_field
 from atlasnn.systems._hamiltonian import HamiltonianFn, HamiltonianSystem, ParametricFn, parametric_field
 from atlasnn.systems._python import load_python_function, python_system
 from atlasnn.systems._parse import CONSTANTS, FUNCTIONS, MAX_DEPTH, MAX_EXPRESSION_LENGTH, MAX_OPERATIONS
 
 __all__ = [
     "parametric_field",
+    "require_float64_field",
+    "narrow_floats",
     "HamiltonianSystem",
     "BundleBox",
     "HamiltonianFn",

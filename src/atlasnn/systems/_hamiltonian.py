@@ -252,9 +252,14 @@ def _probe(system: HamiltonianSystem) -> None:
     calls = [("H(q, p)", system.hamiltonian, (z[:d], z[d:]))]
     if system.parametric is not None:
         calls.append(("parametric(q, p, theta)", system.parametric, (z[:d], z[d:], theta)))
-    for what, fn, args in calls:
-        if str(getattr(fn, "__module__", "")).startswith("atlasnn."):
+    for what, user_fn, args in calls:
+        if str(getattr(user_fn, "__module__", "")).startswith("atlasnn."):
             continue
+        # traced through a wrapper of its own, dropped with the trace: JAX keeps the copy it makes of
+        # a NumPy array H closes over (float32 with x64 off) for as long as a trace holding it lives,
+        # keyed by the array alone, and a trace cached on H itself would hand that float32 copy to
+        # the float64 march (6.9e-7 off with K = np.array([2.3]))
+        fn = lambda *a, _fn=user_fn: _fn(*a)  # noqa: E731
         try:
             traced = str(jax.make_jaxpr(fn)(*args))  # what JAX cannot trace raises here
             problem = None
