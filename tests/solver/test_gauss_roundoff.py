@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from atlasnn.errors import SystemError_
-from atlasnn.solver import solve
+from atlasnn.solver import GaussCollocation, solve
 from atlasnn.systems import HamiltonianSystem
 
 
@@ -56,3 +56,32 @@ def test_a_float32_copy_kept_from_the_users_own_trace_is_refused_not_used():
         with pytest.raises(SystemError_, match="float32 constant"):
             solve(HamiltonianSystem(H, 1), [1.0, 0.0], (0.0, 10.0))
     del kept
+
+
+@pytest.mark.parametrize("c", [1e6, 1e8])
+def test_an_oscillator_about_a_large_offset_takes_few_windows_and_says_its_round_off(c):
+    """H = p²/2 + (q − c)²/2: ṗ = −(q − c) carries an ulp of q (1.2e-10 at c = 1e6, 1.5e-8 at 1e8),
+    which the default tolerance on p is below. The windows no longer shrink chasing it (13 375 at
+    1e6 and millions at 1e8 before), and the estimate is no smaller than the error, which is the
+    ulps of c (before: 1e-13 of the range, the error 500× larger)."""
+    T = 10.0
+    system = HamiltonianSystem(lambda q, p: jnp.sum(p**2) / 2 + jnp.sum((q - c) ** 2) / 2, 1)
+    sol = solve(system, [c + 1.0, 0.0], (0.0, T))
+    t = np.linspace(0.0, T, 1001)
+    error = np.abs(sol(t) - np.stack([c + np.cos(t), -np.sin(t)], axis=-1)).max()
+    est = sol.estimate()
+    assert sol.n_windows <= 40, sol.n_windows
+    assert error <= 4 * np.spacing(c), error  # the answer is right to the ulps of c
+    assert error <= 2 * est.max_abs, (error, est.max_abs)
+    assert est.max_abs >= np.spacing(c)  # … and the estimate says no better
+    assert est.relative_max > 1e-11  # not "accurate" to 1e-13 of the range
+
+
+def test_an_oscillator_about_a_large_offset_with_a_given_tolerance_on_p_is_not_chased_below_round_off():
+    """The same at c = 1e7 with rtol 1e-14: the field's round-off counts as round-off."""
+    c = 1e7
+    system = HamiltonianSystem(lambda q, p: jnp.sum(p**2) / 2 + jnp.sum((q - c) ** 2) / 2, 1)
+    sol = solve(system, [c + 1.0, 0.0], (0.0, 10.0), solver=GaussCollocation(rtol=1e-14, atol=1e-16))
+    assert sol.n_windows <= 60, sol.n_windows
+    t = np.linspace(0.0, 10.0, 1001)
+    assert np.abs(sol(t)[:, 0] - (c + np.cos(t))).max() <= 4 * np.spacing(c)

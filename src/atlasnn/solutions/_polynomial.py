@@ -41,6 +41,15 @@ _MAX_NODES = 1_000_000
 _EVAL_CHUNK = 65_536
 
 
+def _at_least_roundoff(delta: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """δ, each entry at least eps·|ẑ| in size (its sign kept): ẑ is a float64 value, no nearer the
+    true state than its own rounding, which the companion, rounded alike, does not see (H = p²/2 +
+    (q − c)²/2 at c = 1e8: an error of an ulp of c, 1.5e-8, where the difference said 7e-9)."""
+    floor = np.finfo(np.float64).eps * np.abs(z)
+    with np.errstate(invalid="ignore"):
+        return np.where(np.abs(delta) < floor, np.where(delta < 0, -floor, floor), delta)
+
+
 @dataclass(eq=False)
 class PolynomialSolution(AbstractSolution):
     """A Gauss collocation solution over [t0, T], callable at any times.
@@ -179,19 +188,22 @@ class PolynomialSolution(AbstractSolution):
             nodes_d.append(d.reshape(-1, d.shape[-1]))
         t_all = np.append(np.concatenate(nodes_t), self.edges[-1])
         end = companion(np.asarray([self.edges[-1]])) - self(np.asarray([self.edges[-1]]))
-        d_all = np.concatenate(nodes_d + [end])
-        est = ErrorEstimate(t_all, d_all, self(t_all), steps=[3], converged=True)
+        z_all = self(t_all)
+        est = ErrorEstimate(t_all, _at_least_roundoff(np.concatenate(nodes_d + [end]), z_all), z_all, steps=[3],
+                            converged=True)
         self.__dict__["_estimate"] = est
         return est
 
     def error_estimate(self, t) -> np.ndarray:
         """The estimated error z(t) − ẑ(t) at times of the interval (the companion minus this
-        solution, at exactly those times): shape t.shape + (2d,); NaN outside the interval."""
+        solution, at exactly those times, at least an ulp of ẑ): shape t.shape + (2d,); NaN outside
+        the interval."""
         arr = np.asarray(t, np.float64)
         check_inside(self, self.interval, arr.reshape(-1))
         companion = self.companion()
         with np.errstate(invalid="ignore"):
-            out = companion(arr) - self(arr)
+            mine = self(arr)
+            out = _at_least_roundoff(companion(arr) - mine, mine)
         t0, T = self.interval
         out[(arr < t0) | (arr > T)] = np.nan
         return out

@@ -118,6 +118,19 @@ def _started(system, tab, st: GaussState, T, h_given) -> GaussState:
     return lax.cond(st.h_prev > 0, lambda st: st, start, st)
 
 
+def field_roundoff(field, z):
+    """How much the field moves when the state moves by its round-off: the largest change of each
+    component of f over two moves of z by a few ulps (4 eps|z|, all one way and in alternating
+    directions, so that a difference of two large components is moved too). The window's check
+    integrates f and so carries h times this: H = p²/2 + (q − c)²/2 at c = 1e6 has ṗ of size 1
+    carrying 1e-10 (an ulp of q), which a tolerance of 1e-13 on p would chase with windows ever
+    shorter (13 375 for [0, 10], millions at c = 1e8)."""
+    step = 4 * jnp.finfo(z.dtype).eps * jnp.abs(z)
+    sign = jnp.where(jnp.arange(z.shape[-1]) % 2 == 0, 1.0, -1.0)
+    f = field(jnp.stack([z, z + step, z + sign * step]))
+    return jnp.max(jnp.abs(f[1:] - f[:1]), axis=0)
+
+
 def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
     """Try one window from ``st``: (accepted?, the step's result, its length, its check ratio, the
     next length, whether it is the last window, whether a constant length is settled)."""
@@ -135,6 +148,9 @@ def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
     noise = 8 * jnp.finfo(st.z.dtype).eps * (jnp.abs(st.z) + jnp.sum(jnp.abs(r.L), axis=0))
     tol = jnp.maximum(atol + rtol * jnp.maximum(jnp.abs(st.z), jnp.abs(r.z)), noise)
     ratio = settings["safety"] * jnp.max(jnp.maximum(end, dense) / tol)
+    # … and the field's own round-off over the window, where the check fails without it
+    ratio = lax.cond(r.converged & (ratio > 1.0), lambda: settings["safety"] * jnp.max(
+        jnp.maximum(end, dense) / jnp.maximum(tol, h * field_roundoff(field, st.z))), lambda: ratio)
     given = h_given > 0
     ok = r.converged & jnp.all(jnp.isfinite(r.z)) & (given | (jnp.isfinite(ratio) & (ratio <= 1.0)))
     fac = jnp.clip(0.9 * ratio ** (-1.0 / (s + 1)), 0.2, settings["growth"])
