@@ -64,9 +64,11 @@ def _window_train(path: str, given: dict[str, Any], base, length: float):
 
 def march_settings(v: dict[str, Any], given: dict[str, Any], stage) -> MarchSettings:
     """The [march] table as a MarchSettings (the scheme's train configs over the measured defaults)."""
-    if v.get("window") is not None and v.get("n_windows") is not None:
-        _fail("march.window", given.get("window"), "give window or n_windows, not both")
-    window = None if v.get("n_windows") is not None and "window" not in given else v.get("window")
+    # v holds window's default ("auto") whether or not it was given: only a window given beside
+    # n_windows is refused
+    if given.get("window") is not None and v.get("n_windows") is not None:
+        _fail("march.window", given["window"], "give window or n_windows, not both")
+    window = None if v.get("n_windows") is not None else v.get("window")
     scheme = MarchConfig(n_windows=v.get("n_windows"), window=window, thaw=v["thaw"],
                          carry_adam=v["carry_adam"], start=v["start"],
                          polish=polish_config("march.polish", v["polish"]), rtol=v["rtol"], atol=v["atol"],
