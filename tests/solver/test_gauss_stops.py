@@ -40,3 +40,21 @@ def test_a_march_that_would_not_fit_in_memory_is_stopped_with_its_projection(ho,
         solve(ho, None, (0.0, 1.0), solver=GaussCollocation(h=1e-9))
     assert "\n" not in str(info.value)
     assert info.value.partial.interval[1] > 0.0  # what it did is kept
+
+
+# ------------------------------------------------------------------ messages that send the user the right way
+def _kepler(e: float):
+    return expression_system("(p1**2 + p2**2)/2 - 1/sqrt(q1**2 + q2**2)", ["q1", "q2"], ["p1", "p2"],
+                             z0=[1 - e, 0.0, 0.0, ((1 + e) / (1 - e)) ** 0.5])
+
+
+@pytest.mark.parametrize("stages", [15, 16])
+def test_a_tolerance_below_round_off_counts_as_round_off_at_every_stage_count(stages):
+    """rtol 1e-15, atol 0 on a circular orbit: stopped at t = 0 before ("loosen the tolerance, or the
+    system may be singular"), a component through zero whose check's own rounding, summed over
+    s + 1 coefficients, exceeded 8 ulps."""
+    sol = solve(_kepler(0.0), None, (0.0, 10.0), solver=GaussCollocation(stages=stages, rtol=1e-15, atol=0.0))
+    t = np.linspace(0.0, 10.0, 201)
+    exact = np.stack([np.cos(t), np.sin(t), -np.sin(t), np.cos(t)], axis=-1)
+    assert np.abs(sol(t) - exact).max() < 1e-13
+    assert sol.n_windows < 100
