@@ -58,3 +58,49 @@ def test_a_tolerance_below_round_off_counts_as_round_off_at_every_stage_count(st
     exact = np.stack([np.cos(t), np.sin(t), -np.sin(t), np.cos(t)], axis=-1)
     assert np.abs(sol(t) - exact).max() < 1e-13
     assert sol.n_windows < 100
+
+
+def test_an_interval_far_from_zero_is_solved_and_its_time_rounding_is_in_the_estimate():
+    """[1e12, 1e12 + 10]: windows shortened after a rejection were stretched back to the whole rest
+    of the interval (a slack of 1e-12·|T| = 1) until the march gave up; the times themselves are
+    float64 numbers 1.2e-4 apart there, which the estimate shows."""
+    t0 = 1e12
+    sol = solve(expression_system("p**2/2 + q**2/2", ["q"], ["p"]), [1.0, 0.0], (t0, t0 + 10.0))
+    t = t0 + np.linspace(0.0, 10.0, 101)
+    error = np.abs(sol(t) - np.stack([np.cos(t - t0), -np.sin(t - t0)], axis=-1)).max()
+    assert error < 2e-4  # the rounding of t (1.2e-4) times |ż| ≤ 1
+    assert error <= 3 * sol.estimate().max_abs
+
+
+def test_a_march_stopped_by_the_rounding_of_time_says_so_with_the_digits_that_tell_the_ends_apart():
+    with pytest.raises(AtlasError) as info:
+        solve(_kepler(0.9), None, (1e13, 1e13 + 20.0))
+    msg = str(info.value)
+    assert "\n" not in msg and "of [1e+13, 1.000000000002e+13]" in msg
+    assert "float64 numbers 0.00195 apart" in msg and "give h" in msg and "loosen the tolerance" not in msg
+
+
+def test_a_fixed_point_failure_with_newton_off_says_so_and_suggests_newton():
+    stiff = expression_system("p**2/2 + 1e6*q**2/2", ["q"], ["p"], z0=[1.0, 0.0])
+    with pytest.raises(AtlasError) as info:
+        solve(stiff, None, (0.0, 10.0), solver=GaussCollocation(newton=False, h=0.1))
+    msg = str(info.value)
+    assert "the fixed-point iteration failed; newton=False" in msg and "set newton=True" in msg
+    assert "Newton iterations both failed" not in msg
+
+
+def test_too_few_iterations_say_raise_max_iterations_not_shorten_h():
+    with pytest.raises(AtlasError) as info:
+        solve(_kepler(0.0), None, (0.0, 10.0), solver=GaussCollocation(max_iterations=3, h=0.5))
+    msg = str(info.value)
+    assert "raise max_iterations (3; the default is 100)" in msg and "shorter h" not in msg
+
+
+def test_a_field_that_is_not_finite_at_z0_is_one_line_before_any_window():
+    system = expression_system("p**2/2 + sqrt(q - 2)", ["q"], ["p"])
+    with pytest.raises(AtlasError) as info:
+        solve(system, [1.0, 0.0], (0.0, 10.0))
+    msg = str(info.value)
+    assert msg.startswith("the Gauss march cannot start: the vector field J∇H is not finite at z0 = [1.0, 0.0]")
+    assert "\n" not in msg and "did not converge" not in msg and ".partial" not in msg
+    assert info.value.partial is None

@@ -51,6 +51,16 @@ def _integer(name: str, value: Any, low: int = 1) -> int:
     return int(value)
 
 
+def _times(*values: float) -> list[str]:
+    """The times with 6 significant digits, or as many more as tell the different ones apart (an
+    interval [1e12, 1e12 + 10] is not "[1e+12, 1e+12]")."""
+    for digits in range(6, 18):
+        out = [f"{float(v):.{digits}g}" for v in values]
+        if len(set(out)) == len(set(float(v) for v in values)):
+            return out
+    return [repr(float(v)) for v in values]
+
+
 @register_solver
 @dataclass(frozen=True)
 class GaussCollocation(AbstractSolver):
@@ -168,8 +178,7 @@ class GaussCollocation(AbstractSolver):
                     "h_min": float(length.min(initial=math.inf)), "h_max": float(length.max(initial=0.0)),
                     "solve_time": wall, "first_call_time": first_call, "batch": b}
             if failed or start.size == 0 or end < T:
-                problem = problem or self._stopped_line(m, b, end, t0, T, stopped or FAILURES.get(failed, "the march "
-                                                                                                   "stopped"))
+                problem = problem or self._stopped_line(m, b, end, t0, T, stopped, failed, z0s[m])
                 # what was computed up to the stop is kept: the error's .partial
                 out.append(self._solution(system, np.append(start, end), z, e, L, ratio, info) if start.size else None)
                 continue
@@ -177,21 +186,41 @@ class GaussCollocation(AbstractSolver):
             out.append(self._solution(system, np.append(start, T), z, e, L, ratio,
                                       {**info, **({"advice": advice} if advice else {})}))
         if problem is not None:
-            error = ConfigError(problem + "; the solution" + ("s" if b > 1 else "") + " computed so far: the error's "
-                                ".partial")
+            kept = any(part is not None for part in out)
+            error = ConfigError(problem + ("; the solution" + ("s" if b > 1 else "") + " computed so far: the error's "
+                                           ".partial" if kept else ""))
             error.partial = out
             raise error
         return out
 
-    def _stopped_line(self, m: int, b: int, end: float, t0: float, T: float, why: str) -> str:
-        if why.startswith("it would need"):
+    def _stopped_line(self, m: int, b: int, end: float, t0: float, T: float, stopped: str | None, failed: int,
+                      z0: np.ndarray) -> str:
+        """Why member m stopped (``stopped``: the host's reason, else the program's code ``failed``),
+        and the remedy for that reason."""
+        who = "the Gauss march" + ("" if b == 1 else f" of member {m}")
+        if failed == 4:
+            return (f"{who} cannot start: the vector field J∇H is not finite at z0 = {np.asarray(z0).tolist()} (a NaN or "
+                    "an infinity in H or its gradient there); check H and z0")
+        why = stopped or FAILURES.get(failed, "the march stopped")
+        default_iterations = type(self).__dataclass_fields__["max_iterations"].default
+        if stopped is not None:
             remedy = "shorten the interval, loosen the tolerance or give a longer h"
+        elif failed == 1:
+            remedy = (f"times near t = {_times(end)[0]} are float64 numbers {np.spacing(abs(end)):.3g} apart, which the "
+                      "lengths the tolerance asks for come down to: give h (a window length well above that), or start "
+                      "the interval nearer 0 (H does not depend on t)")
+        elif failed == 3 and self.max_iterations < default_iterations:
+            remedy = f"raise max_iterations ({self.max_iterations}; the default is {default_iterations})"
+        elif failed == 3 and not self.newton:
+            why = "the stage equations did not converge (the fixed-point iteration failed; newton=False)"
+            remedy = "set newton=True (Newton's iteration solves such windows)" + (" or try a shorter h" if self.h else "")
         elif self.h is not None:
-            remedy = f"try a shorter h{'' if self.newton else ' or newton=True'}"
+            remedy = "try a shorter h"
         else:
             remedy = "loosen the tolerance, or the system may be singular there"
-        return (f"the Gauss march{'' if b == 1 else f' of member {m}'} stopped at t = {end:.6g} of [{t0:.6g}, {T:.6g}]: "
-                f"{why} (rtol={self.rtol:g}, atol={self.atol:g}, h={self.h}); {remedy}")
+        at, start, stop = _times(end, t0, T)
+        return f"{who} stopped at t = {at} of [{start}, {stop}]: {why} (rtol={self.rtol:g}, atol={self.atol:g}, " \
+               f"h={self.h}); {remedy}"
 
     def _advice(self, length: np.ndarray) -> str | None:
         """A line for a constant-length march whose length had to shrink far after its warm-up (an

@@ -53,6 +53,7 @@ FAILURES = {
     1: "the window length fell below round-off of the time",
     2: "windows were rejected too many times in a row",
     3: "the stage equations did not converge (fixed-point and Newton iterations both failed)",
+    4: "the vector field J∇H is not finite at the initial state",
 }
 
 
@@ -104,7 +105,8 @@ def _started(system, tab, st: GaussState, T, h_given) -> GaussState:
     given length, else 1/ω with ω² = ‖A²‖_F (A the field's Jacobian: for H = T(p) + V(q), A²'s
     eigenvalues are −ω² of the linearised motion whatever the masses and units; at most the
     interval), and a guess of constant rate f(z0), written as a previous window of that length
-    whose polynomial is that line."""
+    whose polynomial is that line. A field that is not finite there fails the march before its
+    first window (FAILURES[4])."""
 
     def start(st):
         a = system.jacobian(st.z[None])[0]
@@ -113,7 +115,8 @@ def _started(system, tab, st: GaussState, T, h_given) -> GaussState:
         h0 = jnp.minimum(T - st.t, h0)
         h0 = jnp.where(h_given > 0, h_given, h0)
         f0 = system.vector_field(st.z[None])[0]
-        return st._replace(h=h0, h_prev=h0, L_prev=h0 * tab["b"][:, None] * f0[None, :])
+        failed = jnp.where(jnp.all(jnp.isfinite(f0)), st.failed, 4).astype(st.failed.dtype)
+        return st._replace(h=h0, h_prev=h0, L_prev=h0 * tab["b"][:, None] * f0[None, :], failed=failed)
 
     return lax.cond(st.h_prev > 0, lambda st: st, start, st)
 
@@ -137,7 +140,10 @@ def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
     s = tab["b"].shape[0]
     field = system.vector_field
     jac = (lambda x: system.jacobian(x[None])[0]) if settings["newton"] else None
-    floor = 1e-12 * jnp.maximum(jnp.abs(T), 1.0)
+    # a window that would end within the round-off of T ends at T (the slack at most a hundredth of
+    # the window: 1e-12·|T| alone is 1 at T = 1e12, and a window shortened after a rejection was
+    # stretched back to the whole remaining span, rejected again, until the march gave up)
+    floor = jnp.minimum(1e-12 * jnp.maximum(jnp.abs(T), 1.0), 0.01 * st.h)
     span = (T - st.t) - st.te
     last = st.h >= span - floor
     h = jnp.where(last, span, st.h)
