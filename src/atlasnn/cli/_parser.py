@@ -17,7 +17,7 @@ from atlasnn.cli._commands import (
     cmd_sweep,
     cmd_systems,
 )
-from atlasnn.cli._solve_commands import cmd_integrate, cmd_solve
+from atlasnn.cli._solve_commands import CHECK_TOLERANCES, cmd_integrate, cmd_solve
 from atlasnn.version import __version__
 
 def build_parser() -> argparse.ArgumentParser:
@@ -155,7 +155,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--h", type=float, default=None, help="gauss: one window length throughout")
     s.add_argument("--features", type=int, default=None, help="collocation: random features per window (20)")
     s.add_argument("--seed", type=int, default=None, help="collocation: the draw of the random features (0)")
-    s.add_argument("--check", action="store_true", help="also compare with DOP853 at 1e-13 (the true error)")
+    s.add_argument("--check", action="store_true", help="also compare with DOP853 at rtol "
+                   f"{CHECK_TOLERANCES['rtol']:g}, atol {CHECK_TOLERANCES['atol']:g} (the true error)")
     s.add_argument("--save", default=None, metavar="FILE.npz", help="save the solution (atlasnn.load reads it)")
     s.set_defaults(func=cmd_solve)
 

@@ -7,6 +7,11 @@ from pathlib import Path
 
 from atlasnn.errors import AtlasError
 
+#: ``atlasnn solve --check``: the reference, DOP853 at its tightest, and the looser run whose
+#: distance from it tells how far the reference itself can be trusted (the --help quotes them)
+CHECK_TOLERANCES = {"rtol": 2.5e-14, "atol": 1e-14}
+CHECK_LOOSER = {"rtol": 1e-13, "atol": 1e-13}
+
 
 def _integrate_problem(args):
     """(system, z0, t0, T, steps) from --system/--T/--steps, or from a config file (its system,
@@ -119,14 +124,15 @@ def cmd_solve(args) -> int:
     print(f"estimated max error: {est.max_abs:.3e} = {est.relative_max:.3e} of the state's range{trust}")
     if args.check:
         t = np.linspace(t0, T, 2000)
-        ref = reference_solution(system, z0, t, rtol=2.5e-14, atol=1e-14)  # DOP853 at its tightest
+        ref = reference_solution(system, z0, t, **CHECK_TOLERANCES)  # DOP853 at its tightest
         # the reference's own error, as far as it can be told: how far the next looser run is from it
-        blur = float(np.abs(reference_solution(system, z0, t, rtol=1e-13, atol=1e-13) - ref).max())
+        blur = float(np.abs(reference_solution(system, z0, t, **CHECK_LOOSER) - ref).max())
         err, scale = float(np.abs(sol(t) - ref).max()), float(np.ptp(ref, axis=0).max())
-        print(f"true max error against DOP853 at rtol 2.5e-14 (2000 times): {err:.3e} = {err / scale:.3e} of the range"
+        print(f"true max error against DOP853 at rtol {CHECK_TOLERANCES['rtol']:g} (2000 times): {err:.3e} = "
+              f"{err / scale:.3e} of the range"
               + (f"; estimate / true = {est.max_abs / err:.2f}" if err > 3 * blur else
-                 f": within what the reference resolves ({blur:.1e}, its distance from DOP853 at 1e-13), so the "
-                 "true error is not known better than that"))
+                 f": within what the reference resolves ({blur:.1e}, its distance from DOP853 at "
+                 f"{CHECK_LOOSER['rtol']:g}), so the true error is not known better than that"))
     if args.save is not None:
         from atlasnn.checkpoint import save_piecewise
 
