@@ -1,5 +1,6 @@
 """A Gauss solution's residual in its own precision, times that are not finite numbers refused in
-one line, and the remedy a given window length that cannot converge is told."""
+one line, the remedy a given window length that cannot converge is told, and a setting a solver
+does not have named in one line with the ones it has."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import numpy as np
 import pytest
 
 from atlasnn import AtlasError, builtin_system, solve
+from atlasnn.errors import ConfigError
 from atlasnn.solver import GaussCollocation
 
 
@@ -34,3 +36,15 @@ def test_a_given_length_that_cannot_converge_says_shorten_it_not_newton_when_new
     with pytest.raises(AtlasError, match=r"the fixed-point iteration failed; newton=False\).*set newton=True"):
         solve(system, None, (0.0, 10.0), solver=GaussCollocation(h=3.0, newton=False))
 
+
+@pytest.mark.parametrize("cls", ["GaussCollocation", "Collocation", "AdamMarch", "Transfer", "FlowMap",
+                                 "NetworkBundle"])
+def test_an_unknown_setting_is_one_line_naming_it_and_the_settings(cls):
+    import atlasnn.solver as solvers
+
+    with pytest.raises(ConfigError) as info:
+        getattr(solvers, cls)(foo=1)
+    msg = str(info.value)
+    assert msg.startswith(f"{cls} has no setting 'foo'; its settings are ") and "\n" not in msg
+    if cls == "GaussCollocation":
+        assert "stages, rtol, atol, steps, h," in msg

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import functools
 import math
 from numbers import Real
 from typing import Any, Callable, ClassVar
@@ -22,7 +23,8 @@ from atlasnn.errors import ConfigError
 from atlasnn.solutions import AbstractSolution
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["AbstractSolver", "SOLVERS", "register_solver", "solver_from_name", "check_tolerance"]
+__all__ = ["AbstractSolver", "SOLVERS", "register_solver", "solver_from_name", "check_tolerance",
+           "refuse_unknown_settings"]
 
 
 def check_tolerance(owner: str, name: str, value: Any, tightest: float, *, zero: bool = False) -> float:
@@ -71,11 +73,31 @@ class AbstractSolver(abc.ABC):
 SOLVERS: dict[str, type[AbstractSolver]] = {}
 
 
+def refuse_unknown_settings(cls: type) -> type:
+    """A settings dataclass whose constructor refuses a keyword that is none of its fields in one
+    line naming it and the fields (rather than Python's TypeError); returns it (a decorator, after
+    ``@dataclass``). :func:`register_solver` applies it to every solver."""
+    init = cls.__init__
+    names = tuple(f.name for f in dataclasses.fields(cls) if f.init)
+
+    @functools.wraps(init)
+    def __init__(self, *args: Any, **settings: Any) -> None:
+        unknown = [k for k in settings if k not in names]
+        if unknown:
+            raise ConfigError(f"{type(self).__name__} has no setting {unknown[0]!r}; its settings are "
+                              f"{', '.join(names)}")
+        init(self, *args, **settings)
+
+    cls.__init__ = __init__
+    return cls
+
+
 def register_solver(cls: type[AbstractSolver]) -> type[AbstractSolver]:
-    """Add a solver class under its ``name`` (which must be new); returns it (a decorator)."""
+    """Add a solver class under its ``name`` (which must be new); returns it (a decorator, after
+    ``@dataclass``; an unknown setting is refused in one line: :func:`refuse_unknown_settings`)."""
     if cls.name in SOLVERS:
         raise ConfigError(f"solver name {cls.name!r} is taken already")
-    SOLVERS[cls.name] = cls
+    SOLVERS[cls.name] = refuse_unknown_settings(cls)
     return cls
 
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from atlasnn.errors import ConfigError
+from atlasnn.solver._base import refuse_unknown_settings
 from atlasnn.solver._flowmap import FlowMap, flowmap_bundle
 from atlasnn.systems import BundleBox, HamiltonianSystem
 from atlasnn.training import BundleTrainConfig, train_bundle
@@ -20,6 +21,7 @@ from atlasnn.training import BundleTrainConfig, train_bundle
 __all__ = ["NetworkBundle", "solve_bundle"]
 
 
+@refuse_unknown_settings
 @dataclass(frozen=True)
 class NetworkBundle:
     """A network trained over the box (:func:`atlasnn.training.train_bundle`): ẑ(t; z0, λ) = z0 +

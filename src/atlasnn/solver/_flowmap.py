@@ -46,12 +46,14 @@ import numpy as np
 import scipy.linalg as sla
 
 from atlasnn.errors import ConfigError
+from atlasnn.solver._base import refuse_unknown_settings
 from atlasnn.solutions import ChebyshevBasis, FlowMapBundle
 from atlasnn.systems import BundleBox, HamiltonianSystem, parametric_field
 
 __all__ = ["FlowMap", "flowmap_bundle", "flowmap_problem", "FlowMapProblem"]
 
 
+@refuse_unknown_settings
 @dataclass(frozen=True)
 class FlowMap:
     """Settings of :func:`solve_bundle`.
