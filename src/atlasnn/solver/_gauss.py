@@ -199,21 +199,22 @@ class GaussCollocation(AbstractSolver):
         and the remedy for that reason."""
         who = "the Gauss march" + ("" if b == 1 else f" of member {m}")
         if failed == 4:
-            return (f"{who} cannot start: the vector field J∇H is not finite at z0 = {np.asarray(z0).tolist()} (a NaN or "
-                    "an infinity in H or its gradient there); check H and z0")
+            return (f"{who} cannot start: the vector field J∇H is not finite at z0 = {np.asarray(z0).tolist()} "
+                    "(a NaN or an infinity in H or its gradient there); check H and z0")
         why = stopped or FAILURES.get(failed, "the march stopped")
         default_iterations = type(self).__dataclass_fields__["max_iterations"].default
         if stopped is not None:
             remedy = "shorten the interval, loosen the tolerance or give a longer h"
         elif failed == 1:
-            remedy = (f"times near t = {_times(end)[0]} are float64 numbers {np.spacing(abs(end)):.3g} apart, which the "
-                      "lengths the tolerance asks for come down to: give h (a window length well above that), or start "
-                      "the interval nearer 0 (H does not depend on t)")
+            remedy = (f"times near t = {_times(end)[0]} are float64 numbers {np.spacing(abs(end)):.3g} apart, which "
+                      "the lengths the tolerance asks for come down to: give h (a window length well above that), or "
+                      "start the interval nearer 0 (H does not depend on t)")
         elif failed == 3 and self.max_iterations < default_iterations:
             remedy = f"raise max_iterations ({self.max_iterations}; the default is {default_iterations})"
         elif failed == 3 and not self.newton:
             why = "the stage equations did not converge (the fixed-point iteration failed; newton=False)"
-            remedy = "set newton=True (Newton's iteration solves such windows)" + (" or try a shorter h" if self.h else "")
+            remedy = "set newton=True (Newton's iteration solves such windows)" + (" or try a shorter h" if self.h
+                                                                                   else "")
         elif self.h is not None:
             remedy = "try a shorter h"
         else:
