@@ -33,10 +33,11 @@ __all__ = ["GaussCollocation", "KEEP_BYTES", "NEWTON_AUTO_SIZE", "STAGES_BY_TOLE
 KEEP_BYTES = 1 << 30
 #: the stage count for a tolerance when none is given: the first s whose rtol bound the tolerance
 #: reaches. Measured (benchmarks/gauss_orders.py: Hénon–Heiles, Kepler e = 0.6, the double
-#: pendulum, an FPUT-β chain; s = 2 … 16): s = 8 was fastest or within 1.3× of it at rtol 1e-5,
-#: s = 12 and 16 shared the lead at 1e-7, s = 16 led from 1e-9 down. Lower orders won nowhere on
-#: these; they do on a large chain whose windows the iteration's reach sets (SOLVER.md).
-STAGES_BY_TOLERANCE = ((1e-7, 8), (1e-10, 12), (0.0, 16))
+#: pendulum, an FPUT-β chain; s = 2 … 16, the fastest at each rtol): s = 8 on three of the four at
+#: rtol 1e-5, 12 on two at 1e-7 (8 and 16 one each), 16 on three at 1e-9 and on all four below.
+#: Lower orders won nowhere there; they do on a large chain whose windows the iteration's reach
+#: sets (docs/SOLVER.md, "At size").
+STAGES_BY_TOLERANCE = ((1e-6, 8), (1e-8, 12), (0.0, 16))
 #: the largest state (2d components) that gets the Newton fallback by default: past it the Jacobian
 #: (n field derivatives) and s/2 complex LU factorisations of n × n cost more than the shorter
 #: fixed-point windows that replace a failed one (benchmarks/gauss_scaling.py)
