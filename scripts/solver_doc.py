@@ -11,7 +11,9 @@ the pages hold what it makes, so no number on them can drift from its record):
 * ``batch``: docs/benchmarks/solver_batch.json (``python -m benchmarks.solver_batch``);
 * ``first_run``: docs/benchmarks/solver_first_run.json (``python -m benchmarks.solver_first_run``);
 * ``stages``: docs/benchmarks/gauss_stages.json (``python -m benchmarks.gauss_stages``);
-* ``roundoff``: docs/benchmarks/gauss_roundoff.json (``python -m benchmarks.gauss_roundoff``).
+* ``roundoff``: docs/benchmarks/gauss_roundoff.json (``python -m benchmarks.gauss_roundoff``);
+* ``orders``: docs/benchmarks/gauss_orders.json (``python -m benchmarks.gauss_orders``);
+* ``scaling``: docs/benchmarks/gauss_scaling.json (``python -m benchmarks.gauss_scaling``).
 
     python scripts/solver_doc.py            # rewrite the tables in place
     python scripts/solver_doc.py --check    # exit 1 if a page is not what the records make
@@ -37,6 +39,8 @@ RECORDS = {
     "first_run": "docs/benchmarks/solver_first_run.json",
     "stages": "docs/benchmarks/gauss_stages.json",
     "roundoff": "docs/benchmarks/gauss_roundoff.json",
+    "orders": "docs/benchmarks/gauss_orders.json",
+    "scaling": "docs/benchmarks/gauss_scaling.json",
 }
 METHODS = [("gauss-adaptive", "Gauss, adaptive"), ("diffrax-dopri8", "Diffrax Dopri8"),
            ("diffrax-tsit5", "Diffrax Tsit5"), ("dop853", "SciPy DOP853"), ("yoshida4", "Yoshida-4"),
@@ -150,9 +154,50 @@ def roundoff(record: dict) -> str:
     return "\n".join(rows)
 
 
+def orders(record: dict) -> str:
+    counts = sorted({r["stages"] for res in record["results"].values() for r in res["rows"]})
+    rows = ["| problem | rtol | " + " | ".join(f"s = {s}" for s in counts) + " |", "|---|---|" + "---|" * len(counts)]
+    for name, res in record["results"].items():
+        for rtol in sorted({r["rtol"] for r in res["rows"]}, reverse=True):
+            got = {r["stages"]: r for r in res["rows"] if r["rtol"] == rtol}
+            best = (res["fastest_at_rtol"].get(f"{rtol:g}") or {}).get("stages")
+            cells = []
+            for s in counts:
+                r = got.get(s)
+                cell = "—" if r is None else "failed" if "seconds" not in r else f"{_ms(r['seconds'])}, {r['error_rel']:.0e}"
+                cells.append(f"**{cell}**" if s == best else cell)
+            rows.append(f"| {name} | {rtol:.0e} | " + " | ".join(cells) + " |")
+    return "\n".join(rows) + ("\n\nEach cell: the whole call's time after compilation (best of 3), then its max error / range; "
+                              "the fastest at each rtol in bold; — not run (order far below the tolerance's digits).")
+
+
+def scaling(record: dict) -> str:
+    rows = ["| system | d | s | windows | iterations / window | µs / window | of which the field's evaluations | "
+            "first call |", "|---|---|---|---|---|---|---|---|"]
+    for r in record["per_window"]:
+        rows.append(f"| {r['kind']} | {r['d']} | {r['stages']} | {r['windows']} | {r['iterations_per_window']:.1f} | "
+                    f"{r['us_per_window']:.3g} | {r['field_us'] * r['iterations_per_window']:.3g} | "
+                    f"{r['first_call_seconds']:.2f} s |")
+    out = "\n".join(rows)
+    if record.get("fput"):
+        rows = ["| FPUT-β, N | rtol | atlasnn: time, error (s, windows) | Diffrax Dopri8, fastest as accurate | "
+                "Diffrax Tsit5, fastest as accurate |", "|---|---|---|---|---|"]
+        for r in record["fput"]:
+            cells = []
+            for label in ("dopri8", "tsit5"):
+                f = r[label]["fastest_at_least_as_accurate"]
+                cells.append("none as accurate" if f is None else
+                             f"{_ms(f['seconds'])}, {f['error']:.0e} (rtol {f['rtol']:.0e}): atlasnn {r[label]['ratio']:.2g}×")
+            rows.append(f"| {r['n']} | {r['rtol']:.0e} | {_ms(r['atlasnn_seconds'])}, {r['atlasnn_error']:.0e} "
+                        f"(s = {r['stages']}, {r['windows']}) | " + " | ".join(cells) + " |")
+        out += "\n\n" + "\n".join(rows) + ("\n\nErrors: max over 200 times / range, against Diffrax Dopri8 at rtol "
+                                           "1e-14; \"atlasnn k×\": atlasnn's time over that run's.")
+    return out
+
+
 MAKERS = {"suite": suite, "workprecision": workprecision, "energy": energy, "step_modes": step_modes, "batch": batch,
           "first_run": first_run, "stages": stages,
-          "roundoff": roundoff}
+          "roundoff": roundoff, "orders": orders, "scaling": scaling}
 
 
 def render(text: str) -> str:

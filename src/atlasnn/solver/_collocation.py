@@ -8,6 +8,8 @@ windows into the :class:`~atlasnn.solutions.PiecewiseSolution` every other part 
 
 from __future__ import annotations
 
+import functools
+
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, ClassVar
@@ -32,12 +34,18 @@ def require_float64(system: HamiltonianSystem | None = None) -> None:
     """Refuse, in one line, a device on which JAX cannot compute in float64, and a ``system`` whose H
     traced in float64 holds a float32 constant or computes in float32
     (:func:`atlasnn.systems.require_float64_field`)."""
-    with jax.enable_x64(True):
-        if jax.device_put(np.zeros(1, np.float64)).dtype != jnp.float64:  # a transfer, not a program
-            raise ConfigError(f"the collocation solver needs float64, which the {jax.default_backend()} device "
-                              "does not offer; run on the CPU (JAX_PLATFORMS=cpu) or use solver=AdamMarch()")
+    if not _offers_float64(jax.default_backend()):
+        raise ConfigError(f"the collocation solver needs float64, which the {jax.default_backend()} device "
+                          "does not offer; run on the CPU (JAX_PLATFORMS=cpu) or use solver=AdamMarch()")
     if system is not None:
         require_float64_field(system)
+
+
+@functools.lru_cache(maxsize=8)
+def _offers_float64(backend: str) -> bool:
+    """Whether the default device of ``backend`` keeps a float64 array (asked once per backend)."""
+    with jax.enable_x64(True):
+        return jax.device_put(np.zeros(1, np.float64)).dtype == jnp.float64  # a transfer, not a program
 
 
 def _positive_int(name: str, value: Any, low: int = 1) -> int:

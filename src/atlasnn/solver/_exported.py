@@ -58,9 +58,17 @@ def exported_program(jitted: Callable, system: Any, settings: dict, out_tree, ho
     program on disk where the system qualifies and the cache is on (module docstring); without
     options and off the disk, ``jitted`` itself. ``out_tree``: its result's tree; ``host``: the
     kept program returns NumPy arrays (for a caller that copies them to the host)."""
-    disk = defined_by_data(system)
+    disk, described = _system_key(system)
     if not disk and not options:
         return jitted
-    key = json.dumps({"system": system.describe() if disk else system.name, "settings": settings}, sort_keys=True,
-                     default=str)
+    key = json.dumps({"system": described, "settings": settings}, sort_keys=True, default=str)
     return _exported(jitted, key, out_tree, host, json.dumps(options), disk)
+
+
+@functools.lru_cache(maxsize=64)
+def _system_key(system: Any) -> tuple[bool, Any]:
+    """(whether the system is defined by data, what keys its programs): judged once per system
+    object (it rebuilds the system from its spec, which a solve of one window would otherwise pay
+    for on every call)."""
+    disk = defined_by_data(system)
+    return disk, system.describe() if disk else system.name

@@ -26,15 +26,31 @@ from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, Repla
                                          compiled_gauss_replay, compiled_gauss_windows, initial_state)
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["GaussCollocation", "KEEP_BYTES"]
+__all__ = ["GaussCollocation", "KEEP_BYTES", "NEWTON_AUTO_SIZE", "STAGES_BY_TOLERANCE", "stages_for"]
 
 #: a march keeps every window's polynomial while they take at most this much memory (else only the
 #: window starts, and a window is solved again when it is evaluated)
 KEEP_BYTES = 1 << 30
+#: the stage count for a tolerance when none is given: the first s whose rtol bound the tolerance
+#: reaches. Measured (benchmarks/gauss_orders.py: Hénon–Heiles, Kepler e = 0.6, the double
+#: pendulum, an FPUT-β chain; s = 2 … 16, the fastest at each rtol): s = 8 on three of the four at
+#: rtol 1e-5, 12 on two at 1e-7 (8 and 16 one each), 16 on three at 1e-9 and on all four below.
+#: Lower orders won nowhere there; they do on a large chain whose windows the iteration's reach
+#: sets (docs/SOLVER.md, "At size").
+STAGES_BY_TOLERANCE = ((1e-6, 8), (1e-8, 12), (0.0, 16))
+#: the largest state (2d components) that gets the Newton fallback by default: past it the Jacobian
+#: (n field derivatives) and s/2 complex LU factorisations of n × n cost more than the shorter
+#: fixed-point windows that replace a failed one (benchmarks/gauss_scaling.py)
+NEWTON_AUTO_SIZE = 64
 #: the most memory one call's buffers take across the members of a batch
 _CHUNK_BYTES = 64 << 20
 #: window lengths replayed per call of the companion's program
 _REPLAY_CHUNK = 4096
+
+
+def stages_for(rtol: float) -> int:
+    """The stage count :class:`GaussCollocation` takes for ``rtol`` when none is given."""
+    return next(s for bound, s in STAGES_BY_TOLERANCE if rtol >= bound)
 
 
 def _number(name: str, value: Any, *, low: float = 0.0, above: bool = True) -> float:
@@ -72,7 +88,7 @@ class GaussCollocation(AbstractSolver):
     the state summed with compensation, the coefficients symplectic in float64 (docs/SOLVER.md).
 
     Attributes:
-        stages: s (1–16; order 2s).
+        stages: s (1–16; order 2s); None: chosen from rtol (:data:`STAGES_BY_TOLERANCE`).
         rtol: relative tolerance: every window's error along it, as its Picard check bounds it, must
             be within atol + rtol·|z| per component (a tolerance below float64's round-off counts as
             round-off).
@@ -84,7 +100,10 @@ class GaussCollocation(AbstractSolver):
         safety: the check's bound is multiplied by this before it is compared with the tolerance.
         growth: the most a window may grow over the last (while lengths may grow).
         warmup: windows over which a constant length is found.
-        newton: solve a window by simplified Newton iterations where the fixed-point iteration fails.
+        newton: solve a window by simplified Newton iterations where the fixed-point iteration fails
+            (decoupled: s/2 complex systems of the state's size); None: for states of at most
+            ``NEWTON_AUTO_SIZE`` components, else the window is shortened instead (its Jacobian and
+            their factorisations cost more than many fixed-point windows there).
         max_iterations: iterations per window at most (each kind).
         max_rejects: rejected tries in a row before the march gives up.
         keep: keep every window's polynomial (True), only the window starts (False: a window is
@@ -96,7 +115,7 @@ class GaussCollocation(AbstractSolver):
     #: a tolerance below round-off counts as round-off; this is only a floor against nonsense
     tightest: ClassVar[float] = 1e-16
 
-    stages: int = 12
+    stages: int | None = None
     rtol: float = 1e-11
     atol: float = 1e-13
     steps: str = "constant"
@@ -104,14 +123,15 @@ class GaussCollocation(AbstractSolver):
     safety: float = 2.0
     growth: float = 4.0
     warmup: int = 8
-    newton: bool = True
+    newton: bool | None = None
     max_iterations: int = 100
     max_rejects: int = 30
     keep: bool | None = None
     chunk: int = 1024
 
     def __post_init__(self) -> None:
-        gauss_tableau(self.stages)  # refuses a stage count out of range
+        if self.stages is not None:
+            gauss_tableau(self.stages)  # refuses a stage count out of range
         self.check_tolerances()
         _number("safety", self.safety)
         if _number("growth", self.growth) <= 1.0:
@@ -123,14 +143,23 @@ class GaussCollocation(AbstractSolver):
         for name in ("max_iterations", "max_rejects", "chunk"):
             _integer(name, getattr(self, name))
         _integer("warmup", self.warmup, 0)
-        for name in ("newton",) + (("keep",) if self.keep is not None else ()):
+        for name in (("newton",) if self.newton is not None else ()) + (("keep",) if self.keep is not None else ()):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"GaussCollocation {name} must be true or false, got {getattr(self, name)!r}")
+
+    def newton_for(self, size: int) -> bool:
+        """Whether a state of ``size`` components gets the Newton fallback (``newton``)."""
+        return self.newton if self.newton is not None else size <= NEWTON_AUTO_SIZE
+
+    @property
+    def stage_count(self) -> int:
+        """s: ``stages``, or the count chosen from rtol."""
+        return self.stages if self.stages is not None else stages_for(self.rtol)
 
     @property
     def order(self) -> int:
         """2s, the order at the window ends."""
-        return 2 * self.stages
+        return 2 * self.stage_count
 
     def settings(self) -> dict[str, Any]:
         """The settings as a JSON-able dict (what a record keeps)."""
@@ -155,10 +184,10 @@ class GaussCollocation(AbstractSolver):
         # a batch padded to 8, 16, 32 … members (copies of the first, already at T, dropped): a few
         # compiled programs rather than one per batch size
         padded = b if b == 1 else bucket_size(b)
-        per_window = 8 * (self.stages + 3) * n + 24
+        per_window = 8 * (self.stage_count + 3) * n + 24
         chunk = int(min(self.chunk, max(16, _CHUNK_BYTES // (padded * per_window))))
-        program = compiled_gauss_march(system, stages=self.stages, steps=self.steps, chunk=chunk,
-                                       max_iterations=self.max_iterations, newton=self.newton, growth=self.growth,
+        program = compiled_gauss_march(system, stages=self.stage_count, steps=self.steps, chunk=chunk,
+                                       max_iterations=self.max_iterations, newton=self.newton_for(n), growth=self.growth,
                                        safety=self.safety, warmup=self.warmup, max_rejects=self.max_rejects,
                                        members=padded)
         started = time.perf_counter()
@@ -172,7 +201,8 @@ class GaussCollocation(AbstractSolver):
         for m in range(b):
             start, length, z, e, L, ratio = (np.concatenate([r[i][m] for r in rows]) for i in range(6))
             end, failed = float(state.t[m]), int(state.failed[m])
-            info = {"solver": self.name, "settings": self.settings(), "order": self.order, "windows": int(start.size),
+            info = {"solver": self.name, "settings": self.settings(), "stages": self.stage_count, "order": self.order,
+                    "windows": int(start.size),
                     "rejected": int(state.rejected[m]), "iterations": int(state.iterations[m]),
                     "newton_windows": int(state.newton[m]), "check_worst": float(state.worst[m]),
                     "h_min": float(length.min(initial=math.inf)), "h_max": float(length.max(initial=0.0)),
@@ -211,8 +241,10 @@ class GaussCollocation(AbstractSolver):
                       "start the interval nearer 0 (H does not depend on t)")
         elif failed == 3 and self.max_iterations < default_iterations:
             remedy = f"raise max_iterations ({self.max_iterations}; the default is {default_iterations})"
-        elif failed == 3 and not self.newton:
-            why = "the stage equations did not converge (the fixed-point iteration failed; newton=False)"
+        elif failed == 3 and not self.newton_for(np.asarray(z0).size):
+            off = "newton=False" if self.newton is False else \
+                f"Newton is off by default above {NEWTON_AUTO_SIZE} components"
+            why = f"the stage equations did not converge (the fixed-point iteration failed; {off})"
             remedy = "set newton=True (Newton's iteration solves such windows)" + (" or try a shorter h" if self.h
                                                                                    else "")
         elif self.h is not None:
@@ -240,8 +272,8 @@ class GaussCollocation(AbstractSolver):
         and why the march was stopped early (None: it was not) — when the windows it would take to
         reach T, projected from the part done, would not fit in the memory available."""
         b, t0 = len(z0s), float(np.min(starts))
-        counts, room = np.zeros(b), available_memory()
-        stacked = [initial_state(z, t, self.stages) for z, t in zip(z0s, starts)]
+        counts, room = np.zeros(b), False  # the memory available: read once a second call is needed
+        stacked = [initial_state(z, t, self.stage_count) for z, t in zip(z0s, starts)]
         state = GaussState(*(np.stack(x) for x in zip(*stacked)))
         args = tuple(np.float64(x) for x in (T, self.rtol, self.atol, self.h or 0.0))
         rows, first_call = [], 0.0
@@ -262,6 +294,7 @@ class GaussCollocation(AbstractSolver):
                 counts += kept.sum(axis=1)
                 done = np.clip((t_now - starts) / np.maximum(T - starts, 1e-300), 1e-300, 1.0)
                 projected = float(np.sum(np.where(starts < T, counts / done, 0.0)))
+                room = available_memory() if room is False else room
                 if room is not None and projected * window_bytes > room:
                     return rows, state, first_call, (
                         f"it would need about {projected:.3g} windows ({projected * window_bytes / 2**30:.3g} GiB) "
@@ -271,7 +304,7 @@ class GaussCollocation(AbstractSolver):
     # ------------------------------------------------------------------ the solution
     def _solution(self, system, edges, z, e, L, ratio, info) -> PolynomialSolution:
         keep = self.keep if self.keep is not None else L.nbytes <= KEEP_BYTES
-        sol = PolynomialSolution(system, edges, z, e, L if keep else None, self.stages, ratio, info,
+        sol = PolynomialSolution(system, edges, z, e, L if keep else None, self.stage_count, ratio, info,
                                  resolve=None if keep else self.resolver(system))
         sol.estimator = lambda: self.companion(sol)
         return sol
@@ -280,8 +313,8 @@ class GaussCollocation(AbstractSolver):
         """``resolve(z, e, h) -> L``: windows solved again from their starts (from a guess of
         constant rate rather than the previous window's: the same equations, the same polynomial to
         round-off), in blocks of a fixed size (one program)."""
-        windows = compiled_gauss_windows(system, stages=self.stages, max_iterations=self.max_iterations,
-                                         newton=self.newton)
+        windows = compiled_gauss_windows(system, stages=self.stage_count, max_iterations=self.max_iterations,
+                                         newton=self.newton_for(system.state_dim))
 
         def resolve(z, e, h):
             out = []
@@ -301,10 +334,10 @@ class GaussCollocation(AbstractSolver):
         starts, lengths = sol.edges[:-1], np.diff(sol.edges)
         halves = np.repeat(0.5 * lengths, 2)
         edges = np.append(np.stack([starts, starts + 0.5 * lengths], axis=1).reshape(-1), sol.edges[-1])
-        replay = compiled_gauss_replay(sol.system, stages=self.stages, max_iterations=self.max_iterations,
-                                       newton=self.newton)
+        replay = compiled_gauss_replay(sol.system, stages=self.stage_count, max_iterations=self.max_iterations,
+                                       newton=self.newton_for(sol.system.state_dim))
         z0 = sol.z0
-        state = ReplayState(z0, np.zeros_like(z0), np.float64(0.0), np.zeros((self.stages, z0.size)), np.int64(0))
+        state = ReplayState(z0, np.zeros_like(z0), np.float64(0.0), np.zeros((self.stage_count, z0.size)), np.int64(0))
         zs, es, Ls = [], [], []
         with jax.enable_x64(True):
             for a in range(0, halves.size, _REPLAY_CHUNK):
@@ -320,5 +353,5 @@ class GaussCollocation(AbstractSolver):
         L = np.concatenate(Ls)
         keep = sol.L is not None
         return PolynomialSolution(sol.system, edges, np.concatenate(zs), np.concatenate(es), L if keep else None,
-                                  self.stages, None, {"companion_of": sol.info.get("solver")}, outside="allow",
+                                  self.stage_count, None, {"companion_of": sol.info.get("solver")}, outside="allow",
                                   resolve=None if keep else self.resolver(sol.system))

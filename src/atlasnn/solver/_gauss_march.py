@@ -102,15 +102,13 @@ def initial_state(z0: np.ndarray, t0: float, stages: int) -> GaussState:
 
 def _started(system, tab, st: GaussState, T, h_given) -> GaussState:
     """``st`` with its first length and guess where the march has not started (h_prev = 0): the
-    given length, else 1/ω with ω² = ‖A²‖_F (A the field's Jacobian: for H = T(p) + V(q), A²'s
-    eigenvalues are −ω² of the linearised motion whatever the masses and units; at most the
-    interval), and a guess of constant rate f(z0), written as a previous window of that length
+    given length, else 1/ω with ω the field's fastest frequency at z0 (:func:`_frequency`; at most
+    the interval), and a guess of constant rate f(z0), written as a previous window of that length
     whose polynomial is that line. A field that is not finite there fails the march before its
     first window (FAILURES[4])."""
 
     def start(st):
-        a = system.jacobian(st.z[None])[0]
-        omega = jnp.sqrt(jnp.sqrt(jnp.sum((a @ a) ** 2)))
+        omega = _frequency(system, st.z)
         h0 = jnp.where(omega > 0, 1.0 / jnp.where(omega > 0, omega, 1.0), T - st.t)
         h0 = jnp.minimum(T - st.t, h0)
         h0 = jnp.where(h_given > 0, h_given, h0)
@@ -132,6 +130,34 @@ def field_roundoff(field, z):
     sign = jnp.where(jnp.arange(z.shape[-1]) % 2 == 0, 1.0, -1.0)
     f = field(jnp.stack([z, z + step, z + sign * step]))
     return jnp.max(jnp.abs(f[1:] - f[:1]), axis=0)
+
+
+#: power iterations of A² in :func:`_frequency`
+_POWER_ITERATIONS = 6
+
+
+def _frequency(system, z):
+    """ω with ω² ≈ the spectral radius of A², A the field's Jacobian at z (for H = T(p) + V(q), A²'s
+    eigenvalues are −ω² of the linearised motion whatever the masses and units): a few power
+    iterations of A² by Jacobian–vector products (each the cost of a few field evaluations, not of
+    the n × n Jacobian), from a start that has a part along every component."""
+    field = lambda x: system.vector_field(x[None])[0]  # noqa: E731
+    n = z.shape[0]
+    v = 1.0 + jnp.arange(n, dtype=z.dtype) / n
+
+    def square(v):
+        w = jax.jvp(field, (z,), (v,))[1]
+        return jax.jvp(field, (z,), (w,))[1]
+
+    def body(_, carry):
+        v, _ = carry
+        norm = jnp.sqrt(jnp.sum(v ** 2))
+        v = v / jnp.where(norm > 0, norm, 1.0)
+        w = square(v)
+        return w, jnp.sqrt(jnp.sum(w ** 2))
+
+    _, growth = lax.fori_loop(0, _POWER_ITERATIONS, body, (v, jnp.zeros((), z.dtype)))
+    return jnp.where(jnp.isfinite(growth), jnp.sqrt(growth), 0.0)
 
 
 def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):

@@ -50,11 +50,21 @@ class StepResult(NamedTuple):
     newton: jax.Array
 
 
+#: M @ X is a fused broadcast product while X (s × n) has at most this many entries, a dot above
+#: (per fixed-point iteration on a CPU, FPUT chains: the product 0.7 µs against the dot's 1.9 at
+#: 12 × 4, even at 12 × 8, the dot 2.3× faster at 12 × 32 and 3.3× at 12 × 2 048)
+SMALL_PRODUCT = 96
+
+
 def small_matmul(M, X: jax.Array) -> jax.Array:
-    """M @ X for the small matrices of a window (s × s by s × n): as a broadcast product and a sum,
-    which XLA fuses with the field around it; its dot is a library call per product (measured 3×
-    slower per fixed-point iteration on a CPU, Hénon–Heiles, s = 12)."""
-    return jnp.sum(M[:, :, None] * X[None, :, :], axis=1)
+    """M @ X for the small matrices of a window (s × s by s × n). For a few entries, a broadcast
+    product and a sum, which XLA fuses with the field around it (the dot is a library call of fixed
+    cost: 3× slower per fixed-point iteration on Hénon–Heiles, s = 12); for more, the dot (XLA's
+    reduction over the middle axis of the product does not vectorise: its cost grew 4× faster than
+    n). ``benchmarks/gauss_scaling.py`` measures both."""
+    if X.shape[-2] * X.shape[-1] <= SMALL_PRODUCT:
+        return jnp.sum(M[:, :, None] * X[None, :, :], axis=1)
+    return jnp.matmul(M, X, precision=lax.Precision.HIGHEST)
 
 
 def compensated_add(z: jax.Array, e: jax.Array, increment: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -76,57 +86,76 @@ def continued_stages(tab, z: jax.Array, e: jax.Array, L_prev: jax.Array, ratio) 
     return z + (e + small_matmul(basis @ tab["series"].T, L_prev))
 
 
-def _iterate(update, L0, max_iterations, unroll=1):
-    """Iterate ``L ← update(L)`` from L0 until round-off: until the update is zero, or for two
-    iterations in a row no entry of it fell below its own smallest value so far (IRKGL16's rule,
-    entry by entry: one entry still converging keeps the iteration going); ``unroll`` iterations
-    per trip of the loop (the rule is checked after each, the loop left between trips: a trip of
-    XLA's loop costs several iterations' worth on a CPU, so a few iterations at round-off are
-    cheaper than the trips they save). Returns (L, iterations, the smallest update's largest entry,
-    the last update's largest entry)."""
+def _iterate(update, L0, scale, max_iterations, unroll=1):
+    """Iterate ``L ← update(L)`` from L0 until round-off: until the update is zero, or its size has
+    not fallen below its smallest so far for two iterations in a row (IRKGL16's rule, on the
+    largest entry of the update relative to ``scale``, its component's size (n,): the rule entry by
+    entry, as IRKGL16 states it for a few components, keeps going while any of them happens to
+    reach a new low by round-off, which with thousands of components took 80 iterations where 10
+    sufficed). ``unroll`` iterations per trip of the loop (the rule is checked after each, the
+    loop left between trips: a trip of XLA's loop costs several iterations' worth on a CPU, so a
+    few iterations at round-off are cheaper than the trips they save). Returns (L, iterations, the
+    smallest update's largest entry, the last update's largest entry)."""
 
     def body(carry):
-        L, k, dmin, stall, dlast = carry
+        L, k, rmin, stall, dmin, dlast = carry
         for _ in range(unroll):
             new = update(L)
             d = jnp.abs(new - L)
-            shrunk = jnp.any(d < dmin)
-            L, k, dmin, stall, dlast = new, k + 1, jnp.minimum(d, dmin), jnp.where(shrunk, 0, stall + 1), jnp.max(d)
-        return L, k, dmin, stall, dlast
+            r = jnp.max(d / scale)
+            dmax = jnp.max(d)
+            L, k, stall = new, k + 1, jnp.where(r < rmin, 0, stall + 1)
+            rmin, dmin, dlast = jnp.minimum(r, rmin), jnp.minimum(dmax, dmin), dmax
+        return L, k, rmin, stall, dmin, dlast
 
     def going(carry):
-        _, k, _, stall, dmax = carry
+        _, k, _, stall, _, dmax = carry
         return (k < max_iterations) & (stall < 2) & (dmax > 0) & jnp.isfinite(dmax)
 
+    inf = jnp.asarray(jnp.inf, L0.dtype)
     big = jnp.asarray(jnp.finfo(L0.dtype).max, L0.dtype)
-    start = (L0, jnp.asarray(0), jnp.full_like(L0, jnp.inf), jnp.asarray(0), big)
-    L, k, dmin, _, dlast = lax.while_loop(going, body, start)
-    return L, k, jnp.max(dmin), dlast
+    start = (L0, jnp.asarray(0), inf, jnp.asarray(0), inf, big)
+    L, k, _, _, dmin, dlast = lax.while_loop(going, body, start)
+    return L, k, dmin, dlast
+
+
+def _scale(z, e, L0):
+    """Each component's size for the iteration's rule: |z| + the largest stage increment, never zero."""
+    w = jnp.abs(z) + jnp.max(jnp.abs(L0), axis=0)
+    return jnp.maximum(w, jnp.finfo(w.dtype).tiny)
 
 
 def _fixed_point(field, tab, z, e, hb, L0, max_iterations):
     """L by fixed-point iteration from L0 = hb ⊙ f(Y0), Y0 the stage guess: (L, iterations counting
     L0's evaluation, whether it reached round-off)."""
     mu = tab["mu"]
-    L, k, dmin, dlast = _iterate(lambda L: hb[:, None] * field(z + (e + small_matmul(mu, L))), L0, max_iterations,
-                                 unroll=FIXED_POINT_UNROLL)
+    L, k, dmin, dlast = _iterate(lambda L: hb[:, None] * field(z + (e + small_matmul(mu, L))), L0,
+                                 _scale(z, e, L0), max_iterations, unroll=FIXED_POINT_UNROLL)
     return L, k + 1, _solved(L, L0, dmin, dlast)
 
 
 def _newton(field, jacobian, tab, z, e, hb, L0, max_iterations):
-    """L by simplified Newton iterations from L0 (one LU of the window's matrix): (L, iterations,
-    whether it reached round-off)."""
-    s, n = L0.shape
-    mu = tab["mu"]
-    a = jacobian(z)
-    matrix = jnp.eye(s * n, dtype=z.dtype) - jnp.kron(hb[:, None] * mu, a)
-    lu = jax.scipy.linalg.lu_factor(matrix)
+    """L by simplified Newton iterations from L0, decoupled (Hairer & Wanner, *Solving ODEs II*,
+    IV.8): the window's matrix I − h (diag(b) μ) ⊗ A(z_n) is block-diagonalised by the eigenvectors
+    V of diag(b) μ, so that a Newton step is one solve of I − hλ_j A per eigenvalue λ_j — s/2
+    complex systems of size n (the conjugate of each pair gives the conjugate solution), not one
+    of size s·n. V's conditioning (1e6 at s = 12) only slows the iteration a little: each step is
+    checked against the true residual, so the result is the same to round-off. Returns (L,
+    iterations, whether it reached round-off)."""
+    n = L0.shape[1]
+    mu, lam, to_modes, from_modes = tab["mu"], tab["newton_lam"], tab["newton_to"], tab["newton_from"]
+    h = jnp.sum(hb)
+    a = jacobian(z).astype(jnp.result_type(z.dtype, jnp.complex64))  # complex of the state's precision
+    eye = jnp.eye(n, dtype=a.dtype)
+    factors = jax.vmap(lambda l: jax.scipy.linalg.lu_factor(eye - (h * l) * a))(jnp.asarray(lam, a.dtype))
 
     def update(L):
         g = L - hb[:, None] * field(z + (e + small_matmul(mu, L)))
-        return L + jax.scipy.linalg.lu_solve(lu, -g.reshape(-1)).reshape(s, n)
+        r = jnp.matmul(jnp.asarray(to_modes, a.dtype), g.astype(a.dtype), precision=lax.Precision.HIGHEST)
+        x = jax.vmap(lambda lu, piv, rj: jax.scipy.linalg.lu_solve((lu, piv), -rj))(*factors, r)
+        return L + jnp.real(jnp.matmul(jnp.asarray(from_modes, a.dtype), x, precision=lax.Precision.HIGHEST))
 
-    L, k, dmin, dlast = _iterate(update, L0, max_iterations)
+    L, k, dmin, dlast = _iterate(update, L0, _scale(z, e, L0), max_iterations)
     return L, k, _solved(L, L0, dmin, dlast)
 
 
@@ -218,6 +247,17 @@ def local_error(field: Callable, tab: dict, z: jax.Array, e: jax.Array, h, L: ja
 
 def tableau_arrays(tab) -> dict:
     """The tableau's arrays that a step and its check read, as float64 NumPy arrays (traced or
-    baked into a program by its caller)."""
-    return {k: np.asarray(getattr(tab, k), np.float64) for k in ("b", "mu", "c", "series", "check_values", "picard",
-                                                                 "poly")}
+    baked into a program by its caller), with the decoupled Newton iteration's (complex128): one
+    eigenvalue λ of diag(b) μ per real one and per conjugate pair (``newton_lam``), the map of the
+    stages onto those modes (rows of V⁻¹, ``newton_to``) and back (columns of V, a pair's doubled:
+    the real part of V x sums the pair, ``newton_from``)."""
+    out = {k: np.asarray(getattr(tab, k), np.float64) for k in ("b", "mu", "c", "series", "check_values", "picard",
+                                                                "poly")}
+    lam, vectors = np.linalg.eig(np.diag(out["b"]) @ out["mu"])
+    inverse = np.linalg.inv(vectors)
+    real = np.abs(lam.imag) <= 1e-12 * np.abs(lam)
+    keep = np.flatnonzero(real | (lam.imag > 0))  # LAPACK returns a pair's vectors as conjugates
+    out["newton_lam"] = np.where(real, lam.real, lam)[keep].astype(np.complex128)
+    out["newton_to"] = inverse[keep].astype(np.complex128)
+    out["newton_from"] = (vectors[:, keep] * np.where(real[keep], 1.0, 2.0)).astype(np.complex128)
+    return out
