@@ -21,7 +21,14 @@ next length is h · clip(0.9 ε^(−1/(s+1)), 0.2, growth) with ε the bound ove
 
 The program marches at most ``chunk`` accepted windows per call (a batch: ``chunk`` tries per member)
 and returns them; the caller calls it again from where it stopped (one program serves every
-interval, and progress shows between calls). Members (initial states) on a leading axis: one
+interval, and progress shows between calls).
+
+A march may run until one component of the state, rather than the time it marches in, reaches T
+(``until``: that component's index): the time transformation (:mod:`._gauss_time`) marches a
+fictitious time τ until the physical time, a component of its extended state, reaches T. No window
+is then cut short to land on T (the last one ends past it: every window keeps the one length, and
+the map stays symplectic); the first length is the field's, at most the span the component's
+rate at the start would take to reach T. Members (initial states) on a leading axis: one
 program marches them all, each with windows of its own — on a CPU one after the other, elsewhere
 in lock step (every member one try per trip).
 """
@@ -42,7 +49,7 @@ from atlasnn.solutions import gauss_tableau
 from atlasnn.solver._exported import exported_program
 from atlasnn.solver._gauss_step import compensated_add, continued_stages, gauss_step, local_error, tableau_arrays
 
-__all__ = ["GaussState", "GaussChunk", "ReplayState", "compiled_gauss_march", "compiled_gauss_replay",
+__all__ = ["GaussState", "GaussChunk", "ReplayState", "clock", "compiled_gauss_march", "compiled_gauss_replay",
            "compiled_gauss_windows", "initial_state", "FAILURES", "STEP_MODES"]
 
 #: the ways window lengths are chosen (module docstring)
@@ -100,35 +107,50 @@ def initial_state(z0: np.ndarray, t0: float, stages: int) -> GaussState:
                       izero, izero, izero, izero, izero, zero, izero)
 
 
-def _started(system, tab, st: GaussState, T, h_given) -> GaussState:
+def clock(st: GaussState, until: int | None):
+    """What a march runs until reaches T: the time it marches in, or component ``until`` of the state."""
+    return st.t if until is None else st.z[..., until] + st.e[..., until]
+
+
+def _started(system, tab, st: GaussState, T, h_given, until: int | None = None) -> GaussState:
     """``st`` with its first length and guess where the march has not started (h_prev = 0): the
     given length, else 1/ω with ω the field's fastest frequency at z0 (:func:`_frequency`; at most
-    the interval), and a guess of constant rate f(z0), written as a previous window of that length
-    whose polynomial is that line. A field that is not finite there fails the march before its
-    first window (FAILURES[4])."""
+    the interval — with ``until``, the span that component's rate at z0 takes to cover what is left
+    of it), and a guess of constant rate f(z0), written as a previous window of that length whose
+    polynomial is that line. A field that is not finite there fails the march before its first
+    window (FAILURES[4])."""
 
     def start(st):
-        omega = _frequency(system, st.z)
-        h0 = jnp.where(omega > 0, 1.0 / jnp.where(omega > 0, omega, 1.0), T - st.t)
-        h0 = jnp.minimum(T - st.t, h0)
-        h0 = jnp.where(h_given > 0, h_given, h0)
         f0 = system.vector_field(st.z[None])[0]
+        span = T - st.t if until is None else (T - clock(st, until)) / jnp.maximum(jnp.abs(f0[until]), 1e-300)
+        omega = _frequency(system, st.z)
+        h0 = jnp.where(omega > 0, 1.0 / jnp.where(omega > 0, omega, 1.0), span)
+        h0 = jnp.minimum(span, h0)
+        h0 = jnp.where(h_given > 0, h_given, h0)
         failed = jnp.where(jnp.all(jnp.isfinite(f0)), st.failed, 4).astype(st.failed.dtype)
         return st._replace(h=h0, h_prev=h0, L_prev=h0 * tab["b"][:, None] * f0[None, :], failed=failed)
 
     return lax.cond(st.h_prev > 0, lambda st: st, start, st)
 
 
+#: the signs of the moves of :func:`field_roundoff` beyond "all one way" and "alternating": fixed
+#: draws (any two components move apart in at least one of them with probability 15/16)
+_ROUNDOFF_DRAWS = 3
+
+
 def field_roundoff(field, z):
     """How much the field moves when the state moves by its round-off: the largest change of each
-    component of f over two moves of z by a few ulps (4 eps|z|, all one way and in alternating
-    directions, so that a difference of two large components is moved too). The window's check
-    integrates f and so carries h times this: H = p²/2 + (q − c)²/2 at c = 1e6 has ṗ of size 1
-    carrying 1e-10 (an ulp of q), which a tolerance of 1e-13 on p would chase with windows ever
-    shorter (13 375 for [0, 10], millions at c = 1e8)."""
+    component of f over moves of z by a few ulps (4 eps|z|: all one way, in alternating directions
+    and with signs of a few fixed random draws, so that a difference of two large components is
+    moved too — two bodies close together, x_2 − x_3, which the first two moves shift alike). The
+    window's check integrates f and so carries h times this: H = p²/2 + (q − c)²/2 at c = 1e6 has
+    ṗ of size 1 carrying 1e-10 (an ulp of q), which a tolerance of 1e-13 on p would chase with
+    windows ever shorter (13 375 for [0, 10], millions at c = 1e8)."""
     step = 4 * jnp.finfo(z.dtype).eps * jnp.abs(z)
-    sign = jnp.where(jnp.arange(z.shape[-1]) % 2 == 0, 1.0, -1.0)
-    f = field(jnp.stack([z, z + step, z + sign * step]))
+    n = z.shape[-1]
+    draws = np.random.default_rng(0).choice([-1.0, 1.0], size=(_ROUNDOFF_DRAWS, n))
+    signs = np.concatenate([np.ones((1, n)), np.where(np.arange(n) % 2 == 0, 1.0, -1.0)[None], draws])
+    f = field(jnp.concatenate([z[None], z + signs * step]))
     return jnp.max(jnp.abs(f[1:] - f[:1]), axis=0)
 
 
@@ -171,7 +193,8 @@ def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
     # stretched back to the whole remaining span, rejected again, until the march gave up)
     floor = jnp.minimum(1e-12 * jnp.maximum(jnp.abs(T), 1.0), 0.01 * st.h)
     span = (T - st.t) - st.te
-    last = st.h >= span - floor
+    # with ``until``, T is that component's end: no window is cut to land on it
+    last = (st.h >= span - floor) if settings["until"] is None else jnp.asarray(False)
     h = jnp.where(last, span, st.h)
     Y0 = continued_stages(tab, st.z, st.e, st.L_prev, h / st.h_prev)
     r = gauss_step(field, jac, tab, st.z, st.e, h, Y0, max_iterations=settings["max_iterations"])
@@ -204,15 +227,16 @@ def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
 
 @program_cache
 @functools.lru_cache(maxsize=32)
-def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety, warmup, max_rejects,
+def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety, warmup, max_rejects, until,
             settings_key):
     tab = tableau_arrays(gauss_tableau(stages))  # NumPy float64: constants of the program (traced in x64)
     settings = {"steps": steps, "max_iterations": max_iterations, "newton": newton, "growth": growth,
-                "safety": safety, "warmup": warmup}
+                "safety": safety, "warmup": warmup, "until": until}
 
     def attempt(st, streak, T, rtol, atol, h_given):
         """One try of one window: (the state after it, the rejections in a row, accepted?, its row)."""
-        floor = 1e-14 * jnp.maximum(jnp.abs(T), 1.0)
+        ends = T if until is None else jnp.maximum(jnp.abs(T), jnp.abs(st.t))  # the round-off of the march's time
+        floor = 1e-14 * jnp.maximum(jnp.abs(ends), 1.0)
         ok, r, h, ratio, h_next, last, settled = _window(system, tab, settings, st, T, rtol, atol, h_given)
         t1, te1 = compensated_add(st.t, st.te, h)
         t1, te1 = jnp.where(last, T, t1), jnp.where(last, 0.0, te1)
@@ -230,12 +254,12 @@ def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety
         return new, streak, ok, (st.t + st.te, h, st.z, st.e, r.L, ratio)
 
     def running(st, T):
-        return (st.t < T) & (st.failed == 0)
+        return (clock(st, until) < T) & (st.failed == 0)
 
     def alone(state: GaussState, T, rtol, atol, h_given):
         """One member: a while loop that stops at T; row k of the buffers is the k-th accepted window
         (written in place whatever the outcome: a rejected try is overwritten by the next)."""
-        st = _started(system, tab, jax.tree_util.tree_map(lambda x: x[0], state), T, h_given)
+        st = _started(system, tab, jax.tree_util.tree_map(lambda x: x[0], state), T, h_given, until)
         n, dt = st.z.shape[0], st.z.dtype
         buf = (jnp.zeros(chunk, dt), jnp.zeros(chunk, dt), jnp.zeros((chunk, n), dt), jnp.zeros((chunk, n), dt),
                jnp.zeros((chunk, stages, n), dt), jnp.zeros(chunk, dt))
@@ -255,7 +279,7 @@ def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety
         finished one idling), until all are done or ``chunk`` trips; trip j's rows go to row j of
         the buffers for every member at once (written in place: a row index per member, under
         ``vmap``, would make every write a scatter that copies the buffers)."""
-        st = jax.vmap(_started, in_axes=(None, None, 0, None, None))(system, tab, state, T, h_given)
+        st = jax.vmap(_started, in_axes=(None, None, 0, None, None, None))(system, tab, state, T, h_given, until)
         b, n, dt = st.z.shape[0], st.z.shape[1], st.z.dtype
         buf = (jnp.zeros((chunk, b), bool), jnp.zeros((chunk, b), dt), jnp.zeros((chunk, b), dt),
                jnp.zeros((chunk, b, n), dt), jnp.zeros((chunk, b, n), dt), jnp.zeros((chunk, b, stages, n), dt),
@@ -300,12 +324,14 @@ def batch_mode() -> str:
 
 
 def compiled_gauss_march(system: Any, *, stages: int, steps: str, chunk: int, max_iterations: int, newton: bool,
-                         growth: float, safety: float, warmup: int, max_rejects: int, members: int):
+                         growth: float, safety: float, warmup: int, max_rejects: int, members: int,
+                         until: int | None = None):
     """The compiled Gauss march for a system and these settings over ``members`` members (a
     leading axis on the state, also for one); one program per shape, cached, keyed by the trace
-    settings; served from its exported form on disk where the system qualifies."""
+    settings; served from its exported form on disk where the system qualifies. ``until``: the
+    state's component that runs to T (module docstring; None: the march's own time)."""
     settings = (int(stages), str(steps), int(chunk), int(max_iterations), bool(newton), float(growth), float(safety),
-                int(warmup), int(max_rejects), trace_settings())
+                int(warmup), int(max_rejects), None if until is None else int(until), trace_settings())
     members_mode = "alone" if members == 1 else batch_mode()
     jitted = _cached(system, *settings)[members_mode]
     return exported_program(jitted, system, {"settings": settings, "members": members_mode, "method": "gauss"},
