@@ -1,6 +1,8 @@
 """Trained networks as solutions of Hamilton's equations: callable at any time, differentiable,
 with their residual; one trial solution (:class:`Solution`) or a time-marching chain of windows
-(:class:`PiecewiseSolution`); and their a-posteriori error estimate, with no reference needed."""
+(:class:`PiecewiseSolution`); and their a-posteriori error estimate, with no reference needed. The
+Gauss collocation's: :class:`PolynomialSolution`, and :class:`TimeTransformedSolution` for its
+time-transformed march."""
 
 from atlasnn.solutions._base import AbstractSolution
 from atlasnn.solutions._bundle import MEMBER_CHUNK, BundleSolution, bundle_start
@@ -10,6 +12,7 @@ from atlasnn.solutions._evaluate import bucket_size
 from atlasnn.solutions._estimate import TRUST_FRACTION, ErrorEstimate, estimate_error, state_range
 from atlasnn.solutions._linearised import propagate, residual_and_jacobian
 from atlasnn.solutions._polynomial import PolynomialSolution
+from atlasnn.solutions._transformed import TimeTransformedSolution
 from atlasnn.solutions._piecewise import PiecewiseSolution, WindowRecord, stack_models, unstack_models, window_edges
 from atlasnn.solutions._base import INTERVAL_SLACK, ExtrapolationError, ExtrapolationWarning
 from atlasnn.solutions._solution import OUTSIDE_MODES, Solution
@@ -32,6 +35,7 @@ __all__ = [
     "Solution",
     "PiecewiseSolution",
     "PolynomialSolution",
+    "TimeTransformedSolution",
     "BundleSolution",
     "MEMBER_CHUNK",
     "bundle_start",

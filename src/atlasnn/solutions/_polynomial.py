@@ -127,13 +127,24 @@ class PolynomialSolution(AbstractSolution):
         return z.reshape(arr.shape + (d,)), dz.reshape(arr.shape + (d,)), arr.shape
 
     def _evaluate_flat(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        k = self.window_index(t)
+        return self.window_values(t, self.window_index(t))
+
+    def window_values(self, t: np.ndarray, k: np.ndarray,
+                      component: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(ẑ(t), dẑ/dt(t)) by window k's polynomial (times (m,) and windows (m,), no check that
+        each time is inside its window), shape (m, 2d) each; with ``component``, that one only (m,)."""
+        t, k = np.asarray(t, np.float64), np.asarray(k, np.int64)
         start, length = self.edges[k], self.edges[k + 1] - self.edges[k]
         theta = (t - start) / length
         basis = shifted_legendre(theta, self.stages)  # (m, s + 1)
         weights = np.stack([theta[:, None] * (basis[:, :-1] @ self._tab.value.T), basis @ self._tab.rate.T], axis=1)
-        both = weights @ self._stage_rows(k)  # (m, 2, 2d): ẑ − z_k and h·dẑ/dt
-        return self.z[k] + (self.e[k] + both[:, 0]), both[:, 1] / length[:, None]
+        rows, z, e = self._stage_rows(k), self.z[k], self.e[k]
+        if component is not None:
+            pick = slice(component, component + 1)
+            rows, z, e = rows[..., pick], z[:, pick], e[:, pick]
+        both = weights @ rows  # (m, 2, 2d): ẑ − z_k and h·dẑ/dt
+        value, rate = z + (e + both[:, 0]), both[:, 1] / length[:, None]
+        return (value, rate) if component is None else (value[:, 0], rate[:, 0])
 
     def pieces(self) -> list[tuple[Any, float, float, float]]:
         raise NotImplementedError("a polynomial solution has no network pieces; its estimate() compares it "
