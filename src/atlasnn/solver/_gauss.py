@@ -4,7 +4,9 @@ the s Gauss–Legendre nodes of every window — the s-stage Gauss–Legendre Ru
 The method is in :mod:`._gauss_step` (one window) and :mod:`._gauss_march` (the compiled march);
 this module holds the settings, checks them, runs the program chunk by chunk and returns the
 :class:`~atlasnn.solutions.PolynomialSolution`, with its error estimate (a companion solution on
-windows half as long) and, for long marches, the means to solve a window again.
+windows half as long) and, for long marches, the means to solve a window again. With a
+``time_scale`` it marches the time-transformed system (:mod:`._gauss_time`) and returns a
+:class:`~atlasnn.solutions.TimeTransformedSolution`.
 """
 
 from __future__ import annotations
@@ -19,11 +21,12 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.limits import available_memory
-from atlasnn.solutions import PolynomialSolution, bucket_size, gauss_tableau
+from atlasnn.solutions import PolynomialSolution, TimeTransformedSolution, bucket_size, gauss_tableau
 from atlasnn.solver._base import AbstractSolver, register_solver
 from atlasnn.solver._collocation import require_float64
-from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, ReplayState, compiled_gauss_march,
+from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, ReplayState, clock, compiled_gauss_march,
                                          compiled_gauss_replay, compiled_gauss_windows, initial_state)
+from atlasnn.solver._gauss_time import TimeTransform, check_time_scale, describe_time_scale
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["GaussCollocation", "KEEP_BYTES", "NEWTON_AUTO_SIZE", "STAGES_BY_TOLERANCE", "stages_for"]
@@ -109,6 +112,12 @@ class GaussCollocation(AbstractSolver):
         keep: keep every window's polynomial (True), only the window starts (False: a window is
             solved again when evaluated), or decide by the memory it takes (None: up to 1 GiB).
         chunk: windows per call of the compiled program (progress is reported between calls).
+        time_scale: march in a fictitious time τ with dt/dτ = g(q, p), windows of one τ-length
+            (Poincaré's transformation: symplectic in the extended phase space; for close
+            encounters and eccentric orbits): a function g(q, p) > 0, small where the motion is
+            fast, or ``"potential"``: g = (−V(q))^(−3/2) for a separable H whose potential is
+            negative (gravitational N-body problems). None: march in t. ``h`` and the lengths
+            recorded are then in τ (:mod:`._gauss_time`; docs/SOLVER.md, "Close encounters").
     """
 
     name: ClassVar[str] = "gauss"
@@ -128,6 +137,7 @@ class GaussCollocation(AbstractSolver):
     max_rejects: int = 30
     keep: bool | None = None
     chunk: int = 1024
+    time_scale: str | Callable | None = None
 
     def __post_init__(self) -> None:
         if self.stages is not None:
@@ -146,6 +156,7 @@ class GaussCollocation(AbstractSolver):
         for name in (("newton",) if self.newton is not None else ()) + (("keep",) if self.keep is not None else ()):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"GaussCollocation {name} must be true or false, got {getattr(self, name)!r}")
+        check_time_scale(self.time_scale)
 
     def newton_for(self, size: int) -> bool:
         """Whether a state of ``size`` components gets the Newton fallback (``newton``)."""
@@ -162,12 +173,13 @@ class GaussCollocation(AbstractSolver):
         return 2 * self.stage_count
 
     def settings(self) -> dict[str, Any]:
-        """The settings as a JSON-able dict (what a record keeps)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        """The settings as a JSON-able dict (what a record keeps; a time scale by its name)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        return {**out, "time_scale": describe_time_scale(self.time_scale)}
 
     # ------------------------------------------------------------------ solving
     def solve(self, system: HamiltonianSystem, z0: np.ndarray, t0: float, T: float, *,
-              progress: Callable[[float], None] | None = None) -> PolynomialSolution:
+              progress: Callable[[float], None] | None = None) -> PolynomialSolution | TimeTransformedSolution:
         try:
             return self.solve_batch(system, np.asarray(z0)[None], t0, T, progress=progress)[0]
         except ConfigError as exc:
@@ -176,10 +188,26 @@ class GaussCollocation(AbstractSolver):
             raise
 
     def solve_batch(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float, *,
-                    progress: Callable[[float], None] | None = None) -> list[PolynomialSolution]:
+                    progress: Callable[[float], None] | None = None
+                    ) -> list[PolynomialSolution] | list[TimeTransformedSolution]:
         """One solution per row of ``z0s`` (shape (B, 2d)), all marched by one compiled program."""
         require_float64(system)
         z0s = np.atleast_2d(np.asarray(z0s, np.float64))
+        if self.time_scale is None:
+            return self._solve_rows(system, z0s, t0, T, progress)
+        transform = TimeTransform(system, self.time_scale)
+        try:
+            out = self._solve_rows(transform.extended, transform.lift(z0s, t0), t0, T, progress, until=transform.clock)
+        except ConfigError as exc:
+            if isinstance(getattr(exc, "partial", None), list):
+                exc.partial = [transform.solution(part, T) for part in exc.partial]
+            raise
+        return [transform.solution(sol, T) for sol in out]
+
+    def _solve_rows(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float,
+                    progress: Callable[[float], None] | None, until: int | None = None) -> list[PolynomialSolution]:
+        """:meth:`solve_batch` in the march's own time, or (``until``: the index of t in the
+        extended state) in τ until t reaches T."""
         b, n = z0s.shape
         # a batch padded to 8, 16, 32 … members (copies of the first, already at T, dropped): a few
         # compiled programs rather than one per batch size
@@ -189,18 +217,20 @@ class GaussCollocation(AbstractSolver):
         program = compiled_gauss_march(system, stages=self.stage_count, steps=self.steps, chunk=chunk,
                                        max_iterations=self.max_iterations, newton=self.newton_for(n), growth=self.growth,
                                        safety=self.safety, warmup=self.warmup, max_rejects=self.max_rejects,
-                                       members=padded)
+                                       members=padded, until=until)
         started = time.perf_counter()
         # the padding members start at T: nothing to march
         starts = np.concatenate([np.full(b, float(t0)), np.full(padded - b, float(T))])
-        rows, state, first_call, stopped = self._march(
-            program, np.concatenate([z0s, np.repeat(z0s[:1], padded - b, axis=0)]), starts, T, progress,
-            2 * per_window)
+        padding = np.repeat(z0s[:1], padded - b, axis=0)
+        if until is not None:
+            padding[:, until] = float(T)
+        rows, state, first_call, stopped = self._march(program, np.concatenate([z0s, padding]), starts, T, progress,
+                                                       2 * per_window, until)
         wall = time.perf_counter() - started
         out, problem = [], None
         for m in range(b):
             start, length, z, e, L, ratio = (np.concatenate([r[i][m] for r in rows]) for i in range(6))
-            end, failed = float(state.t[m]), int(state.failed[m])
+            end, failed = float(clock(state, until)[m]), int(state.failed[m])
             info = {"solver": self.name, "settings": self.settings(), "stages": self.stage_count, "order": self.order,
                     "windows": int(start.size),
                     "rejected": int(state.rejected[m]), "iterations": int(state.iterations[m]),
@@ -210,10 +240,11 @@ class GaussCollocation(AbstractSolver):
             if failed or start.size == 0 or end < T:
                 problem = problem or self._stopped_line(m, b, end, t0, T, stopped, failed, z0s[m])
                 # what was computed up to the stop is kept: the error's .partial
-                out.append(self._solution(system, np.append(start, end), z, e, L, ratio, info) if start.size else None)
+                out.append(self._solution(system, np.append(start, state.t[m]), z, e, L, ratio, info)
+                           if start.size else None)
                 continue
-            advice = self._advice(length)
-            out.append(self._solution(system, np.append(start, T), z, e, L, ratio,
+            advice = None if until is not None else self._advice(length)
+            out.append(self._solution(system, np.append(start, state.t[m]), z, e, L, ratio,
                                       {**info, **({"advice": advice} if advice else {})}))
         if problem is not None:
             kept = any(part is not None for part in out)
@@ -266,11 +297,12 @@ class GaussCollocation(AbstractSolver):
                 "differ along the orbit): steps='adaptive' would take fewer windows (not symplectic: "
                 "docs/SOLVER.md, 'Window lengths')")
 
-    def _march(self, program, z0s, starts, T, progress, window_bytes):
-        """Call the compiled program until every member reaches T or fails: the accepted windows
-        per call (each (B, ...) cut to the member's count), the final state, the first call's time,
-        and why the march was stopped early (None: it was not) — when the windows it would take to
-        reach T, projected from the part done, would not fit in the memory available."""
+    def _march(self, program, z0s, starts, T, progress, window_bytes, until=None):
+        """Call the compiled program until every member reaches T (its time, or component ``until``
+        of its state) or fails: the accepted windows per call (each (B, ...) cut to the member's
+        count), the final state, the first call's time, and why the march was stopped early (None:
+        it was not) — when the windows it would take to reach T, projected from the part done,
+        would not fit in the memory available."""
         b, t0 = len(z0s), float(np.min(starts))
         counts, room = np.zeros(b), False  # the memory available: read once a second call is needed
         stacked = [initial_state(z, t, self.stage_count) for z, t in zip(z0s, starts)]
@@ -286,7 +318,7 @@ class GaussCollocation(AbstractSolver):
                 state = out.state
                 kept = np.asarray(out.kept, bool)
                 rows.append([[np.asarray(x)[m][kept[m]] for m in range(b)] for x in out[1:-1]])
-                t_now, failed = np.asarray(state.t), np.asarray(state.failed)
+                t_now, failed = np.asarray(clock(state, until)), np.asarray(state.failed)
                 if progress is not None:
                     progress(min(1.0, float(t_now.min() - t0) / (T - t0)))
                 if np.all((t_now >= T) | (failed != 0)):
