@@ -1,5 +1,6 @@
 """The problems the solver instruments share: the hard suite's and the long experiments' names,
-Kepler's problem with its exact orbit, and the reference where no exact solution is known."""
+Kepler's problem with its exact orbit, the Pythagorean three-body problem, and the reference where
+no exact solution is known."""
 
 from __future__ import annotations
 
@@ -31,6 +32,25 @@ def kepler_system(e: float, name: str | None = None):
     """Kepler's problem (a = 1, period 2π) started at pericentre with eccentricity ``e``."""
     return expression_system("(p1**2 + p2**2)/2 - 1/sqrt(q1**2 + q2**2)", ["q1", "q2"], ["p1", "p2"],
                              z0=[1 - e, 0.0, 0.0, math.sqrt((1 + e) / (1 - e))], separable=True, name=name or f"kepler-{e}")
+
+
+#: the Pythagorean three-body problem (Burrau 1913; Szebehely & Peters 1967): masses 3, 4, 5 at rest
+#: at the vertices of a 3-4-5 right triangle, each opposite the side of its length, G = 1
+PYTHAGOREAN_MASSES = (3.0, 4.0, 5.0)
+PYTHAGOREAN_Z0 = (1.0, 3.0, -2.0, -1.0, 1.0, -1.0) + (0.0,) * 6
+
+
+def pythagorean_system():
+    """The Pythagorean three-body problem in the plane (q = x1, y1, x2, y2, x3, y3): near-collisions
+    (the closest, at t ≈ 15.83, brings two bodies within ~4e-4), then a binary and an escape after
+    t ≈ 60. Energy −769/60."""
+    m = PYTHAGOREAN_MASSES
+    kinetic = " + ".join(f"(px{i + 1}**2 + py{i + 1}**2)/{2 * m[i]:g}" for i in range(3))
+    pairs = " - ".join(f"{m[i] * m[j]:g}/sqrt((x{i + 1} - x{j + 1})**2 + (y{i + 1} - y{j + 1})**2)"
+                       for i, j in ((0, 1), (0, 2), (1, 2)))
+    q = [f"{c}{i + 1}" for i in range(3) for c in "xy"]
+    return expression_system(f"{kinetic} - {pairs}", q, ["p" + n for n in q], z0=list(PYTHAGOREAN_Z0),
+                             separable=True, name="pythagorean")
 
 
 def kepler_exact(t, e: float, z0=None) -> np.ndarray:

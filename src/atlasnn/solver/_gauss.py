@@ -197,12 +197,19 @@ class GaussCollocation(AbstractSolver):
             return self._solve_rows(system, z0s, t0, T, progress)
         transform = TimeTransform(system, self.time_scale)
         try:
-            out = self._solve_rows(transform.extended, transform.lift(z0s, t0), t0, T, progress, until=transform.clock)
+            parts, stop = self._solve_rows(transform.extended, transform.lift(z0s, t0), t0, T, progress,
+                                           until=transform.clock), None
         except ConfigError as exc:
-            if isinstance(getattr(exc, "partial", None), list):
-                exc.partial = [transform.solution(part, T) for part in exc.partial]
-            raise
-        return [transform.solution(sol, T) for sol in out]
+            if not isinstance(getattr(exc, "partial", None), list):
+                raise
+            parts, stop = exc.partial, exc
+        out, problem = transform.solutions(parts, T)
+        if problem is None and stop is None:
+            return out
+        # a scale that stopped the time says so, rather than the march's projection it led to
+        error = ConfigError(problem + "; the solution computed so far: the error's .partial" if problem else str(stop))
+        error.partial = out
+        raise error from None
 
     def _solve_rows(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float,
                     progress: Callable[[float], None] | None, until: int | None = None) -> list[PolynomialSolution]:

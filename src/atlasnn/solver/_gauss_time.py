@@ -122,7 +122,9 @@ class TimeTransform:
         rows = np.concatenate([z0s[:, :d], np.full((len(z0s), 1), float(t0)), z0s[:, d:],
                                -self.system.energy64(z0s)[:, None]], axis=1)
         g = self.rate(rows)
-        self._refuse(rows, np.isfinite(g) & (g > 0), "z0 =")
+        bad = np.flatnonzero(~(np.isfinite(g) & (g > 0)))
+        if bad.size:
+            raise ConfigError(self._line(float(g[bad[0]]), f"z0 = {z0s[bad[0]].tolist()}"))
         return rows
 
     def rate(self, Z: np.ndarray) -> np.ndarray:
@@ -130,23 +132,37 @@ class TimeTransform:
         with jax.enable_x64(True):
             return np.asarray(_compiled_rate(self.extended, self.clock)(np.asarray(Z, np.float64)))
 
-    def _refuse(self, Z: np.ndarray, good: np.ndarray, where: str) -> None:
-        bad = np.flatnonzero(~good)
-        if bad.size:
-            m = int(bad[0])
-            physical = np.delete(Z[m], [self.clock, Z.shape[1] - 1])
-            at = f"{where} {physical.tolist()}" if where == "z0 =" else f"{where} {Z[m, self.clock]:.6g} (window {m})"
-            raise ConfigError(f"GaussCollocation time_scale ({self.label}) must be finite and > 0 along the orbit, got "
-                              f"g = {float(self.rate(Z[m:m + 1])[0])!r} at {at}")
+    def _line(self, g: float, where: str) -> str:
+        hint = ": V(q) = H(q, 0) must be < 0 there" if self.label == "potential" else ""
+        return (f"GaussCollocation time_scale ({self.label}) must be finite and > 0 along the orbit, got g = {g!r} "
+                f"at {where}{hint}; give a scale that stays positive and finite wherever the orbit goes")
 
-    def solution(self, extended: PolynomialSolution | None, T: float) -> TimeTransformedSolution | None:
-        """The solution in physical time on [t0, min(T, the time reached)] from the extended one
-        (None stays None); a march whose time did not increase (g ≤ 0 or not finite on the way) is
-        refused in one line."""
-        if extended is None:
-            return None
-        Z = extended.z + extended.e
-        t = Z[:, self.clock]
-        self._refuse(Z, np.append(True, np.diff(t) > 0), "t =")
-        info = {**extended.info, "time_scale": self.label, "tau_interval": list(extended.interval)}
-        return TimeTransformedSolution(self.system, extended, float(T), info)
+    def solutions(self, parts: list[PolynomialSolution | None], T: float
+                  ) -> tuple[list[TimeTransformedSolution | None], str | None]:
+        """The solutions in physical time on [t0, min(T, the time reached)] from the extended ones
+        (None stays None), and the line saying where the first march's time stopped increasing
+        (g ≤ 0 or not finite on the way; None: none did), its solution then cut before that window."""
+        out, problem = [], None
+        for part in parts:
+            sol, line = self._physical(part, T)
+            out.append(sol)
+            problem = problem or line
+        return out, problem
+
+    def _physical(self, ext: PolynomialSolution | None, T: float) -> tuple[TimeTransformedSolution | None, str | None]:
+        if ext is None:
+            return None, None
+        t = ext.z[:, self.clock] + ext.e[:, self.clock]
+        stalled = np.flatnonzero(np.diff(t) <= 0)
+        line = None
+        if stalled.size:
+            k = int(stalled[0]) + 1  # window k starts no later than window k - 1 did: keep windows before k - 1
+            line = self._line(float(self.rate((ext.z + ext.e)[k:k + 1])[0]), f"t = {t[k]:.6g} (window {k})")
+            if k < 2:
+                return None, line
+            keep = slice(0, k - 1)
+            ext = PolynomialSolution(ext.system, ext.edges[:k], ext.z[keep], ext.e[keep],
+                                     None if ext.L is None else ext.L[keep], ext.stages,
+                                     None if ext.check is None else ext.check[keep], ext.info, resolve=ext.resolve)
+        info = {**ext.info, "time_scale": self.label, "tau_interval": list(ext.interval)}
+        return TimeTransformedSolution(self.system, ext, float(T), info), line

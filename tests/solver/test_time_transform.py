@@ -1,0 +1,159 @@
+"""The time-transformed Gauss collocation (GaussCollocation(time_scale=...)): one window is a
+symplectic map of the extended phase space, the physical time is recovered (Kepler e = 0.9 and
+0.99 against the exact orbit), the energy stays bounded where adaptive windows drift, the
+Pythagorean three-body problem is marched through its near-collisions, and bad scales are refused
+in one line."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from atlasnn import AtlasError, solve, solve_batch
+from atlasnn.solutions import TimeTransformedSolution, gauss_tableau
+from atlasnn.solver import GaussCollocation
+from atlasnn.solver._gauss_step import gauss_step, tableau_arrays
+from atlasnn.solver._gauss_time import TimeTransform, poincare_system
+from atlasnn.systems import expression_system, henon_heiles
+
+from benchmarks.problems import kepler_exact, kepler_system, pythagorean_system
+
+TT = GaussCollocation(time_scale="potential")
+
+
+def test_one_window_is_a_symplectic_map_of_the_extended_space():
+    """M, the Jacobian of one Gauss window of K = g·(H + p_t) (Kepler e = 0.9 at pericentre, g =
+    r^(3/2), s = 8, a τ-window three times the march's, which turns the velocity by 39°), satisfies
+    MᵀJM = J in 2d + 2 = 6 dimensions to round-off."""
+    system = kepler_system(0.9)
+    extended = poincare_system(system, "potential")
+    Z0 = TimeTransform(system, "potential").lift(system.z0[None], 0.0)[0]
+    tab = tableau_arrays(gauss_tableau(8))
+    n = Z0.size
+    J = np.block([[np.zeros((n // 2, n // 2)), np.eye(n // 2)], [-np.eye(n // 2), np.zeros((n // 2, n // 2))]])
+    with jax.enable_x64(True):
+        def step(z):
+            Y0 = jnp.broadcast_to(z, (8, n))
+            return gauss_step(extended.vector_field, None, tab, z, jnp.zeros(n), 1.0, Y0, implicit_gradients=True)
+
+        M = np.asarray(jax.jacfwd(lambda z: step(z).z)(jnp.asarray(Z0)))
+        done = step(jnp.asarray(Z0))
+        moved = np.asarray(done.z)
+    assert bool(done.converged)
+    assert np.abs(M.T @ J @ M - J).max() < 1e-12
+    assert np.abs(M - np.eye(n)).max() > 1.0  # a map far from the identity
+    assert moved[2] > 0.01 and abs(moved[5] - Z0[5]) == 0.0  # t advanced; p_t, a linear invariant, exact
+
+
+@pytest.mark.parametrize("e, periods, bound", [(0.9, 3, 1e-10), (0.99, 3, 1e-7)])
+def test_the_physical_time_is_recovered(e, periods, bound):
+    """Kepler's orbit at physical times (t(τ) inverted), against Kepler's equation from the float64
+    start; the derivative is J∇H there, and the time the inversion found is the query's to round-off.
+    At e = 0.99 an energy error of 1e-13 alone moves the pericentre passage by ~1e-12 in time over
+    a few periods, where the velocity turns at 1e4 per unit time (the bound)."""
+    system = kepler_system(e)
+    T = 2 * np.pi * periods
+    sol = solve(system, None, (0.0, T), solver=TT)
+    assert isinstance(sol, TimeTransformedSolution) and sol.interval == (0.0, T)
+    t = np.sort(np.concatenate([np.linspace(0.0, T, 3001), 2 * np.pi * np.arange(periods + 1)]))
+    z = sol(t)
+    assert np.abs(z - kepler_exact(t, e)).max() < bound
+    assert np.abs(sol.end_state - kepler_exact(np.asarray([T]), e)[0]).max() < bound
+    tau, k = sol.tau(t)
+    found = sol.extended.window_values(tau, k, system.dim)[0]
+    assert np.abs(found - t).max() <= 4 * np.spacing(T)
+    assert np.abs(sol.residual(t)).max() < 1e3 * bound
+    estimate = np.abs(sol.error_estimate(t)).max()
+    assert 0 < estimate < bound
+
+
+def test_windows_are_few_on_an_eccentric_orbit():
+    """Ten periods of Kepler e = 0.99: tens of windows (constant lengths in t take tens of
+    thousands: docs/SOLVER.md, 'Window lengths')."""
+    sol = solve(kepler_system(0.99), None, (0.0, 20 * np.pi), solver=TT)
+    assert sol.n_windows < 300
+    assert sol.info["time_scale"] == "potential" and sol.info["settings"]["time_scale"] == "potential"
+
+
+def test_the_energy_stays_bounded_where_adaptive_windows_drift():
+    """Kepler e = 0.9 over 200 periods at rtol 1e-6, the energy at every window end: with windows of
+    one τ-length (symplectic) its error is as large in the last quarter as in the first; with
+    adaptive τ-lengths it grows with t."""
+    system = kepler_system(0.9)
+    T = 2 * np.pi * 200
+
+    def quarters(steps):
+        sol = solve(system, None, (0.0, T), solver=GaussCollocation(time_scale="potential", rtol=1e-6, atol=1e-8,
+                                                                     steps=steps))
+        Z = sol.extended.z + sol.extended.e
+        t, z = Z[:, 2], Z[:, [0, 1, 3, 4]]
+        error = np.abs(system.energy64(z) / system.energy64(system.z0) - 1)
+        return [error[(t >= a * T / 4) & (t < (a + 1) * T / 4)].max() for a in range(4)]
+
+    constant = quarters("constant")
+    assert max(constant) < 1e-11 and constant[3] < 3 * constant[0] + 1e-13
+    adaptive = quarters("adaptive")
+    assert adaptive[3] > 2 * adaptive[0] and adaptive[3] > 10 * max(constant)
+
+
+def test_the_pythagorean_problem_is_marched_through_its_near_collisions():
+    """Masses 3, 4, 5 from rest to T = 20, past the closest approach (t ≈ 15.83, two bodies ~4e-4
+    apart; a march of constant windows in t needs millions of windows for it): a few hundred
+    windows, the relative energy error along the output within 1e-8 and at T near round-off, and
+    the state at T = 10 that of a march of adaptive windows at a tight tolerance."""
+    system = pythagorean_system()
+    sol = solve(system, None, (0.0, 20.0), solver=TT)
+    assert sol.n_windows < 1000
+    t = np.linspace(0.0, 20.0, 20001)
+    H0 = system.energy64(system.z0)
+    assert np.abs(sol.energy(t) / H0 - 1).max() < 1e-8
+    assert abs(sol.energy(np.asarray([20.0]))[0] / H0 - 1) < 1e-12
+    reference = solve(system, None, (0.0, 10.0), solver=GaussCollocation(steps="adaptive", rtol=1e-13, atol=1e-15))
+    assert np.abs(sol(np.asarray([10.0])) - reference(np.asarray([10.0]))).max() < 1e-7
+
+
+def test_a_batch_is_marched_member_by_member():
+    """solve_batch with a time scale: each member its own windows, each on its own orbit."""
+    z0s = [kepler_system(e).z0 for e in (0.6, 0.9)]
+    sols = solve_batch(kepler_system(0.9), z0s, (0.0, 4 * np.pi), solver=TT)
+    t = np.linspace(0.0, 4 * np.pi, 501)
+    for sol, e in zip(sols, (0.6, 0.9)):
+        assert np.abs(sol(t) - kepler_exact(t, e)).max() < 1e-10
+
+
+@pytest.mark.parametrize("scale, match", [
+    (lambda q, p: -jnp.sum(q ** 2), r"time_scale \(g = .*\) must be finite and > 0 along the orbit, got g = -0\.0099"),
+    (lambda q, p: jnp.log(-jnp.sum(q ** 2)), r"must be finite and > 0 along the orbit, got g = nan at z0"),
+    (lambda q, p: 1.0 / q[1], r"must be finite and > 0 along the orbit, got g = inf at z0"),
+])
+def test_a_scale_not_positive_or_not_finite_at_z0_is_refused_in_one_line(scale, match):
+    with pytest.raises(AtlasError, match=match) as caught:
+        solve(kepler_system(0.9), None, (0.0, 1.0), solver=GaussCollocation(time_scale=scale))
+    assert "\n" not in str(caught.value)
+
+
+def test_a_scale_that_reaches_zero_on_the_way_is_refused_with_what_was_computed():
+    """g = q1 + 0.5 on Kepler e = 0.9 (q1 falls from 0.1 to −1.9): the time stops at q1 = −0.5; the
+    line says where, and the part before is kept."""
+    with pytest.raises(AtlasError, match=r"got g = .* at t = 0\.33\d* \(window \d+\); give a scale") as caught:
+        solve(kepler_system(0.9), None, (0.0, 10.0), solver=GaussCollocation(time_scale=lambda q, p: q[0] + 0.5))
+    assert "\n" not in str(caught.value)
+    partial = caught.value.partial
+    assert isinstance(partial, TimeTransformedSolution) and 0.3 < partial.interval[1] < 0.34
+
+
+def test_bad_settings_are_refused_in_one_line():
+    for value in (3, "n-body"):
+        with pytest.raises(AtlasError, match=r"GaussCollocation time_scale must be None, one of \['potential'\] or a "
+                                             r"function g\(q, p\) > 0, got"):
+            GaussCollocation(time_scale=value)
+    with pytest.raises(AtlasError, match=r"time_scale \(potential\) .* got g = nan at z0 = .*: V\(q\) = H\(q, 0\) "
+                                         r"must be < 0 there"):
+        solve(henon_heiles(), None, (0.0, 1.0), solver=TT)
+    kepler = expression_system("(p1**2 + p2**2)/2 - 1/sqrt(q1**2 + q2**2)", ["q1", "q2"], ["p1", "p2"],
+                               z0=[0.5, 0.0, 0.0, 1.5], name="kepler-undeclared")
+    with pytest.raises(AtlasError, match=r"time_scale 'potential' needs a separable H = T\(p\) \+ V\(q\); system "
+                                         r"'kepler-undeclared' is not declared separable"):
+        solve(kepler, None, (0.0, 1.0), solver=TT)
