@@ -157,3 +157,17 @@ def test_bad_settings_are_refused_in_one_line():
     with pytest.raises(AtlasError, match=r"time_scale 'potential' needs a separable H = T\(p\) \+ V\(q\); system "
                                          r"'kepler-undeclared' is not declared separable"):
         solve(kepler, None, (0.0, 1.0), solver=TT)
+
+
+def test_an_interval_off_zero_and_windows_solved_again_read_alike():
+    """From t0 = 1 (t starts at t0 in the extended state), with every window's polynomial kept and
+    with only the window starts kept (solved again when read): the same orbit, the same values."""
+    system = kepler_system(0.9)
+    interval = (1.0, 1.0 + 4 * np.pi)
+    kept = solve(system, None, interval, solver=TT)
+    again = solve(system, None, interval, solver=GaussCollocation(time_scale="potential", keep=False))
+    assert kept.extended.L is not None and again.extended.L is None
+    t = np.linspace(*interval, 801)
+    assert np.abs(kept(t) - kepler_exact(t - 1.0, 0.9)).max() < 1e-10
+    assert np.abs(again(t) - kept(t)).max() < 1e-13
+    assert kept.edges[0] == 1.0 and kept.edges[-1] == interval[1]

@@ -108,13 +108,18 @@ class PolynomialSolution(AbstractSolution):
         """The window serving each time: k with t_k ≤ t < t_{k+1}, clipped to [0, n − 1]."""
         return np.searchsorted(self.edges[1:-1], np.asarray(t, np.float64), side="right").astype(np.int64)
 
-    def _stage_rows(self, k: np.ndarray) -> np.ndarray:
-        """L of the windows k (len(k), s, 2d), solved again where they are not kept."""
+    def window_increments(self, k: np.ndarray, component: int) -> np.ndarray:
+        """The stage increments of one component in windows k: L[k, :, component], (len(k), s)."""
+        return self._stage_rows(np.asarray(k, np.int64), slice(component, component + 1))[..., 0]
+
+    def _stage_rows(self, k: np.ndarray, columns: slice = slice(None)) -> np.ndarray:
+        """L of the windows k (len(k), s, 2d; only ``columns`` of the last axis), solved again where
+        they are not kept."""
         if self.L is not None:
-            return self.L[k]
+            return self.L[k, :, columns]
         unique, where = np.unique(k, return_inverse=True)
         rows = self.resolve(self.z[unique], self.e[unique], np.diff(self.edges)[unique])
-        return np.asarray(rows)[where]
+        return np.asarray(rows)[where][..., columns]
 
     def _evaluate(self, t) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
         arr = finite_times(t)
@@ -138,10 +143,8 @@ class PolynomialSolution(AbstractSolution):
         theta = (t - start) / length
         basis = shifted_legendre(theta, self.stages)  # (m, s + 1)
         weights = np.stack([theta[:, None] * (basis[:, :-1] @ self._tab.value.T), basis @ self._tab.rate.T], axis=1)
-        rows, z, e = self._stage_rows(k), self.z[k], self.e[k]
-        if component is not None:
-            pick = slice(component, component + 1)
-            rows, z, e = rows[..., pick], z[:, pick], e[:, pick]
+        pick = slice(None) if component is None else slice(component, component + 1)
+        rows, z, e = self._stage_rows(k, pick), self.z[k, pick], self.e[k, pick]
         both = weights @ rows  # (m, 2, 2d): ẑ − z_k and h·dẑ/dt
         value, rate = z + (e + both[:, 0]), both[:, 1] / length[:, None]
         return (value, rate) if component is None else (value[:, 0], rate[:, 0])

@@ -23,6 +23,7 @@ from atlasnn.solutions._base import AbstractSolution, check_inside, finite_times
 from atlasnn.solutions._estimate import ErrorEstimate
 from atlasnn.solutions._polynomial import PolynomialSolution, _at_least_roundoff
 from atlasnn.solutions._solution import check_outside_mode
+from atlasnn.solutions._tableau import gauss_tableau, shifted_legendre
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["TimeTransformedSolution"]
@@ -73,32 +74,70 @@ class TimeTransformedSolution(AbstractSolution):
         self.end = float(min(self.end, self.times[-1]))
 
     # ------------------------------------------------------------------ evaluation
-    def tau(self, t) -> np.ndarray:
-        """τ at physical times t (t's shape), and the window holding it: (τ, k)."""
+    def tau(self, t) -> tuple[np.ndarray, np.ndarray]:
+        """τ at physical times t, and the window holding each: (τ, k), t's shape. In the window,
+        Newton's method on t(θ) = t* for θ = (τ − τ_k)/h_k, from :meth:`_start`, each step kept
+        inside the bracket of the θs tried (bisecting where it would leave it), until t(θ) is t* to
+        a few of its ulps (a further Newton step would be round-off divided by g: many ulps of θ
+        where g is small), θ stops moving or the bracket closes."""
         t = np.asarray(t, np.float64)
         flat = t.reshape(-1)
-        ext = self.extended
+        ext, eps = self.extended, np.finfo(np.float64).eps
         k = np.clip(np.searchsorted(self.times[1:-1], flat, side="right"), 0, ext.n_windows - 1)
-        lo, hi = ext.edges[k].copy(), ext.edges[k + 1].copy()
-        t_lo, t_hi = self.times[k], self.times[k + 1]
-        tau = lo + (hi - lo) * np.clip((flat - t_lo) / (t_hi - t_lo), 0.0, 1.0)
+        value, rate, nodes = self._coefficients(k)
+        theta = self._start(flat, k, nodes)
+        lo, hi = np.zeros_like(theta), np.ones_like(theta)
+        roundoff = 4 * eps * np.maximum(np.abs(flat), np.abs(self.times[k + 1]))
+        z, e = ext.z[k, self.clock], ext.e[k, self.clock]
         active = np.arange(flat.size)
         for _ in range(_MAX_STEPS):
             if active.size == 0:
                 break
-            value, rate = ext.window_values(tau[active], k[active], self.clock)
-            miss = value - flat[active]
-            lo[active] = np.where(miss < 0, tau[active], lo[active])
-            hi[active] = np.where(miss > 0, tau[active], hi[active])
+            th = theta[active]
+            basis = shifted_legendre(th, ext.stages)
+            miss = z[active] + (e[active] + th * np.einsum("ms,ms->m", basis[:, :-1], value[active])) - flat[active]
+            slope = np.einsum("ms,ms->m", basis, rate[active])  # dt/dθ = h·g
+            lo[active] = np.where(miss < 0, th, lo[active])
+            hi[active] = np.where(miss > 0, th, hi[active])
             with np.errstate(divide="ignore", invalid="ignore"):
-                new = tau[active] - miss / rate
-            inside = np.isfinite(new) & (new >= lo[active]) & (new <= hi[active])
-            new = np.where(inside, new, 0.5 * (lo[active] + hi[active]))
-            done = (miss == 0) | (np.abs(new - tau[active]) <= 2 * np.finfo(np.float64).eps * np.abs(tau[active])) \
-                | (hi[active] - lo[active] <= 2 * np.finfo(np.float64).eps * np.abs(tau[active]))
-            tau[active] = np.where(miss == 0, tau[active], new)
+                new = th - miss / slope
+            new = np.where(np.isfinite(new) & (new >= lo[active]) & (new <= hi[active]), new,
+                           0.5 * (lo[active] + hi[active]))
+            done = (np.abs(miss) <= roundoff[active]) | (np.abs(new - th) <= 2 * eps) \
+                | (hi[active] - lo[active] <= 2 * eps)
+            theta[active] = np.where(miss == 0, th, new)
             active = active[~done]
+        tau = ext.edges[k] + theta * (ext.edges[k + 1] - ext.edges[k])
         return tau.reshape(t.shape), k.reshape(t.shape)
+
+    def _start(self, flat: np.ndarray, k: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+        """θ where window k's t(θ) is each time, interpolated linearly between its values at the
+        window's ends and at its s Gauss nodes (the stage values' t: no polynomial to evaluate;
+        Newton's method then takes 2–3 steps where the window's ends alone took 5–6)."""
+        c = np.concatenate([[0.0], gauss_tableau(self.extended.stages).c, [1.0]])
+        values = np.concatenate([self.times[k, None], self.times[k, None] + nodes, self.times[k + 1, None]], axis=1)
+        j = np.clip(np.sum(values <= flat[:, None], axis=1) - 1, 0, c.size - 2)
+        below = np.take_along_axis(values, j[:, None], 1)[:, 0]
+        above = np.take_along_axis(values, j[:, None] + 1, 1)[:, 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = np.clip((flat - below) / (above - below), 0.0, 1.0)
+        return c[j] + (c[j + 1] - c[j]) * np.where(np.isfinite(x), x, 0.5)
+
+    def _coefficients(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What windows k's polynomial of t is made of: the Legendre coefficients of its value, Vᵀl
+        (len(k), s), and of its rate, Wᵀl (len(k), s + 1), and its values at the Gauss nodes less
+        the window's start, μl (len(k), s) (l: the window's increments of t); kept once computed
+        where the increments are kept (a general product of every component per Newton step took
+        4× as long)."""
+        ext, tab = self.extended, gauss_tableau(self.extended.stages)
+        if ext.L is None:
+            increments = ext.window_increments(k, self.clock)
+            return increments @ tab.value, increments @ tab.rate, increments @ tab.mu.T
+        if "_clock_coefficients" not in self.__dict__:
+            increments = ext.L[:, :, self.clock]
+            self.__dict__["_clock_coefficients"] = (increments @ tab.value, increments @ tab.rate,
+                                                    increments @ tab.mu.T)
+        return tuple(part[k] for part in self.__dict__["_clock_coefficients"])
 
     def _evaluate(self, t) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
         arr = finite_times(t)

@@ -1,0 +1,133 @@
+"""Close encounters and eccentric orbits: the Gauss collocation with Poincaré's time transformation
+(``time_scale``) against its windows in t, adaptive and constant (the default), on Kepler
+e = 0.9 and 0.99 over 10 periods and on the Pythagorean three-body problem to t = 10 and 60.
+
+For each: the wall time of the whole call (the solve and its dense output at 2 001 times; best of
+3 after a first call, which compiles or loads the program), the solve alone, the windows, the
+largest error at 20 001 times against the exact orbit (Kepler's equation from the float64 start)
+or against a reference (the three-body problem: the time-transformed march at rtol 1e-14, up to
+where a march of adaptive windows at rtol 1e-14 parts from it by 1e-6: :func:`pythagorean_reference`),
+and the largest relative energy error at those times. A march that stops says why. Also the scale g = r (1/U for the three bodies)
+beside the built-in g = r^(3/2) ((1/U)^(3/2)), the measurement behind "potential".
+
+    taskset -c 0 python -m benchmarks.time_transform --out docs/benchmarks/time_transform.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import jax.numpy as jnp
+import numpy as np
+
+from atlasnn import solve
+from atlasnn.errors import AtlasError
+from atlasnn.solver import GaussCollocation
+
+from benchmarks.common import machine_info, write_result
+from benchmarks.problems import kepler_exact, kepler_system, pythagorean_system
+
+#: the output times the timed call evaluates, and the times the errors are measured at
+OUTPUT, MEASURED = 2_001, 20_001
+
+
+def one_over_potential(system):
+    """g = 1/(−V(q)): r for Kepler, 1/Σ m_i m_j/r_ij for N bodies (the scale 'potential' raises to 3/2)."""
+    def g(q, p):
+        return -1.0 / system.hamiltonian(q, jnp.zeros_like(p))
+
+    g.__qualname__ = "one_over_potential"
+    return g
+
+
+def methods(system):
+    return {"time_scale='potential'": GaussCollocation(time_scale="potential"),
+            "time_scale=1/(-V)": GaussCollocation(time_scale=one_over_potential(system)),
+            "steps='adaptive'": GaussCollocation(steps="adaptive"),
+            "steps='constant' (default)": GaussCollocation()}
+
+
+def measure(system, T, solver, exact, until, repeats=3):
+    """One row: times, windows, the error against ``exact`` (at MEASURED times, up to ``until``)
+    and the energy error at MEASURED times."""
+    out_t = np.linspace(0.0, T, OUTPUT)
+
+    def call():
+        tic = time.perf_counter()
+        sol = solve(system, None, (0.0, T), solver=solver)
+        solved = time.perf_counter() - tic
+        sol(out_t)
+        return sol, time.perf_counter() - tic, solved
+
+    try:
+        tic = time.perf_counter()
+        sol, _, _ = call()
+        first = time.perf_counter() - tic
+    except AtlasError as exc:
+        return {"finished": False, "stopped": str(exc).split(";")[0], "first_call_seconds": time.perf_counter() - tic}
+    runs = [call() for _ in range(repeats)]
+    sol = runs[-1][0]
+    t = np.linspace(0.0, T, MEASURED)
+    z = sol(t)
+    H0 = float(system.energy64(system.z0))
+    return {"finished": True, "windows": sol.n_windows, "seconds": min(r[1] for r in runs),
+            "solve_seconds": min(r[2] for r in runs), "first_call_seconds": first,
+            "max_error": float(np.abs(z - exact)[t <= until].max()),
+            "energy_max_rel": float(np.abs(system.energy64(z) / H0 - 1).max()),
+            "energy_end_rel": float(abs(system.energy64(z[-1]) / H0 - 1))}
+
+
+#: the gap between the two references beyond which the reference is not trusted (the three-body
+#: problem is chaotic: after the near-collisions near t = 46 the two part ways)
+TRUST = 1e-6
+
+
+def pythagorean_reference(system, T):
+    """The reference at MEASURED times, what it is, and until when it is trusted: the
+    time-transformed march at rtol 1e-14 (its own kind: at T = 10 it is 5.6e-10 from the same at
+    1e-13, where a march of adaptive windows at 1e-13 is 7e-8 from one at 1e-14, and DOP853 at 2.3e-14
+    3.6e-6 from all of them), trusted while a march of adaptive windows at rtol 1e-14 is within
+    TRUST of it; the largest gap to that one up to then."""
+    t = np.linspace(0.0, T, MEASURED)
+    tight = dict(rtol=1e-14, atol=1e-16)
+    ref = solve(system, None, (0.0, T), solver=GaussCollocation(time_scale="potential", **tight))(t)
+    other = solve(system, None, (0.0, T), solver=GaussCollocation(steps="adaptive", **tight))(t)
+    gap = np.maximum.accumulate(np.abs(ref - other).max(axis=1))
+    trusted = t[gap <= TRUST]
+    until = float(trusted[-1])
+    return ref, {"reference": "time_scale='potential', rtol 1e-14, atol 1e-16", "trusted_until": until,
+                 "gap": float(gap[t <= until].max())}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="docs/benchmarks/time_transform.json")
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args(argv)
+    cases = [(f"Kepler e = {e}", kepler_system(e), 20 * np.pi, e) for e in (0.9, 0.99)]
+    cases += [(f"Pythagorean, T = {T:g}", pythagorean_system(), T, None) for T in (10.0, 60.0)]
+    rows = []
+    for problem, system, T, e in cases:
+        if e is not None:
+            exact = kepler_exact(np.linspace(0.0, T, MEASURED), e)
+            reference = {"reference": "Kepler's equation", "trusted_until": T, "gap": 0.0}
+        else:
+            exact, reference = pythagorean_reference(system, T)
+        for method, solver in methods(system).items():
+            row = {"problem": problem, "T": T, "method": method, **reference,
+                   **measure(system, T, solver, exact, reference["trusted_until"], args.repeats)}
+            rows.append(row)
+            if row["finished"]:
+                print(f"{problem:22s} {method:27s} {row['windows']:7d} windows {row['seconds'] * 1e3:8.1f} ms "
+                      f"(solve {row['solve_seconds'] * 1e3:7.1f}) error {row['max_error']:.1e} "
+                      f"|ΔH/H| {row['energy_max_rel']:.1e} (at T {row['energy_end_rel']:.1e})", flush=True)
+            else:
+                print(f"{problem:22s} {method:27s} stopped: {row['stopped']}", flush=True)
+    write_result(args.out, {"command": "taskset -c 0 python -m benchmarks.time_transform " + " ".join(argv or []),
+                            "output_times": OUTPUT, "measured_times": MEASURED, "machine": machine_info(),
+                            "rows": rows})
+
+
+if __name__ == "__main__":
+    main()
