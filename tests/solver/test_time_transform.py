@@ -171,3 +171,12 @@ def test_an_interval_off_zero_and_windows_solved_again_read_alike():
     assert np.abs(kept(t) - kepler_exact(t - 1.0, 0.9)).max() < 1e-10
     assert np.abs(again(t) - kept(t)).max() < 1e-13
     assert kept.edges[0] == 1.0 and kept.edges[-1] == interval[1]
+
+
+def test_saving_is_refused_in_one_line(tmp_path):
+    from atlasnn import save
+
+    sol = solve(kepler_system(0.9), None, (0.0, 1.0), solver=TT)
+    with pytest.raises(AtlasError, match=r"a time-transformed solution .* cannot be saved yet") as caught:
+        save(tmp_path / "tt.atlas", sol)
+    assert "\n" not in str(caught.value)

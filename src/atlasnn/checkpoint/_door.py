@@ -15,7 +15,8 @@ from atlasnn.checkpoint._piecewise import KIND_PIECEWISE, load_piecewise, save_p
 from atlasnn.checkpoint._polynomial import KIND_POLYNOMIAL
 from atlasnn.checkpoint._single import KIND_MODEL, load_checkpoint, save_checkpoint
 from atlasnn.errors import CheckpointError
-from atlasnn.solutions import BundleSolution, FlowMapBundle, PiecewiseSolution, PolynomialSolution, Solution
+from atlasnn.solutions import (BundleSolution, FlowMapBundle, PiecewiseSolution, PolynomialSolution, Solution,
+                                TimeTransformedSolution)
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["save", "load"]
@@ -32,6 +33,9 @@ def save(path: str | os.PathLike, solution: Any, *, extra: Mapping[str, Any] | N
                               f"save({type(path).__name__}, {type(solution).__name__})")
     if isinstance(solution, (PolynomialSolution, PiecewiseSolution)):
         return save_piecewise(path, solution, extra=extra)
+    if isinstance(solution, TimeTransformedSolution):
+        raise _fail(os.fspath(path), "a time-transformed solution (GaussCollocation(time_scale=...)) cannot be saved "
+                                     "yet; solve again, or evaluate it and save the values")
     if isinstance(solution, FlowMapBundle):
         return save_flowmap(path, solution, extra=extra)
     if isinstance(solution, BundleSolution):
