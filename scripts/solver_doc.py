@@ -13,7 +13,8 @@ the pages hold what it makes, so no number on them can drift from its record):
 * ``stages``: docs/benchmarks/gauss_stages.json (``python -m benchmarks.gauss_stages``);
 * ``roundoff``: docs/benchmarks/gauss_roundoff.json (``python -m benchmarks.gauss_roundoff``);
 * ``orders``: docs/benchmarks/gauss_orders.json (``python -m benchmarks.gauss_orders``);
-* ``scaling``: docs/benchmarks/gauss_scaling.json (``python -m benchmarks.gauss_scaling``).
+* ``scaling``: docs/benchmarks/gauss_scaling.json (``python -m benchmarks.gauss_scaling``);
+* ``time_transform``: docs/benchmarks/time_transform.json (``python -m benchmarks.time_transform``).
 
     python scripts/solver_doc.py            # rewrite the tables in place
     python scripts/solver_doc.py --check    # exit 1 if a page is not what the records make
@@ -41,6 +42,7 @@ RECORDS = {
     "roundoff": "docs/benchmarks/gauss_roundoff.json",
     "orders": "docs/benchmarks/gauss_orders.json",
     "scaling": "docs/benchmarks/gauss_scaling.json",
+    "time_transform": "docs/benchmarks/time_transform.json",
 }
 METHODS = [("gauss-adaptive", "Gauss, adaptive"), ("diffrax-dopri8", "Diffrax Dopri8"),
            ("diffrax-tsit5", "Diffrax Tsit5"), ("dop853", "SciPy DOP853"), ("yoshida4", "Yoshida-4"),
@@ -195,9 +197,27 @@ def scaling(record: dict) -> str:
     return out
 
 
+def time_transform(record: dict) -> str:
+    rows = ["| problem | method | windows | call (solve) | max error | max \\|H/H0 − 1\\| (at T) |",
+            "|---|---|---|---|---|---|"]
+    for r in record["rows"]:
+        if not r["finished"]:
+            why = r["stopped"].removeprefix("the Gauss march ").split(" (rtol")[0]
+            rows.append(f"| {r['problem']} | {r['method']} | {why} (after {r['first_call_seconds']:.0f} s) | | | |")
+            continue
+        error = f"{r['max_error']:.1e}"
+        if r["trusted_until"] < r["T"]:
+            error += f" (t ≤ {r['trusted_until']:.3g})"
+        times = f"{_ms(r['seconds'])} ({_ms(r['solve_seconds'])})"
+        rows.append(f"| {r['problem']} | {r['method']} | {r['windows']} | {times} | {error} "
+                    f"| {r['energy_max_rel']:.1e} ({r['energy_end_rel']:.0e}) |")
+    return "\n".join(rows) + (f"\n\nThe call: the solve and its values at {record['output_times']} times, best of 3 "
+                              f"after a first call; errors and energies at {record['measured_times']} times.")
+
+
 MAKERS = {"suite": suite, "workprecision": workprecision, "energy": energy, "step_modes": step_modes, "batch": batch,
           "first_run": first_run, "stages": stages,
-          "roundoff": roundoff, "orders": orders, "scaling": scaling}
+          "roundoff": roundoff, "orders": orders, "scaling": scaling, "time_transform": time_transform}
 
 
 def render(text: str) -> str:
