@@ -25,10 +25,10 @@ encounters").
 ``time_scale="potential"``: g = (−V(q))^(−3/2), V(q) = H(q, 0) the potential of a separable H
 (H = T(p) + V(q), T(0) = 0) that is negative everywhere and vanishes far away — gravitational
 N-body problems, Kepler's: r^(3/2) there, the free-fall time at that distance, and for N bodies
-1/(Σ m_i m_j/r_ij)^(3/2). Measured against g = 1/(−V) (r for Kepler): 65 and 86 windows for ten
-periods of Kepler e = 0.9 and 0.99 against 197 and 625, 82 windows against 802 for the
-Pythagorean three-body problem to t = 10 (benchmarks/time_transform.py). Any other scale is a
-function g(q, p) of the user's (JAX-traceable, > 0 and finite along the orbit).
+1/(Σ m_i m_j/r_ij)^(3/2). Measured against g = 1/(−V) (r for Kepler): 65 and 87 windows for ten
+periods of Kepler e = 0.9 and 0.99 against 197 and 622, 48 and 362 against 371 and 9 432 for the
+Pythagorean three-body problem to t = 10 and 60 (benchmarks/time_transform.py). Any other scale
+is a function g(q, p) of the user's (JAX-traceable, > 0 and finite along the orbit).
 """
 
 from __future__ import annotations
