@@ -185,13 +185,17 @@ def scaling(record: dict) -> str:
         for r in record["fput"]:
             cells = []
             for label in ("dopri8", "tsit5"):
-                f = r[label]["fastest_at_least_as_accurate"]
-                cells.append("none as accurate" if f is None else
-                             f"{_ms(f['seconds'])}, {f['error']:.0e} (rtol {f['rtol']:.0e}): atlasnn {r[label]['ratio']:.2g}×")
+                good = [p for p in r[label]["points"] if p["error"] <= 2 * r["atlasnn_error"]]
+                f = min(good, key=lambda p: p["seconds"]) if good else None
+                cells.append("none within 2× of its error" if f is None else
+                             f"{_ms(f['seconds'])}, {f['error']:.0e} (rtol {f['rtol']:.0e}): "
+                             f"atlasnn {r['atlasnn_seconds'] / f['seconds']:.2g}×")
             rows.append(f"| {r['n']} | {r['rtol']:.0e} | {_ms(r['atlasnn_seconds'])}, {r['atlasnn_error']:.0e} "
                         f"(s = {r['stages']}, {r['windows']}) | " + " | ".join(cells) + " |")
         out += "\n\n" + "\n".join(rows) + ("\n\nErrors: max over 200 times / range, against Diffrax Dopri8 at rtol "
-                                           "1e-14; \"atlasnn k×\": atlasnn's time over that run's.")
+                                           "1e-14 (at N ≤ 256 within 1e-14 of the Gauss method at s = 16); a Diffrax "
+                                           "run counts as accurate as atlasnn's within 2× of its error (rtol 1e-6 … "
+                                           "1e-13 swept); \"atlasnn k×\": atlasnn's time over that run's.")
     return out
 
 
