@@ -337,9 +337,18 @@ def _performance_machines() -> list[str]:
             f"a {host[1]}-core {words(host[0])} host with one lent {gpu} for the GPU records"]
 
 
+def _choosing_limits() -> list[str]:
+    runs = _json(RECORDS["first_run"])["runs"]
+    cold = statistics.median(r["first_solve"] for r in runs["cold (cache off)"])
+    warm = statistics.median(r["first_solve"] for r in runs["warm cache"])
+    solar = _json("docs/benchmarks/outer_solar.json")["row"]
+    return [f"{cold:.2f} s for a small system with the cache off, {warm:.2f} s when the program is on disk",
+            f"{solar['first_solve_seconds']:.1f} s for the {solar['dimension']} components of the outer solar system"]
+
+
 #: page → the words it must hold, each made from a record
 PROSE = {
-    "docs/CHOOSING.md": [_choosing_trajectory, _choosing_diffrax],
+    "docs/CHOOSING.md": [_choosing_trajectory, _choosing_diffrax, _choosing_limits],
     "docs/FROM_DIFFRAX.md": [_from_diffrax],
     "docs/SOLVER.md": [_solver_suite],
     "docs/PERFORMANCE.md": [_performance_machines],
