@@ -372,6 +372,19 @@ def test_every_page_is_in_the_site_nav():
     assert listed - pages == set(), f"nav entries with no page: {sorted(listed - pages)}"
 
 
+def test_the_citation_names_the_paper_as_the_references_do():
+    """CITATION.cff is valid YAML with the Citation File Format's required keys, and its preferred
+    citation is the paper docs/REFERENCES.md cites, with the same authors."""
+    yaml = pytest.importorskip("yaml")
+    cff = yaml.safe_load((ROOT / "CITATION.cff").read_text(encoding="utf-8"))
+    assert {"cff-version", "message", "title", "authors"} <= set(cff)
+    paper = cff["preferred-citation"]
+    references = " ".join((ROOT / "docs" / "REFERENCES.md").read_text(encoding="utf-8").split())
+    assert paper["title"].rstrip(".") in references.replace("*", "")
+    for author in paper["authors"]:
+        assert f"{author['given-names'][0]}. {author['family-names']}" in references
+
+
 def test_the_site_builds_strict(tmp_path):
     """`mkdocs build --strict` (what `make docs` runs): every link, anchor and docstring renders
     without a warning."""

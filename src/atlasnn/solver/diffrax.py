@@ -128,7 +128,7 @@ class GaussLegendre(diffrax.AbstractAdaptiveSolver):
         stages: s (1–16; order 2s). Default 12 (``GaussCollocation`` chooses its s from its rtol).
         max_iterations: iterations of each kind (fixed point, Newton) per step at most.
         newton: fall back on simplified Newton iterations (the vector field's Jacobian at the step's
-            start, decoupled into s/2 complex systems of the state's size) where the fixed-point
+            start, decoupled into ⌈s/2⌉ complex systems of the state's size) where the fixed-point
             iteration does not reach round-off. A step whose equations are not solved either way
             fails: rejected (infinite error) under a PIDController, an error result under
             ConstantStepSize.
