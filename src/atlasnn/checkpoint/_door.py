@@ -24,9 +24,10 @@ _SOLUTIONS = (PolynomialSolution, PiecewiseSolution, FlowMapBundle, BundleSoluti
 
 
 def save(path: str | os.PathLike, solution: Any, *, extra: Mapping[str, Any] | None = None) -> str:
-    """Save a solution — from :func:`atlasnn.solve` (any solver), :func:`atlasnn.solve_bundle` (any
-    method), or a trained :class:`~atlasnn.solutions.Solution` — as one file; returns its content
-    hash. ``extra``: a JSON-able dict kept beside it (``load(path).info["extra"]``)."""
+    """Save a solution — from [`atlasnn.solve`][atlasnn.solver.solve] (any solver),
+    [`atlasnn.solve_bundle`][atlasnn.solver.solve_bundle] (any method), or a trained
+    [`Solution`][atlasnn.solutions.Solution] — as one file; returns its content hash. ``extra``: a
+    JSON-able dict kept beside it (``load(path).info["extra"]``)."""
     if isinstance(path, _SOLUTIONS) or isinstance(solution, (str, os.PathLike)):
         raise CheckpointError(f"save takes the path first, then the solution: save(path, solution), got "
                               f"save({type(path).__name__}, {type(solution).__name__})")
@@ -46,7 +47,7 @@ def save(path: str | os.PathLike, solution: Any, *, extra: Mapping[str, Any] | N
 
 
 def load(path: str | os.PathLike, system: HamiltonianSystem | None = None) -> Any:
-    """The solution a file written by :func:`save` holds, of whichever kind (hash verified; it
+    """The solution a file written by [`save`][atlasnn.checkpoint.save] holds, of whichever kind (hash verified; it
     evaluates bit-identically to the saved one). ``system``: needed where the system was a Python
     function (it cannot be rebuilt from the file), else rebuilt from the stored spec."""
     p = os.fspath(path)

@@ -215,7 +215,7 @@ INTEGRATORS: dict[str, Callable[..., tuple[np.ndarray, np.ndarray]]] = {
 
 
 def integrate(method: str, system: HamiltonianSystem, z0: Any, t0: float, T: float, n_steps: int):
-    """Run the fixed-step integrator named ``method`` (a key of :data:`INTEGRATORS`).
+    """Run the fixed-step integrator named ``method`` (a key of ``INTEGRATORS``).
 
     Returns ``(t, Z)`` as the named function does; an unknown name is a one-line ConfigError.
     """
@@ -294,7 +294,7 @@ def reference_solution(
     reporting the solution at ``t_eval`` (dense output of the solver, not interpolation by
     atlasnn). The vector field J∇H is evaluated in float64 by a jitted JAX function, whatever the
     global precision. Works for any Hamiltonian, separable or not. (The authors' release used
-    ``scipy.integrate.odeint`` at default tolerances; see :data:`REFERENCE_DESCRIPTION`.)
+    ``scipy.integrate.odeint`` at default tolerances; see ``REFERENCE_DESCRIPTION``.)
 
     Args:
         system: the Hamiltonian system.

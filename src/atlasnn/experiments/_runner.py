@@ -212,17 +212,17 @@ def run_experiment(
 
     Nothing is written before the inputs are checked (``out`` must be new or empty unless
     ``overwrite``) and, with a Dask scheduler, before it is connected. ``seed_batch``: seeds of a
-    column trained as one program (an integer, or ``"auto"``: see :mod:`atlasnn.experiments._plan`;
+    column trained as one program (an integer, or ``"auto"``: see ``atlasnn.experiments._plan``;
     on Dask ``"auto"`` counts the cluster's worker threads as jobs). ``scheduler``: the address of a
     Dask scheduler to run the trainings on (default ``$ATLASNN_SCHEDULER``; None or empty: local
     processes, ``jobs`` of them). ``resume=True`` continues an interrupted run
-    in ``out`` (use :func:`resume_experiment`, which reads the config from ``out``).
+    in ``out`` (use ``resume_experiment``, which reads the config from ``out``).
     ``handle_signals``: while running, SIGINT and SIGTERM stop training at the end of the current
-    chunk (main thread only). Raises :class:`RunInterrupted` (a KeyboardInterrupt) when
+    chunk (main thread only). Raises ``RunInterrupted`` (a KeyboardInterrupt) when
     interrupted. ``figures``: what the report draws (``"all"``, ``"overview"``, ``"none"``:
-    tables only; :func:`atlasnn.report.write_report`). ``seed_batch`` None takes the config's
+    tables only; ``atlasnn.report.write_report``). ``seed_batch`` None takes the config's
     ``execution.seed_batch``. ``executor``:
-    an open :class:`~atlasnn.experiments._executors.Executor` to use (and leave open) instead of
+    an open ``Executor`` to use (and leave open) instead of
     one made from ``jobs`` and ``scheduler`` (a sweep runs all its points on one).
     """
     seeds = tuple(seeds if seeds is not None else cfg.seeds)

@@ -21,12 +21,12 @@ COND_LIMIT = 1e12
 
 @dataclasses.dataclass
 class FitResult:
-    """The outcome of :func:`fit_shooting`.
+    """The outcome of ``fit_shooting``.
 
     ``std`` are Gauss–Newton standard errors at the optimum: sqrt of the diagonal of
     s²(JᵀJ)⁻¹ with s² = RSS/(n_data − n_unknowns) (``noise_estimate`` is s). An unknown that the
     data cannot determine (it lies in a direction where the column-scaled JᵀJ has condition
-    number above :data:`COND_LIMIT`) gets std = inf, ``identifiable`` is False and ``notes``
+    number above ``COND_LIMIT``) gets std = inf, ``identifiable`` is False and ``notes``
     names it. ``trusted`` is False when a rule found a reason not to believe the estimate or its
     σ (a misfit, a bound, a second minimum, another method's better fit); ``notes`` says which and
     what to do. ``search``: what a multistart tried (starts, failed starts, the minima found).
@@ -61,7 +61,7 @@ class FitResult:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "FitResult":
-        """The record :meth:`as_dict` wrote, read back (keys that are not fields are ignored)."""
+        """The record ``as_dict`` wrote, read back (keys that are not fields are ignored)."""
         arrays = {"estimate", "std", "covariance"}
         kw = {f.name: (np.asarray(d[f.name], float) if f.name in arrays else
                        tuple(d[f.name]) if f.name == "names" else d[f.name])

@@ -37,9 +37,9 @@ __all__ = ["AbstractFitMethod", "Shooting", "Joint", "BundleFit", "FIT_METHODS",
 
 @dataclasses.dataclass(frozen=True)
 class Shooting(AbstractFitMethod):
-    """Least-squares shooting (:func:`fit_shooting`); ``segments``: a count (1: single shooting) or
-    ``"auto"`` (:func:`auto_segments`); ``starts``: ``"auto"`` (the guess and 12 more per unknown
-    over the bounds, :func:`fit_multistart`) or a count, 1 = the guess alone; ``solver``: the orbit's
+    """Least-squares shooting (``fit_shooting``); ``segments``: a count (1: single shooting) or
+    ``"auto"`` (``auto_segments``); ``starts``: ``"auto"`` (the guess and 12 more per unknown
+    over the bounds, ``fit_multistart``) or a count, 1 = the guess alone; ``solver``: the orbit's
     solve, ``"gauss"`` (the compiled Gauss collocation) or ``"dop853"`` (SciPy's)."""
 
     segments: int | str = 1
@@ -63,7 +63,7 @@ class Shooting(AbstractFitMethod):
 
 @dataclasses.dataclass(frozen=True)
 class Joint(AbstractFitMethod):
-    """One network trained on the data and Hamilton's equations together (:func:`fit_joint`)."""
+    """One network trained on the data and Hamilton's equations together (``fit_joint``)."""
 
     config: JointConfig = JointConfig()
     name: ClassVar[str] = "joint"
@@ -78,7 +78,7 @@ class Joint(AbstractFitMethod):
 @dataclasses.dataclass(frozen=True)
 class BundleFit(AbstractFitMethod):
     """A bundle trained on the equations over the unknowns' bounds (time-marched in ``windows``),
-    then least squares with it as the model (:func:`fit_with_bundle`); the training's seconds are
+    then least squares with it as the model (``fit_with_bundle``); the training's seconds are
     in the result's ``search["training_seconds"]``."""
 
     windows: int = 1
@@ -120,10 +120,10 @@ for _cls in (Shooting, Joint, BundleFit, CollocationFit):
 def fit(system: HamiltonianSystem, observations: Observations, unknowns: Sequence[Unknown],
         method: AbstractFitMethod | None = None, *, z0: Any = None, t0: float = 0.0, seed: int = 0) -> FitResult:
     """Fit ``unknowns`` (parameters of H, ``z0.<name>`` initial-state components) to
-    ``observations`` by ``method`` (default: :class:`Shooting`, a multistart over the bounds).
+    ``observations`` by ``method`` (default: [`Shooting`][atlasnn.inverse.Shooting], a multistart over the bounds).
 
     ``method`` is an object — ``Shooting(segments=4)``, ``CollocationFit()``, ``Joint(JointConfig(epochs=500))``,
-    ``BundleFit(windows=4)`` — not a name (names are for configs, :data:`FIT_METHODS`)."""
+    ``BundleFit(windows=4)`` — not a name (names are for configs, ``FIT_METHODS``)."""
     method = Shooting() if method is None else method
     if not isinstance(method, AbstractFitMethod):
         hint = f" (use {FIT_METHODS[method].__name__}())" if isinstance(method, str) and method in FIT_METHODS else ""

@@ -24,8 +24,8 @@ __all__ = ["NetworkBundle", "solve_bundle"]
 @refuse_unknown_settings
 @dataclass(frozen=True)
 class NetworkBundle:
-    """A network trained over the box (:func:`atlasnn.training.train_bundle`): ẑ(t; z0, λ) = z0 +
-    f(t − t0; γ)·N(t, z0, λ; θ), Adam then Levenberg–Marquardt per window.
+    """A network trained over the box ([`atlasnn.training.train_bundle`][atlasnn.training.train_bundle]):
+    ẑ(t; z0, λ) = z0 + f(t − t0; γ)·N(t, z0, λ; θ), Adam then Levenberg–Marquardt per window.
 
     Attributes:
         config: the training's settings (windows, epochs, LM steps…).
@@ -51,11 +51,12 @@ class NetworkBundle:
 def solve_bundle(system: HamiltonianSystem, box: BundleBox, method: FlowMap | NetworkBundle | None = None, *,
                  seed: int = 0, progress: Callable[[str], None] | None = None) -> Any:
     """Every trajectory of the box at once: the initial states and parameter values of ``box``
-    (a :class:`~atlasnn.systems.BundleBox`) over its interval, by ``method``.
+    (a [`BundleBox`][atlasnn.systems.BundleBox]) over its interval, by ``method``.
 
-    Returns a :class:`~atlasnn.solutions.FlowMapBundle` (:class:`FlowMap`, the default) or a
-    :class:`~atlasnn.solutions.BundleSolution` (:class:`NetworkBundle`, its training record in
-    ``info``): ``bundle(t, z0s, params)`` evaluates any members at any times. ``seed`` draws the
+    Returns a [`FlowMapBundle`][atlasnn.solutions.FlowMapBundle] ([`FlowMap`][atlasnn.solver.FlowMap],
+    the default) or a [`BundleSolution`][atlasnn.solutions.BundleSolution]
+    ([`NetworkBundle`][atlasnn.solver.NetworkBundle], its training record in ``info``):
+    ``bundle(t, z0s, params)`` evaluates any members at any times. ``seed`` draws the
     collocation points (and the network's weights); ``progress`` is told each step in words."""
     method = FlowMap() if method is None else method
     if isinstance(method, FlowMap):

@@ -50,9 +50,9 @@ def solve(system: HamiltonianSystem, z0: Any = None, interval: tuple[float, floa
         z0: the initial state (q then p); default the system's own.
         interval: (t0, T) with t0 < T.
         solver: a solver object, holding its settings and tolerances:
-            :class:`~atlasnn.solver.GaussCollocation` (default: the trial solution collocated at
-            Gauss–Legendre nodes; symplectic, order 2s), :class:`~atlasnn.solver.Collocation`
-            (random tanh features, Gauss–Newton) or :class:`~atlasnn.solver.AdamMarch` (the
+            [`GaussCollocation`][atlasnn.solver.GaussCollocation] (default: the trial solution collocated at
+            Gauss–Legendre nodes; symplectic, order 2s), [`Collocation`][atlasnn.solver.Collocation]
+            (random tanh features, Gauss–Newton) or [`AdamMarch`][atlasnn.solver.AdamMarch] (the
             paper's networks trained by Adam, window by window).
         rtol: replaces the solver's own relative tolerance (each solver says what it means).
         atol: replaces the solver's own absolute tolerance.
@@ -60,7 +60,7 @@ def solve(system: HamiltonianSystem, z0: Any = None, interval: tuple[float, floa
 
     Returns the solution: evaluate ẑ and dẑ/dt at any times (``sol(t)``, ``sol.derivative(t)``),
     its energy, residual and a-posteriori ``error_estimate(t)``; save it with
-    :func:`atlasnn.save`.
+    [`atlasnn.save`][atlasnn.checkpoint.save].
     """
     t0, T = _interval(system, interval)
     z = system.initial_state(z0)
@@ -87,8 +87,8 @@ def solve_batch(system: HamiltonianSystem, z0s: Any, interval: tuple[float, floa
                 atol: float | None = None, progress: Callable[[float], None] | None = None) -> list[AbstractSolution]:
     """Many trajectories at once: one solution per initial state in ``z0s`` (shape (B, 2d)), all
     marched by one compiled program, each with windows of its own. ``seeds`` (one per member) draws
-    each member's features of a :class:`~atlasnn.solver.Collocation` solver. Otherwise as
-    :func:`solve`."""
+    each member's features of a [`Collocation`][atlasnn.solver.Collocation] solver. Otherwise as
+    [`solve`][atlasnn.solver.solve]."""
     t0, T = _interval(system, interval)
     try:
         rows = [system.check_state(z, f"z0s[{i}]") for i, z in enumerate(list(z0s))]
