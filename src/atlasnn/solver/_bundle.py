@@ -51,13 +51,21 @@ class NetworkBundle:
 def solve_bundle(system: HamiltonianSystem, box: BundleBox, method: FlowMap | NetworkBundle | None = None, *,
                  seed: int = 0, progress: Callable[[str], None] | None = None) -> Any:
     """Every trajectory of the box at once: the initial states and parameter values of ``box``
-    (a [`BundleBox`][atlasnn.systems.BundleBox]) over its interval, by ``method``.
+    over its interval, by ``method``.
 
-    Returns a [`FlowMapBundle`][atlasnn.solutions.FlowMapBundle] ([`FlowMap`][atlasnn.solver.FlowMap],
-    the default) or a [`BundleSolution`][atlasnn.solutions.BundleSolution]
-    ([`NetworkBundle`][atlasnn.solver.NetworkBundle], its training record in ``info``):
-    ``bundle(t, z0s, params)`` evaluates any members at any times. ``seed`` draws the
-    collocation points (and the network's weights); ``progress`` is told each step in words."""
+    Args:
+        system: the Hamiltonian system; a box over parameters needs its parametric H (the built-ins
+            and expression systems have one).
+        box: the [`BundleBox`][atlasnn.systems.BundleBox]: the ranges of the initial states and of
+            the parameters, and the interval.
+        method: [`FlowMap`][atlasnn.solver.FlowMap] (default: one float64 flow map, solved) or
+            [`NetworkBundle`][atlasnn.solver.NetworkBundle] (the paper's kind of network, trained).
+        seed: draws the collocation points (and the network's initial weights).
+        progress: told each step in words.
+
+    Returns a [`FlowMapBundle`][atlasnn.solutions.FlowMapBundle] (``FlowMap``) or a
+    [`BundleSolution`][atlasnn.solutions.BundleSolution] (``NetworkBundle``, its training record in
+    ``info``): ``bundle(t, z0s, params)`` evaluates any members at any times."""
     method = FlowMap() if method is None else method
     if isinstance(method, FlowMap):
         return flowmap_bundle(system, box, method, seed=seed, progress=progress)
