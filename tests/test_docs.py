@@ -372,6 +372,19 @@ def test_every_page_is_in_the_site_nav():
     assert listed - pages == set(), f"nav entries with no page: {sorted(listed - pages)}"
 
 
+def test_the_citation_names_the_paper_as_the_references_do():
+    """CITATION.cff is valid YAML with the Citation File Format's required keys, and its preferred
+    citation is the paper docs/REFERENCES.md cites, with the same authors."""
+    yaml = pytest.importorskip("yaml")
+    cff = yaml.safe_load((ROOT / "CITATION.cff").read_text(encoding="utf-8"))
+    assert {"cff-version", "message", "title", "authors"} <= set(cff)
+    paper = cff["preferred-citation"]
+    references = " ".join((ROOT / "docs" / "REFERENCES.md").read_text(encoding="utf-8").split())
+    assert paper["title"].rstrip(".") in references.replace("*", "")
+    for author in paper["authors"]:
+        assert f"{author['given-names'][0]}. {author['family-names']}" in references
+
+
 def test_the_site_builds_strict(tmp_path):
     """`mkdocs build --strict` (what `make docs` runs): every link, anchor and docstring renders
     without a warning."""
@@ -385,6 +398,12 @@ def test_the_site_builds_strict(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, f"mkdocs build --strict failed:\n{proc.stderr[-4000:]}"
+    # a Sphinx role (:func:`x`, :class:`x` …) in a docstring is not resolved by mkdocstrings: it would
+    # show on the page as ":func:" before the name (write ``x`` or a cross-reference [`x`][atlasnn.y.x])
+    roles = re.compile(r":(?:func|class|mod|data|meth|attr|obj|exc):(?:<code>|`)")
+    shown = [f"{page.relative_to(tmp_path / 'site')}: {m.group(0)}" for page in (tmp_path / "site").rglob("*.html")
+             for m in roles.finditer(page.read_text(encoding="utf-8"))]
+    assert not shown, f"Sphinx roles rendered as text on the site: {shown[:10]}"
 
 
 # ------------------------------------------------------------------------------ the harness itself

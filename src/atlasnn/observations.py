@@ -165,10 +165,14 @@ class Observations:
 def load_observations(path: Any) -> Observations:
     """Read observations from a ``.csv`` or ``.npz`` file.
 
-    CSV: the first non-blank row is a header naming ``t`` and the observed components (any
-    order, spaces around names allowed); every other non-blank row holds one number per column.
-    NPZ: an array ``t`` and one 1-D array per component, all of the same length; every key other
-    than ``t`` is a component name.
+    Args:
+        path: the file; its suffix (``.csv`` or ``.npz``) says how to read it.
+            CSV: the first non-blank row is a header naming ``t`` and the observed components (any
+            order, spaces around names allowed); every other non-blank row holds one number per
+            column. NPZ: an array ``t`` and one 1-D array per component, all of the same length;
+            every key other than ``t`` is a component name.
+
+    Returns the [`Observations`][atlasnn.observations.Observations], their ``source`` the path.
     """
     p = Path(path)
     if not p.is_file():
@@ -270,8 +274,14 @@ def _number(value: Any, what: str) -> float:
 
 @dataclass(frozen=True)
 class Unknown:
-    """One quantity to fit: a parameter of H (``"lam"``) or an initial-state component
-    (``"z0.x"``), starting at ``guess`` and kept within [low, high]."""
+    """One quantity to fit: a parameter of H or an initial-state component.
+
+    Args:
+        name: a parameter's name (``"lam"``) or ``"z0."`` and a state component's (``"z0.x"``).
+        guess: where the fit starts, within [low, high].
+        low: the lower bound the fit keeps to.
+        high: the upper bound (above ``low``).
+    """
 
     name: str
     guess: float

@@ -1,5 +1,7 @@
 """The measured tables of docs/SOLVER.md and docs/CHOOSING.md are what scripts/solver_doc.py makes
-from the committed records: no number there can drift from its record."""
+from the committed records: no number there can drift from its record. The key numbers of the prose
+around them (SOLVER, CHOOSING, FROM_DIFFRAX) and the machines PERFORMANCE.md names are checked against
+their records by the same script."""
 
 from __future__ import annotations
 

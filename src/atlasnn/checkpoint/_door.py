@@ -25,9 +25,16 @@ _SOLUTIONS = (PolynomialSolution, PiecewiseSolution, FlowMapBundle, BundleSoluti
 
 
 def save(path: str | os.PathLike, solution: Any, *, extra: Mapping[str, Any] | None = None) -> str:
-    """Save a solution — from :func:`atlasnn.solve` (any solver), :func:`atlasnn.solve_bundle` (any
-    method), or a trained :class:`~atlasnn.solutions.Solution` — as one file; returns its content
-    hash. ``extra``: a JSON-able dict kept beside it (``load(path).info["extra"]``)."""
+    """Save a solution as one file (NumPy's ``.npz``, written atomically, nothing in it executable).
+
+    Args:
+        path: the file to write (the path first, then the solution).
+        solution: from [`atlasnn.solve`][atlasnn.solver.solve] (any solver),
+            [`atlasnn.solve_bundle`][atlasnn.solver.solve_bundle] (any method), or a trained
+            [`Solution`][atlasnn.solutions.Solution].
+        extra: a JSON-able dict kept beside it (``load(path).info["extra"]``).
+
+    Returns the file's content hash, which [`load`][atlasnn.checkpoint.load] verifies."""
     if isinstance(path, _SOLUTIONS) or isinstance(solution, (str, os.PathLike)):
         raise CheckpointError(f"save takes the path first, then the solution: save(path, solution), got "
                               f"save({type(path).__name__}, {type(solution).__name__})")
@@ -50,9 +57,14 @@ def save(path: str | os.PathLike, solution: Any, *, extra: Mapping[str, Any] | N
 
 
 def load(path: str | os.PathLike, system: HamiltonianSystem | None = None) -> Any:
-    """The solution a file written by :func:`save` holds, of whichever kind (hash verified; it
-    evaluates bit-identically to the saved one). ``system``: needed where the system was a Python
-    function (it cannot be rebuilt from the file), else rebuilt from the stored spec."""
+    """The solution a file written by [`save`][atlasnn.checkpoint.save] holds, of whichever kind.
+
+    Args:
+        path: the file. Its content hash is verified before anything is built from it.
+        system: the Hamiltonian system, needed where it was a Python function (which cannot be
+            rebuilt from the file); otherwise rebuilt from the spec the file stores.
+
+    Returns the solution, of the kind that was saved, evaluating bit-identically to it."""
     p = os.fspath(path)
     kind = _read(p)[1].get("kind")
     if kind in (KIND_PIECEWISE, KIND_POLYNOMIAL):

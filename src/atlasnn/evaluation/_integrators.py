@@ -215,9 +215,19 @@ INTEGRATORS: dict[str, Callable[..., tuple[np.ndarray, np.ndarray]]] = {
 
 
 def integrate(method: str, system: HamiltonianSystem, z0: Any, t0: float, T: float, n_steps: int):
-    """Run the fixed-step integrator named ``method`` (a key of :data:`INTEGRATORS`).
+    """Run the fixed-step integrator named ``method``, in float64 whatever the global precision.
 
-    Returns ``(t, Z)`` as the named function does; an unknown name is a one-line ConfigError.
+    Args:
+        method: ``"symplectic_euler"`` (the paper's baseline "SE"), ``"stormer_verlet"`` or
+            ``"yoshida4"`` (the keys of ``INTEGRATORS``); each needs H declared separable.
+        system: the Hamiltonian system.
+        z0: the initial state (q then p, length 2d), or ``None`` for the system's default.
+        t0: the start of the interval.
+        T: its end, after ``t0``.
+        n_steps: the number of steps of length (T − t0)/n_steps, a positive integer.
+
+    Returns ``(t, Z)``: float64 arrays of shapes (n_steps + 1,) and (n_steps + 1, 2d); ``Z[0]`` is
+    z0. An unknown name is a one-line ConfigError.
     """
     if method not in INTEGRATORS:
         raise ConfigError(f"unknown integrator {method!r}; choose one of {sorted(INTEGRATORS)}")
@@ -294,7 +304,7 @@ def reference_solution(
     reporting the solution at ``t_eval`` (dense output of the solver, not interpolation by
     atlasnn). The vector field J∇H is evaluated in float64 by a jitted JAX function, whatever the
     global precision. Works for any Hamiltonian, separable or not. (The authors' release used
-    ``scipy.integrate.odeint`` at default tolerances; see :data:`REFERENCE_DESCRIPTION`.)
+    ``scipy.integrate.odeint`` at default tolerances; see ``REFERENCE_DESCRIPTION``.)
 
     Args:
         system: the Hamiltonian system.

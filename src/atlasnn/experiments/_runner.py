@@ -211,19 +211,36 @@ def run_experiment(
     """Run every training of ``cfg`` and write the run directory ``out``; returns results.
 
     Nothing is written before the inputs are checked (``out`` must be new or empty unless
-    ``overwrite``) and, with a Dask scheduler, before it is connected. ``seed_batch``: seeds of a
-    column trained as one program (an integer, or ``"auto"``: see :mod:`atlasnn.experiments._plan`;
-    on Dask ``"auto"`` counts the cluster's worker threads as jobs). ``scheduler``: the address of a
-    Dask scheduler to run the trainings on (default ``$ATLASNN_SCHEDULER``; None or empty: local
-    processes, ``jobs`` of them). ``resume=True`` continues an interrupted run
-    in ``out`` (use :func:`resume_experiment`, which reads the config from ``out``).
-    ``handle_signals``: while running, SIGINT and SIGTERM stop training at the end of the current
-    chunk (main thread only). Raises :class:`RunInterrupted` (a KeyboardInterrupt) when
-    interrupted. ``figures``: what the report draws (``"all"``, ``"overview"``, ``"none"``:
-    tables only; :func:`atlasnn.report.write_report`). ``seed_batch`` None takes the config's
-    ``execution.seed_batch``. ``executor``:
-    an open :class:`~atlasnn.experiments._executors.Executor` to use (and leave open) instead of
-    one made from ``jobs`` and ``scheduler`` (a sweep runs all its points on one).
+    ``overwrite``) and, with a Dask scheduler, before it is connected.
+
+    Args:
+        cfg: the experiment, from [`load_config`][atlasnn.experiments.config.load_config].
+        out: the run directory: new or empty (unless ``overwrite`` or ``resume``).
+        seeds: the seeds to train (default the config's).
+        jobs: local processes training at once (an integer ≥ 1).
+        progress: show each training's progress.
+        overwrite: reuse a non-empty ``out``, replacing this tool's own files of an earlier run.
+        config_text: the config's text, kept in ``out`` as ``config.toml``.
+        quick: record the run as a quick one (the reduced budget itself comes from
+            ``load_config(..., quick=True)``).
+        report: write the tables and figures when the trainings are done.
+        log: called with each line of news.
+        resume: continue an interrupted run in ``out`` (use ``resume_experiment``, which reads the
+            config from ``out``).
+        figures: what the report draws: ``"all"``, ``"overview"`` or ``"none"`` (tables only;
+            ``atlasnn.report.write_report``).
+        config_source: where the config came from, for the record.
+        handle_signals: while running, SIGINT and SIGTERM stop training at the end of the current
+            chunk (main thread only); ``RunInterrupted`` (a KeyboardInterrupt) is raised then.
+        seed_batch: seeds of a column trained as one program: an integer, or ``"auto"`` (see
+            ``atlasnn.experiments._plan``; on Dask it counts the cluster's worker threads as jobs);
+            None takes the config's ``execution.seed_batch``.
+        scheduler: the address of a Dask scheduler to run the trainings on (default
+            ``$ATLASNN_SCHEDULER``; None or empty: local processes, ``jobs`` of them).
+        executor: an open ``Executor`` to use (and leave open) instead of one made from ``jobs``
+            and ``scheduler`` (a sweep runs all its points on one).
+
+    Returns the results, as written to ``out/results.json``.
     """
     seeds = tuple(seeds if seeds is not None else cfg.seeds)
     if executor is None and (isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1):

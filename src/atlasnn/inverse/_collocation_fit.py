@@ -60,8 +60,8 @@ __all__ = ["CollocationFit", "fit_collocation"]
 
 @dataclasses.dataclass(frozen=True)
 class CollocationFit(AbstractFitMethod):
-    """The simultaneous collocation fit as a method object (for :func:`atlasnn.inverse.fit`), and
-    the settings of :func:`fit_collocation`.
+    """The simultaneous collocation fit as a method object (for [`atlasnn.inverse.fit`][atlasnn.inverse.fit]), and
+    the settings of ``fit_collocation``.
 
     Attributes:
         windows: windows over the record, or ``"auto"``: length 1/‖A‖ (A = D(J∇H) at z0 and the
@@ -73,7 +73,7 @@ class CollocationFit(AbstractFitMethod):
         max_steps: Levenberg–Marquardt steps per stage at most.
         seed: the draw of the features.
         polish: finish with single shooting from the estimate (exact least squares and σ).
-        polish_solver: the orbit's solve in that shooting (:func:`fit_shooting`'s ``solver``:
+        polish_solver: the orbit's solve in that shooting (``fit_shooting``'s ``solver``:
             ``"gauss"`` or ``"dop853"``).
     """
 

@@ -21,15 +21,37 @@ COND_LIMIT = 1e12
 
 @dataclasses.dataclass
 class FitResult:
-    """The outcome of :func:`fit_shooting`.
+    """The outcome of a fit ([`atlasnn.fit`][atlasnn.inverse.fit], by any method).
 
     ``std`` are Gauss–Newton standard errors at the optimum: sqrt of the diagonal of
     s²(JᵀJ)⁻¹ with s² = RSS/(n_data − n_unknowns) (``noise_estimate`` is s). An unknown that the
     data cannot determine (it lies in a direction where the column-scaled JᵀJ has condition
-    number above :data:`COND_LIMIT`) gets std = inf, ``identifiable`` is False and ``notes``
+    number above ``COND_LIMIT``) gets std = inf, ``identifiable`` is False and ``notes``
     names it. ``trusted`` is False when a rule found a reason not to believe the estimate or its
     σ (a misfit, a bound, a second minimum, another method's better fit); ``notes`` says which and
-    what to do. ``search``: what a multistart tried (starts, failed starts, the minima found).
+    what to do.
+
+    Attributes:
+        names: the unknowns' names, in the order of ``estimate``.
+        estimate: the fitted values.
+        std: their standard errors (inf for an unknown the data cannot determine).
+        covariance: the Gauss–Newton covariance of the estimates.
+        noise_estimate: s, the noise level the residuals imply.
+        residual_rms: the root mean square of the data misfits at the optimum.
+        wall_time: seconds the fit took.
+        n_rhs: evaluations of the vector field.
+        n_solves: orbits integrated.
+        method: the method, in words.
+        success: whether the minimisation ended normally.
+        message: its last message.
+        identifiable: False when some unknown is not determined by the data.
+        notes: the reasons behind ``trusted`` and ``identifiable``, each with what to do.
+        t0: the time the orbits start from.
+        n_data: the number of observed values.
+        segments: the shooting segments (1: single shooting).
+        cond: the condition number of the column-scaled JᵀJ.
+        trusted: False when a rule found a reason not to believe the estimate or its σ.
+        search: what a multistart tried (starts, failed starts, the minima found).
     """
 
     names: tuple[str, ...]
@@ -61,7 +83,7 @@ class FitResult:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "FitResult":
-        """The record :meth:`as_dict` wrote, read back (keys that are not fields are ignored)."""
+        """The record ``as_dict`` wrote, read back (keys that are not fields are ignored)."""
         arrays = {"estimate", "std", "covariance"}
         kw = {f.name: (np.asarray(d[f.name], float) if f.name in arrays else
                        tuple(d[f.name]) if f.name == "names" else d[f.name])

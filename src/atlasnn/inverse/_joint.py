@@ -51,7 +51,7 @@ __all__ = ["JointConfig", "fit_joint"]
 
 @dataclass(frozen=True)
 class JointConfig:
-    """Settings of :func:`fit_joint`: the network (``width``, ``depth``, ``scaling``), Adam
+    """Settings of ``fit_joint``: the network (``width``, ``depth``, ``scaling``), Adam
     (``epochs``, ``lr``, ``batch`` collocation times per epoch), LM (``lm_steps``, ``lm_points``
     Chebyshev times), ``lam_reg`` and the data weight ``data_weight`` (module docstring)."""
 

@@ -37,10 +37,18 @@ __all__ = ["AbstractFitMethod", "Shooting", "Joint", "BundleFit", "FIT_METHODS",
 
 @dataclasses.dataclass(frozen=True)
 class Shooting(AbstractFitMethod):
-    """Least-squares shooting (:func:`fit_shooting`); ``segments``: a count (1: single shooting) or
-    ``"auto"`` (:func:`auto_segments`); ``starts``: ``"auto"`` (the guess and 12 more per unknown
-    over the bounds, :func:`fit_multistart`) or a count, 1 = the guess alone; ``solver``: the orbit's
-    solve, ``"gauss"`` (the compiled Gauss collocation) or ``"dop853"`` (SciPy's)."""
+    """Least-squares shooting: the orbit integrated from the unknowns and its sensitivities, the
+    misfit to the data minimised over the unknowns' bounds (``fit_shooting``).
+
+    Attributes:
+        segments: 1 (single shooting), a count of consecutive segments (multiple shooting: each
+            segment starts from its own unknown state, joined by continuity), or ``"auto"`` (as many
+            as the record's length needs, ``auto_segments``).
+        starts: ``"auto"`` (the guess and 12 more per unknown over the bounds, ``fit_multistart``)
+            or a count; 1 is the guess alone.
+        solver: the orbit's solve, ``"gauss"`` (the compiled Gauss collocation) or ``"dop853"``
+            (SciPy's).
+    """
 
     segments: int | str = 1
     starts: int | str = "auto"
@@ -63,7 +71,12 @@ class Shooting(AbstractFitMethod):
 
 @dataclasses.dataclass(frozen=True)
 class Joint(AbstractFitMethod):
-    """One network trained on the data and Hamilton's equations together (:func:`fit_joint`)."""
+    """One network trained on the data and Hamilton's equations together, the unknowns with it
+    (``fit_joint``).
+
+    Attributes:
+        config: the network and its training ([`JointConfig`][atlasnn.inverse.JointConfig]).
+    """
 
     config: JointConfig = JointConfig()
     name: ClassVar[str] = "joint"
@@ -77,9 +90,17 @@ class Joint(AbstractFitMethod):
 
 @dataclasses.dataclass(frozen=True)
 class BundleFit(AbstractFitMethod):
-    """A bundle trained on the equations over the unknowns' bounds (time-marched in ``windows``),
-    then least squares with it as the model (:func:`fit_with_bundle`); the training's seconds are
-    in the result's ``search["training_seconds"]``."""
+    """A bundle trained on the equations over the unknowns' bounds, then least squares with it as
+    the model (``fit_with_bundle``); the training's seconds are in the result's
+    ``search["training_seconds"]``. The training is paid once per system and bounds.
+
+    Attributes:
+        windows: equal windows the bundle is time-marched in (1: no marching).
+        epochs: Adam epochs per window.
+        lm_steps: Levenberg–Marquardt trials after Adam (0: none).
+        lm_points: the fixed collocation points of the Levenberg–Marquardt phase.
+        width: the width of the bundle network's hidden layers.
+    """
 
     windows: int = 1
     epochs: int = 2000
@@ -120,10 +141,27 @@ for _cls in (Shooting, Joint, BundleFit, CollocationFit):
 def fit(system: HamiltonianSystem, observations: Observations, unknowns: Sequence[Unknown],
         method: AbstractFitMethod | None = None, *, z0: Any = None, t0: float = 0.0, seed: int = 0) -> FitResult:
     """Fit ``unknowns`` (parameters of H, ``z0.<name>`` initial-state components) to
-    ``observations`` by ``method`` (default: :class:`Shooting`, a multistart over the bounds).
+    ``observations`` by ``method``.
 
-    ``method`` is an object — ``Shooting(segments=4)``, ``CollocationFit()``, ``Joint(JointConfig(epochs=500))``,
-    ``BundleFit(windows=4)`` — not a name (names are for configs, :data:`FIT_METHODS`)."""
+    Args:
+        system: the Hamiltonian system; its parametric H (the built-ins and expression systems
+            have one) when a parameter is unknown.
+        observations: the data ([`Observations`][atlasnn.observations.Observations]): times and
+            observed components.
+        unknowns: what to fit, each an [`Unknown`][atlasnn.observations.Unknown] with its guess and
+            bounds: a parameter's name, or ``z0.<name>`` for an initial-state component.
+        method: a method object — [`Shooting`][atlasnn.inverse.Shooting] (default: a multistart
+            over the bounds), ``Shooting(segments=4)``, [`CollocationFit`][atlasnn.inverse.CollocationFit],
+            ``Joint(JointConfig(epochs=500))``, ``BundleFit(windows=4)`` — not a name (names are
+            for configs, ``FIT_METHODS``).
+        z0: the initial state the orbit starts from, its unknown components replaced by the fit;
+            default the system's own.
+        t0: the time of ``z0``, at or before the first observation.
+        seed: the draw of whatever the method draws (starts, features, networks).
+
+    Returns a [`FitResult`][atlasnn.inverse.FitResult]: the estimates, their standard deviations,
+    and whether to trust them (``trusted``, with the reasons in ``notes``). Data that cannot
+    determine the unknowns are refused before anything runs."""
     method = Shooting() if method is None else method
     if not isinstance(method, AbstractFitMethod):
         hint = f" (use {FIT_METHODS[method].__name__}())" if isinstance(method, str) and method in FIT_METHODS else ""

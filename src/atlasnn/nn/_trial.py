@@ -93,7 +93,7 @@ def make_model(
     ``scaling`` is a scaling instance or a name: ``"exp_decay"`` (HNN baseline), ``"tanh"`` or
     ``"rational_exp"`` (ATLAS-NN), ``"linear"`` (f = t, the collocation solver's); paper model
     names ``"hnn"``, ``"atlas_tanh"``, ``"atlas_exp"`` are accepted too. ``gamma`` gives the initial γ (default 1.0 for each, as in the paper).
-    ``first_layer_scale`` scales the first layer's initial weights (see :class:`MLP`); it is an
+    ``first_layer_scale`` scales the first layer's initial weights (see ``MLP``); it is an
     initialisation choice only (a checkpoint stores the weights, not the scale).
     """
     z0 = np.asarray(z0, dtype=np.float64).reshape(-1)

@@ -74,7 +74,7 @@ def _evaluate(windows, edges, t_parts, z0, lam, chunk):
 
 @dataclass(frozen=True, eq=False)
 class BundleSolution:
-    """The trained bundle: ``windows`` (one :class:`BundleTrial` per window), ``edges``
+    """The trained bundle: ``windows`` (one ``BundleTrial`` per window), ``edges``
     t_0 < … < t_n, the ``box`` it was trained over, and the ``system`` (for residuals and
     references). Call it with times (T,), initial states (N, 2d) and parameters (N, P) of the
     box's varying parameters (``box.param_names``); (N, T, 2d) comes back."""

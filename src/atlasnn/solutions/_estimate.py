@@ -91,7 +91,7 @@ class ErrorEstimate:
 
     @property
     def range(self) -> float:
-        """The solution's range (:func:`state_range` of ẑ)."""
+        """The solution's range (``state_range`` of ẑ)."""
         return state_range(self.z)
 
     @property

@@ -117,7 +117,7 @@ def _shown(values: np.ndarray) -> str:
 
 @dataclass
 class FlowMapBundle:
-    """The solution of :func:`atlasnn.solver.solve_bundle`: ``W`` (2d, S + 1, M_space) over
+    """The solution of [`atlasnn.solver.solve_bundle`][atlasnn.solver.solve_bundle]: ``W`` (2d, S + 1, M_space) over
     ``basis``, ``windows`` windows of length h = (T − t0)/windows over ``box``; ``info``: how it
     was fitted (seconds, residual, region rounds)."""
 
@@ -143,7 +143,7 @@ class FlowMapBundle:
         return out
 
     def from_coefficients(self, C: np.ndarray, z: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(ẑ(s), ∂ẑ/∂s) of rows whose window starts at z with coefficients C (:meth:`coefficients`)."""
+        """(ẑ(s), ∂ẑ/∂s) of rows whose window starts at z with coefficients C (``coefficients``)."""
         s = np.asarray(s, np.float64).reshape(-1)
         T, D = self.basis.time(s, rate=True)
         G = np.einsum("nci,ni->nc", C, T)
@@ -189,7 +189,7 @@ class FlowMapBundle:
         return t, z0, lam
 
     def compose(self, t: np.ndarray, z0: np.ndarray, lam: np.ndarray) -> np.ndarray:
-        """The composed map at sorted times t, without :meth:`__call__`'s checks (the solver's
+        """The composed map at sorted times t, without ``__call__``'s checks (the solver's
         scouting carries members past the region on purpose, to find where they go)."""
         t0 = self.box.t0
         h = self.basis.h

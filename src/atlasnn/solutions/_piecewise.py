@@ -137,11 +137,11 @@ class PiecewiseSolution(AbstractSolution):
         models: the window trial solutions (local time, t0 = 0 each), in order.
         system: the Hamiltonian system.
         edges: the window edges t_0..t_n (float64).
-        windows: one :class:`WindowRecord` per window (may be empty for a bare solution).
+        windows: one ``WindowRecord`` per window (may be empty for a bare solution).
         info: free-form record (scheme settings, training summary).
         stacked: the window models as one pytree with a leading window axis (built from ``models``
             when not given; a solver that has it already passes it).
-        outside: what evaluating outside [t0, T] does, as for :class:`~atlasnn.solutions._solution.Solution`:
+        outside: what evaluating outside [t0, T] does, as for [`Solution`][atlasnn.solutions.Solution]:
             ``"warn"`` (once), ``"raise"`` or ``"allow"`` (the first or last window extrapolates).
     """
 

@@ -66,7 +66,7 @@ class PolynomialSolution(AbstractSolution):
         info: the solver's record (settings, tolerance, counts, times).
         estimator: a function returning the companion solution of the error estimate.
         resolve: ``resolve(z, e, h) -> L`` for windows whose L is not kept.
-        outside: what evaluating outside [t0, T] does (as for :class:`Solution`).
+        outside: what evaluating outside [t0, T] does (as for [`Solution`][atlasnn.solutions.Solution]).
     """
 
     interval_name: ClassVar[str] = "interval"

@@ -48,7 +48,7 @@ class Solution(AbstractSolution):
     """A trained trial solution for one system.
 
     Attributes:
-        model: the trained :class:`~atlasnn.nn._trial.TrialSolution`.
+        model: the trained ``TrialSolution``.
         system: its Hamiltonian system.
         interval: the (t0, T) it was trained on, if known.
         info: free-form record (model name, training summary).

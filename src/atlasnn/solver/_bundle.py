@@ -24,8 +24,8 @@ __all__ = ["NetworkBundle", "solve_bundle"]
 @refuse_unknown_settings
 @dataclass(frozen=True)
 class NetworkBundle:
-    """A network trained over the box (:func:`atlasnn.training.train_bundle`): ẑ(t; z0, λ) = z0 +
-    f(t − t0; γ)·N(t, z0, λ; θ), Adam then Levenberg–Marquardt per window.
+    """A network trained over the box ([`atlasnn.training.train_bundle`][atlasnn.training.train_bundle]):
+    ẑ(t; z0, λ) = z0 + f(t − t0; γ)·N(t, z0, λ; θ), Adam then Levenberg–Marquardt per window.
 
     Attributes:
         config: the training's settings (windows, epochs, LM steps…).
@@ -51,12 +51,21 @@ class NetworkBundle:
 def solve_bundle(system: HamiltonianSystem, box: BundleBox, method: FlowMap | NetworkBundle | None = None, *,
                  seed: int = 0, progress: Callable[[str], None] | None = None) -> Any:
     """Every trajectory of the box at once: the initial states and parameter values of ``box``
-    (a :class:`~atlasnn.systems.BundleBox`) over its interval, by ``method``.
+    over its interval, by ``method``.
 
-    Returns a :class:`~atlasnn.solutions.FlowMapBundle` (:class:`FlowMap`, the default) or a
-    :class:`~atlasnn.solutions.BundleSolution` (:class:`NetworkBundle`, its training record in
-    ``info``): ``bundle(t, z0s, params)`` evaluates any members at any times. ``seed`` draws the
-    collocation points (and the network's weights); ``progress`` is told each step in words."""
+    Args:
+        system: the Hamiltonian system; a box over parameters needs its parametric H (the built-ins
+            and expression systems have one).
+        box: the [`BundleBox`][atlasnn.systems.BundleBox]: the ranges of the initial states and of
+            the parameters, and the interval.
+        method: [`FlowMap`][atlasnn.solver.FlowMap] (default: one float64 flow map, solved) or
+            [`NetworkBundle`][atlasnn.solver.NetworkBundle] (the paper's kind of network, trained).
+        seed: draws the collocation points (and the network's initial weights).
+        progress: told each step in words.
+
+    Returns a [`FlowMapBundle`][atlasnn.solutions.FlowMapBundle] (``FlowMap``) or a
+    [`BundleSolution`][atlasnn.solutions.BundleSolution] (``NetworkBundle``, its training record in
+    ``info``): ``bundle(t, z0s, params)`` evaluates any members at any times."""
     method = FlowMap() if method is None else method
     if isinstance(method, FlowMap):
         return flowmap_bundle(system, box, method, seed=seed, progress=progress)

@@ -56,7 +56,7 @@ __all__ = ["FlowMap", "flowmap_bundle", "flowmap_problem", "FlowMapProblem"]
 @refuse_unknown_settings
 @dataclass(frozen=True)
 class FlowMap:
-    """Settings of :func:`solve_bundle`.
+    """Settings of [`solve_bundle`][atlasnn.solver.solve_bundle].
 
     Attributes:
         windows: h = (T − t0)/windows, the length over which one map is fitted (the error falls

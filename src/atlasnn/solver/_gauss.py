@@ -91,7 +91,7 @@ class GaussCollocation(AbstractSolver):
     the state summed with compensation, the coefficients symplectic in float64 (docs/SOLVER.md).
 
     Attributes:
-        stages: s (1–16; order 2s); None: chosen from rtol (:data:`STAGES_BY_TOLERANCE`).
+        stages: s (1–16; order 2s); None: chosen from rtol (``STAGES_BY_TOLERANCE``).
         rtol: relative tolerance: every window's error along it, as its Picard check bounds it, must
             be within atol + rtol·|z| per component (a tolerance below float64's round-off counts as
             round-off).
@@ -369,7 +369,7 @@ class GaussCollocation(AbstractSolver):
 
     def companion(self, sol: PolynomialSolution) -> PolynomialSolution:
         """The same method over the same interval on windows half as long: the reference of the
-        error estimate (module docstring of :mod:`atlasnn.solutions._polynomial`)."""
+        error estimate (module docstring of ``atlasnn.solutions._polynomial``)."""
         starts, lengths = sol.edges[:-1], np.diff(sol.edges)
         halves = np.repeat(0.5 * lengths, 2)
         edges = np.append(np.stack([starts, starts + 0.5 * lengths], axis=1).reshape(-1), sol.edges[-1])

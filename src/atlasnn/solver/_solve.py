@@ -50,9 +50,9 @@ def solve(system: HamiltonianSystem, z0: Any = None, interval: tuple[float, floa
         z0: the initial state (q then p); default the system's own.
         interval: (t0, T) with t0 < T.
         solver: a solver object, holding its settings and tolerances:
-            :class:`~atlasnn.solver.GaussCollocation` (default: the trial solution collocated at
-            Gauss–Legendre nodes; symplectic, order 2s), :class:`~atlasnn.solver.Collocation`
-            (random tanh features, Gauss–Newton) or :class:`~atlasnn.solver.AdamMarch` (the
+            [`GaussCollocation`][atlasnn.solver.GaussCollocation] (default: the trial solution collocated at
+            Gauss–Legendre nodes; symplectic, order 2s), [`Collocation`][atlasnn.solver.Collocation]
+            (random tanh features, Gauss–Newton) or [`AdamMarch`][atlasnn.solver.AdamMarch] (the
             paper's networks trained by Adam, window by window).
         rtol: replaces the solver's own relative tolerance (each solver says what it means).
         atol: replaces the solver's own absolute tolerance.
@@ -60,7 +60,7 @@ def solve(system: HamiltonianSystem, z0: Any = None, interval: tuple[float, floa
 
     Returns the solution: evaluate ẑ and dẑ/dt at any times (``sol(t)``, ``sol.derivative(t)``),
     its energy, residual and a-posteriori ``error_estimate(t)``; save it with
-    :func:`atlasnn.save`.
+    [`atlasnn.save`][atlasnn.checkpoint.save].
     """
     t0, T = _interval(system, interval)
     z = system.initial_state(z0)
@@ -85,10 +85,23 @@ def _seeds(seeds: Any, count: int) -> list[int] | None:
 def solve_batch(system: HamiltonianSystem, z0s: Any, interval: tuple[float, float], *,
                 solver: GaussCollocation | Collocation | None = None, seeds: Any = None, rtol: float | None = None,
                 atol: float | None = None, progress: Callable[[float], None] | None = None) -> list[AbstractSolution]:
-    """Many trajectories at once: one solution per initial state in ``z0s`` (shape (B, 2d)), all
-    marched by one compiled program, each with windows of its own. ``seeds`` (one per member) draws
-    each member's features of a :class:`~atlasnn.solver.Collocation` solver. Otherwise as
-    :func:`solve`."""
+    """Many trajectories at once: one solution per initial state in ``z0s``, all marched by one
+    compiled program, each with windows of its own. Otherwise as [`solve`][atlasnn.solver.solve].
+
+    Args:
+        system: the Hamiltonian system.
+        z0s: the initial states, one per row (shape (B, 2d), q then p); at least one.
+        interval: (t0, T) with t0 < T, the same for every member.
+        solver: [`GaussCollocation`][atlasnn.solver.GaussCollocation] (default) or
+            [`Collocation`][atlasnn.solver.Collocation]; the trained solvers have no batch.
+        seeds: one integer in [0, 2**32) per member, drawing each member's random features of a
+            ``Collocation`` solver; None for ``GaussCollocation``, which has none.
+        rtol: replaces the solver's own relative tolerance.
+        atol: replaces the solver's own absolute tolerance.
+        progress: called with the fraction of the interval done as the march advances.
+
+    Returns a list of B solutions, in the order of ``z0s``, each the same kind as ``solve`` returns.
+    """
     t0, T = _interval(system, interval)
     try:
         rows = [system.check_state(z, f"z0s[{i}]") for i, z in enumerate(list(z0s))]

@@ -23,7 +23,7 @@ __all__ = ["AdamMarch", "Transfer"]
 @dataclass(frozen=True)
 class AdamMarch(AbstractSolver):
     """Time-marching with windows trained by Adam (float32) then Levenberg–Marquardt, windows
-    chosen by the a-posteriori error estimate (:func:`atlasnn.training.march`). It is what the
+    chosen by the a-posteriori error estimate ([`atlasnn.training.march`][atlasnn.training.march]). It is what the
     paper's reproductions use; for a trajectory alone the Gauss collocation is faster and more
     accurate by orders of magnitude (docs/SOLVER.md).
 
@@ -32,7 +32,7 @@ class AdamMarch(AbstractSolver):
             the state's range (the trained windows are float32: rtol below 1e-7 is out of reach and
             refused).
         atol: absolute tolerance (see rtol).
-        network: the arguments of :func:`atlasnn.nn.make_model`.
+        network: the arguments of [`atlasnn.nn.make_model`][atlasnn.nn.make_model].
         config: the march's other settings (its own rtol/atol are replaced by these).
         seed: the networks' initialisation.
     """
@@ -73,9 +73,9 @@ class Transfer(AbstractSolver):
 
     Attributes:
         source: the source interval's length (default 4π, the paper's oscillator source).
-        network: the arguments of :func:`atlasnn.nn.make_model` (default: the paper's
+        network: the arguments of [`atlasnn.nn.make_model`][atlasnn.nn.make_model] (default: the paper's
             ATLAS-NN exp model, 80 wide, 2 deep).
-        source_train: the source training's settings (:class:`atlasnn.training.TrainConfig`).
+        source_train: the source training's settings ([`atlasnn.training.TrainConfig`][atlasnn.training.TrainConfig]).
         target_train: the target training's settings.
         thaw: keep γ trainable on the target (the paper freezes it).
         seed: the network's initialisation.

@@ -1,4 +1,4 @@
-"""The Gauss collocation as a Diffrax solver: :class:`GaussLegendre` for ``diffrax.diffeqsolve``.
+"""The Gauss collocation as a Diffrax solver: ``GaussLegendre`` for ``diffrax.diffeqsolve``.
 
 This module imports Diffrax (the ``atlasnn[diffrax]`` extra); nothing else in atlasnn imports it, so
 atlasnn works without Diffrax. The step is :func:`._gauss_step.gauss_step`, the one that
@@ -64,7 +64,7 @@ class GaussLegendreInterpolation(diffrax.AbstractLocalInterpolation):
 
         ẑ(t0 + θh) = y0 + (e0 + Σ_j w_j(θ) L_j),
 
-    the trial solution z0 + θh·N(θ) of :mod:`atlasnn.solutions._tableau` (w from ``window_value``),
+    the trial solution z0 + θh·N(θ) of ``atlasnn.solutions._tableau`` (w from ``window_value``),
     exact at θ = 0 and of order s + 1 in h in between (2s at the window's end). Its derivative is the
     polynomial's own (``rate``), which equals f at the s Gauss nodes."""
 
@@ -125,12 +125,13 @@ class GaussLegendre(diffrax.AbstractAdaptiveSolver):
     float64 arrays (flattened inside the step).
 
     Attributes:
-        stages: s (1–16; order 2s). Default 12, as ``GaussCollocation``.
+        stages: s (1–16; order 2s). Default 12 (``GaussCollocation`` chooses its s from its rtol).
         max_iterations: iterations of each kind (fixed point, Newton) per step at most.
         newton: fall back on simplified Newton iterations (the vector field's Jacobian at the step's
-            start, one LU factorisation of an s·n matrix) where the fixed-point iteration does not
-            reach round-off. A step whose equations are not solved either way fails: rejected
-            (infinite error) under a PIDController, an error result under ConstantStepSize.
+            start, decoupled into ⌈s/2⌉ complex systems of the state's size) where the fixed-point
+            iteration does not reach round-off. A step whose equations are not solved either way
+            fails: rejected (infinite error) under a PIDController, an error result under
+            ConstantStepSize.
     """
 
     term_structure: ClassVar = diffrax.ODETerm

@@ -148,7 +148,16 @@ def numpy_field(system: HamiltonianSystem) -> Callable[[float, np.ndarray], np.n
 
 
 def builtin_system(name: str, **params: float) -> HamiltonianSystem:
-    """A built-in system by name, e.g. ``builtin_system("henon_heiles", lam=1.0)``."""
+    """A built-in system by name, e.g. ``builtin_system("henon_heiles", lam=1.0)``.
+
+    Args:
+        name: ``"nonlinear_oscillator"``, ``"henon_heiles"`` or ``"harmonic_oscillator"`` (``-``
+            may stand for ``_``); ``atlasnn systems`` lists them with their H.
+        **params: values of the system's parameters (``lam``, the nonlinearity of the paper's two
+            systems, 1 there; ``omega`` of the harmonic oscillator); unnamed ones keep their defaults.
+
+    Returns the [`HamiltonianSystem`][atlasnn.systems.HamiltonianSystem], with its default initial
+    state (the paper's, for the paper's two) and its parametric H."""
     key = name.replace("-", "_")
     if key not in BUILTIN_SYSTEMS:
         raise SystemError_(f"unknown system {name!r}; built-ins are {sorted(BUILTIN_SYSTEMS)}")

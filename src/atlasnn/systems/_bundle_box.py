@@ -34,6 +34,15 @@ class BundleBox:
 
     ``BundleBox.around(z0, 0.2, {"lam": (0.5, 1.5)}, T=4π)``: z0 ± 20 % (of |z0_i|, or of max |z0|
     where z0_i = 0) and λ in [0.5, 1.5].
+
+    Args:
+        z0_low: the lower end of each initial-state component (2d numbers, q then p).
+        z0_high: the upper end of each component (equal to ``z0_low``'s: that component is fixed).
+        T: the end of the interval (after ``t0``).
+        params: ``{name: (low, high)}`` for the parameters that vary over the box (low < high).
+        t0: the start of the interval.
+
+    A box where nothing varies is refused (solve one trajectory instead).
     """
 
     z0_low: tuple[float, ...]

@@ -126,7 +126,7 @@ def expression_system(
     separable: bool | str = False,
     z0: Sequence[float] | None = None,
 ):
-    """A :class:`~atlasnn.systems.HamiltonianSystem` from a Hamiltonian written as text.
+    """A [`HamiltonianSystem`][atlasnn.systems.HamiltonianSystem] from a Hamiltonian written as text.
 
     Example::
 
@@ -142,11 +142,11 @@ def expression_system(
         params: named parameters with finite values.
         name: a short identifier (letters, digits, ``_ . -``; used in file names).
         separable: ``True`` if H = T(p) + V(q) (the user's declaration, not checked),
-            ``False``, or ``"auto"`` to decide with :func:`is_syntactically_separable`.
+            ``False``, or ``"auto"`` to decide with ``is_syntactically_separable``.
         z0: default initial state, coordinates then momenta.
 
     Returns:
-        The system; its ``spec`` rebuilds it with :func:`~atlasnn.systems.system_from_spec`.
+        The system; its ``spec`` rebuilds it with ``system_from_spec``.
     """
     qs = _coerce_names(coordinates, "coordinates", "coordinate")
     ps = _coerce_names(momenta, "momenta", "momentum")

@@ -41,7 +41,7 @@ class HamiltonianSystem:
         separable: the user's declaration that H = T(p) + V(q). Explicit symplectic
             integrators need it; atlasnn does not try to prove it.
         params: named parameters of H (e.g. ``{"lam": 1.0}``), for the record.
-        spec: a JSON-able description from which :func:`system_from_spec` can rebuild the
+        spec: a JSON-able description from which ``system_from_spec`` can rebuild the
             system (set by the built-ins and by expression systems; ``None`` for a Python
             function, which then has to be passed again when a checkpoint is loaded).
         parametric: the same H with its parameters as an input, ``H(q, p, θ)`` for θ of shape

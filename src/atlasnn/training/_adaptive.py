@@ -234,8 +234,8 @@ def march(
     on_progress: Callable[[MarchProgress], None] | None = None,
 ) -> PiecewiseSolution:
     """Train a time-marching ATLAS-NN on [model.t0, T] and return the piecewise solution: windows
-    chosen by the error estimate (:func:`march_adaptive`; ``window = "auto"``, the default), or
-    fixed ones (``window`` or ``n_windows``: :func:`~atlasnn.training.march_batch`).
+    chosen by the error estimate (``march_adaptive``; ``window = "auto"``, the default), or
+    fixed ones (``window`` or ``n_windows``: ``march_batch``).
 
     Args:
         model: the first window's starting trial solution (network, scaling with initial γ, z0);
@@ -243,11 +243,11 @@ def march(
         system: the Hamiltonian system.
         T: the end of the interval.
         config: windows, per-window training, γ freezing, Adam carrying, polishing.
-        on_window: called with each window's :class:`WindowRecord` when it is done.
+        on_window: called with each window's ``WindowRecord`` when it is done.
         on_chunk: passed to the trainer (called after every chunk of epochs with the list of
             current training states); raising KeyboardInterrupt there stops the march.
-        resume: continue from a :class:`~atlasnn.training.MarchProgress`.
-        on_progress: called with a :class:`~atlasnn.training.MarchProgress` after every finished
+        resume: continue from a ``MarchProgress``.
+        on_progress: called with a ``MarchProgress`` after every finished
             window (to save it: ``atlasnn.checkpoint``).
     """
     if config.adaptive:

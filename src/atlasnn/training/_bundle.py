@@ -39,7 +39,7 @@ __all__ = ["BundleTrainConfig", "BundleTraining", "train_bundle", "bundle_residu
 
 @dataclass(frozen=True)
 class BundleTrainConfig:
-    """Settings of :func:`train_bundle`.
+    """Settings of [`train_bundle`][atlasnn.training.train_bundle].
 
     ``windows`` equal windows over [t0, T] (1: no time-marching); per window ``epochs`` Adam epochs
     of ``batch`` fresh collocation points, the learning rate decaying by a cosine from ``lr`` to
@@ -48,7 +48,7 @@ class BundleTrainConfig:
     per compiled call (progress is reported between chunks); ``warm_start``: window k starts from
     window k − 1's weights (else from a fresh draw; γ is window 0's either way); ``retry_factor``:
     a window ending above that many times the previous window's loss is trained again (see
-    :func:`train_bundle`; ``inf``: never); ``members``: how collocation members are drawn,
+    [`train_bundle`][atlasnn.training.train_bundle]; ``inf``: never); ``members``: how collocation members are drawn,
     ``"uniform"`` in the box or ``"edges"`` (half of them from the arcsine law, crowding the faces
     and corners, where the extreme members are: measured on the oscillator bundle, uniform
     draws left the corner of large amplitude and large lam 100x worse than the median);

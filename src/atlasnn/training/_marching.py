@@ -85,10 +85,10 @@ class MarchConfig:
 
     Windows: ``n_windows``, or ``window`` (the longest window length wanted: n = ⌈(T − t0)/window⌉,
     the windows then being (T − t0)/n long); at most one of them (neither: ``window`` =
-    :data:`DEFAULT_WINDOW` = 4π, the paper's oscillator source interval).
+    ``DEFAULT_WINDOW`` = 4π, the paper's oscillator source interval).
     ``train``: the Adam run of every window (its ``n_points`` and ``epochs`` are per window; its
     ``freeze_gamma`` is ignored: γ is learned in window 0 and frozen after unless ``thaw``);
-    default :data:`DEFAULT_WINDOW_TRAIN`.
+    default ``DEFAULT_WINDOW_TRAIN``.
     ``first``: the first window's run, if it should differ (default: ``train``).
     ``thaw``: keep γ trainable after window 0.
     ``carry_adam``: start each window from the previous window's final Adam moments.
@@ -98,11 +98,11 @@ class MarchConfig:
     to zero: its features are kept, its phase-specific output is not). γ is always the learned
     one (frozen, or thawed and carried on).
     ``polish``: the second phase of every window after Adam: Levenberg–Marquardt (an
-    :class:`~atlasnn.training.LMConfig`, the default), L-BFGS (a :class:`PolishConfig`) or none
+    ``LMConfig``, the default), L-BFGS (a ``PolishConfig``) or none
     (``None``); its ``lam_reg`` is the window's; with its default ``freeze_gamma`` (true) every
     window refines θ only, so one compiled program serves all windows.
     Windows chosen by the error estimate (the default, ``window = "auto"``, see
-    :mod:`atlasnn.training._adaptive`): ``rtol``/``atol`` the local error tolerance of a window
+    ``atlasnn.training._adaptive``): ``rtol``/``atol`` the local error tolerance of a window
     (``atol + rtol × the state's range``), ``first_window`` (default: one period of the fastest
     linear mode at z0), ``min_window`` (default (T − t0)·1e-4), ``max_rejects`` retrainings of one
     window, ``max_windows`` in all.

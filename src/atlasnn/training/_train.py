@@ -273,7 +273,7 @@ def train(
     on_chunk: Callable[[TrainState], None] | None = None,
     energy0: float | None = None,
 ) -> TrainResult:
-    """Train ``model`` on [model.t0, T] and return a :class:`TrainResult`.
+    """Train ``model`` on [model.t0, T] and return a [`TrainResult`][atlasnn.training.TrainResult].
 
     Args:
         model: the trial solution to train (its z0 and t0 define the problem).
@@ -282,9 +282,9 @@ def train(
         config: epochs, lr, betas, λ_reg, K, jitter σ, tolerance, best rule, γ freezing, seed.
         opt_state: an Adam state to start from (transfer carries the source's); must match the
             trainable parameters. Its lr and betas are replaced by the config's.
-        resume: a :class:`TrainState` from an earlier, interrupted run of the same config.
+        resume: a ``TrainState`` from an earlier, interrupted run of the same config.
         desc: label of the progress bar.
-        on_chunk: called with the current :class:`TrainState` after every chunk (checkpointing).
+        on_chunk: called with the current ``TrainState`` after every chunk (checkpointing).
         energy0: the energy E0 of the penalty term; default H(model.z0). Time-marching passes the
             energy of the problem's initial state, so that window after window is held to it.
 

@@ -54,9 +54,9 @@ def transfer(
         carry_adam: start from the source's Adam moments (the release does).
         architecture: the target's intended architecture (width, depth, ...); a mismatch with the
             source is an error.
-        resume: passed to :func:`~atlasnn.training.train`: continue an interrupted target run from
-            its saved :class:`~atlasnn.training.TrainState`.
-        on_chunk: passed to :func:`~atlasnn.training.train`: a per-chunk callback.
+        resume: passed to [`train`][atlasnn.training.train]: continue an interrupted target run from
+            its saved ``TrainState``.
+        on_chunk: passed to [`train`][atlasnn.training.train]: a per-chunk callback.
     """
     return transfer_from(
         source.model, source.opt_state, system, T, config, thaw=thaw, carry_adam=carry_adam,

@@ -418,7 +418,18 @@ def read_config(path: str | Path) -> dict[str, Any]:
 
 
 def load_config(path: str | Path, *, quick: bool = False, profile: str | None = None) -> ExperimentConfig:
-    """Read and validate a TOML experiment file."""
+    """Read and validate a TOML experiment file.
+
+    Args:
+        path: the file (a built-in experiment's: ``builtin_config_path(NAME)``, from
+            ``atlasnn.experiments.config``).
+        quick: merge the file's ``[quick]`` table over it (a reduced budget, labelled as such).
+        profile: a variant in the file's ``[profiles]`` merged over it first (the built-ins are
+            ``"paper"`` as written and have ``"release"``); None, or the file's own profile, takes
+            the file as written.
+
+    Returns the validated experiment, for [`run_experiment`][atlasnn.experiments.run_experiment].
+    A bad key or value is one line naming it."""
     return parse_config(read_config(path), quick=quick, source=str(path), profile=profile)
 
 
