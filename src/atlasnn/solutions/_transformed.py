@@ -47,7 +47,7 @@ class TimeTransformedSolution(AbstractSolution):
             components.
         end: T, the end of the interval (the extended march's last window ends past it).
         info: the solver's record (settings, counts, times; window lengths in τ).
-        outside: what evaluating outside [t0, T] does (as for :class:`Solution`).
+        outside: what evaluating outside [t0, T] does (as for ``Solution``).
     """
 
     interval_name: ClassVar[str] = "interval"
@@ -76,7 +76,7 @@ class TimeTransformedSolution(AbstractSolution):
     # ------------------------------------------------------------------ evaluation
     def tau(self, t) -> tuple[np.ndarray, np.ndarray]:
         """τ at physical times t, and the window holding each: (τ, k), t's shape. In the window,
-        Newton's method on t(θ) = t* for θ = (τ − τ_k)/h_k, from :meth:`_start`, each step kept
+        Newton's method on t(θ) = t* for θ = (τ − τ_k)/h_k, from ``_start``, each step kept
         inside the bracket of the θs tried (bisecting where it would leave it), until t(θ) is t* to
         a few of its ulps (a further Newton step would be round-off divided by g: many ulps of θ
         where g is small), θ stops moving or the bracket closes."""

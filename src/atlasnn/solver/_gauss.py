@@ -117,7 +117,7 @@ class GaussCollocation(AbstractSolver):
             encounters and eccentric orbits): a function g(q, p) > 0, small where the motion is
             fast, or ``"potential"``: g = (−V(q))^(−3/2) for a separable H whose potential is
             negative (gravitational N-body problems). None: march in t. ``h`` and the lengths
-            recorded are then in τ (:mod:`._gauss_time`; docs/SOLVER.md, "Close encounters").
+            recorded are then in τ (``_gauss_time``; docs/SOLVER.md, "Close encounters").
     """
 
     name: ClassVar[str] = "gauss"
@@ -213,7 +213,7 @@ class GaussCollocation(AbstractSolver):
 
     def _solve_rows(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float,
                     progress: Callable[[float], None] | None, until: int | None = None) -> list[PolynomialSolution]:
-        """:meth:`solve_batch` in the march's own time, or (``until``: the index of t in the
+        """``solve_batch`` in the march's own time, or (``until``: the index of t in the
         extended state) in τ until t reaches T."""
         b, n = z0s.shape
         # a batch padded to 8, 16, 32 … members (copies of the first, already at T, dropped): a few
