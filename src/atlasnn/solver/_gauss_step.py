@@ -12,8 +12,9 @@ by fixed-point iteration over all stages at once, from a guess of the stages (th
 polynomial continued into this one), until the update is zero or has not shrunk for two iterations
 in a row: the iteration has reached round-off, which needs no tolerance to tune. Where it does not
 get there — it diverges or stalls above round-off: a stiff term, or a step too long for the
-iteration to contract — the window is solved again by simplified Newton iterations, with the
-Jacobian at z_n and one LU factorisation of I − (diag(hb) μ) ⊗ A(z_n) for the window.
+iteration to contract — the window is solved again by simplified Newton iterations with the
+Jacobian at z_n, the matrix I − (diag(hb) μ) ⊗ A(z_n) decoupled into ⌈s/2⌉ complex n × n systems
+by the eigenvectors of diag(b) μ (:func:`_newton`).
 """
 
 from __future__ import annotations
@@ -60,8 +61,8 @@ def small_matmul(M, X: jax.Array) -> jax.Array:
     """M @ X for the small matrices of a window (s × s by s × n). For a few entries, a broadcast
     product and a sum, which XLA fuses with the field around it (the dot is a library call of fixed
     cost: 3× slower per fixed-point iteration on Hénon–Heiles, s = 12); for more, the dot (XLA's
-    reduction over the middle axis of the product does not vectorise: its cost grew 4× faster than
-    n). ``benchmarks/gauss_scaling.py`` measures both."""
+    reduction over the middle axis of the product does not vectorise: per iteration it cost 4–5×
+    the field's evaluations at n = 512, measured on FPUT chains)."""
     if X.shape[-2] * X.shape[-1] <= SMALL_PRODUCT:
         return jnp.sum(M[:, :, None] * X[None, :, :], axis=1)
     return jnp.matmul(M, X, precision=lax.Precision.HIGHEST)
@@ -119,7 +120,7 @@ def _iterate(update, L0, scale, max_iterations, unroll=1):
     return L, k, dmin, dlast
 
 
-def _scale(z, e, L0):
+def _scale(z, L0):
     """Each component's size for the iteration's rule: |z| + the largest stage increment, never zero."""
     w = jnp.abs(z) + jnp.max(jnp.abs(L0), axis=0)
     return jnp.maximum(w, jnp.finfo(w.dtype).tiny)
@@ -130,7 +131,7 @@ def _fixed_point(field, tab, z, e, hb, L0, max_iterations):
     L0's evaluation, whether it reached round-off)."""
     mu = tab["mu"]
     L, k, dmin, dlast = _iterate(lambda L: hb[:, None] * field(z + (e + small_matmul(mu, L))), L0,
-                                 _scale(z, e, L0), max_iterations, unroll=FIXED_POINT_UNROLL)
+                                 _scale(z, L0), max_iterations, unroll=FIXED_POINT_UNROLL)
     return L, k + 1, _solved(L, L0, dmin, dlast)
 
 
@@ -155,7 +156,7 @@ def _newton(field, jacobian, tab, z, e, hb, L0, max_iterations):
         x = jax.vmap(lambda lu, piv, rj: jax.scipy.linalg.lu_solve((lu, piv), -rj))(*factors, r)
         return L + jnp.real(jnp.matmul(jnp.asarray(from_modes, a.dtype), x, precision=lax.Precision.HIGHEST))
 
-    L, k, dmin, dlast = _iterate(update, L0, _scale(z, e, L0), max_iterations)
+    L, k, dmin, dlast = _iterate(update, L0, _scale(z, L0), max_iterations)
     return L, k, _solved(L, L0, dmin, dlast)
 
 
