@@ -13,6 +13,7 @@ from atlasnn.solutions._estimate import TRUST_FRACTION, ErrorEstimate, estimate_
 from atlasnn.solutions._linearised import propagate, residual_and_jacobian
 from atlasnn.solutions._polynomial import PolynomialSolution
 from atlasnn.solutions._transformed import TimeTransformedSolution
+from atlasnn.solutions._traced import TracedSolution
 from atlasnn.solutions._piecewise import PiecewiseSolution, WindowRecord, stack_models, unstack_models, window_edges
 from atlasnn.solutions._base import INTERVAL_SLACK, ExtrapolationError, ExtrapolationWarning
 from atlasnn.solutions._solution import OUTSIDE_MODES, Solution
@@ -36,6 +37,7 @@ __all__ = [
     "PiecewiseSolution",
     "PolynomialSolution",
     "TimeTransformedSolution",
+    "TracedSolution",
     "BundleSolution",
     "MEMBER_CHUNK",
     "bundle_start",

@@ -21,9 +21,10 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.limits import available_memory
-from atlasnn.solutions import PolynomialSolution, TimeTransformedSolution, bucket_size, gauss_tableau
+from atlasnn.solutions import PolynomialSolution, TimeTransformedSolution, TracedSolution, bucket_size, gauss_tableau
 from atlasnn.solver._base import AbstractSolver, register_solver
 from atlasnn.solver._collocation import require_float64
+from atlasnn.solver._gauss_core import LOOPS, gauss_core
 from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, ReplayState, clock, compiled_gauss_march,
                                          compiled_gauss_replay, compiled_gauss_windows, initial_state)
 from atlasnn.solver._gauss_time import TimeTransform, check_time_scale, describe_time_scale
@@ -118,6 +119,11 @@ class GaussCollocation(AbstractSolver):
             fast, or ``"potential"``: g = (−V(q))^(−3/2) for a separable H whose potential is
             negative (gravitational N-body problems). None: march in t. ``h`` and the lengths
             recorded are then in τ (``_gauss_time``; docs/SOLVER.md, "Close encounters").
+        max_windows: the most window tries (accepted or rejected) of a solve run inside ``jax.jit``,
+            ``jax.grad``, ``jax.vmap`` or ``jax.jvp`` (its traceable core has static shapes, as
+            Diffrax's ``max_steps``); a march that needs more raises when it runs.
+        differentiation: how that core may be differentiated: ``"reverse"`` (``jax.grad``,
+            ``jax.vjp``: a checkpointed loop) or ``"forward"`` (``jax.jvp``, ``jax.jacfwd``).
     """
 
     name: ClassVar[str] = "gauss"
@@ -138,6 +144,8 @@ class GaussCollocation(AbstractSolver):
     keep: bool | None = None
     chunk: int = 1024
     time_scale: str | Callable | None = None
+    max_windows: int = 4096
+    differentiation: str = "reverse"
 
     def __post_init__(self) -> None:
         if self.stages is not None:
@@ -150,7 +158,10 @@ class GaussCollocation(AbstractSolver):
             raise ConfigError(f"GaussCollocation steps must be one of {list(STEP_MODES)}, got {self.steps!r}")
         if self.h is not None:
             _number("h", self.h)
-        for name in ("max_iterations", "max_rejects", "chunk"):
+        if self.differentiation not in LOOPS:
+            raise ConfigError(f"GaussCollocation differentiation must be one of {list(LOOPS)}, "
+                              f"got {self.differentiation!r}")
+        for name in ("max_iterations", "max_rejects", "chunk", "max_windows"):
             _integer(name, getattr(self, name))
         _integer("warmup", self.warmup, 0)
         for name in (("newton",) if self.newton is not None else ()) + (("keep",) if self.keep is not None else ()):
@@ -186,6 +197,20 @@ class GaussCollocation(AbstractSolver):
             if isinstance(getattr(exc, "partial", None), list):
                 exc.partial = exc.partial[0]  # one solution: the part up to the stop, or None
             raise
+
+    def solve_traced(self, system: HamiltonianSystem, z0: Any, t0: Any, T: Any) -> TracedSolution:
+        """The solution as JAX values, by the traceable core (:mod:`._gauss_core`): what ``solve``
+        returns inside ``jax.jit``, ``jax.grad``, ``jax.vmap`` or ``jax.jvp``. The same windows and
+        numbers as :meth:`solve` (to round-off); no progress, no error estimate, no time scale."""
+        if self.time_scale is not None:
+            raise ConfigError("GaussCollocation time_scale is not available inside jit/grad/vmap: solve without it "
+                              "there, or call solve on numbers")
+        n = system.state_dim
+        return gauss_core(system, z0, t0, T, stages=self.stage_count, steps=self.steps, rtol=self.rtol,
+                          atol=self.atol, h=self.h, max_windows=self.max_windows,
+                          differentiation=self.differentiation, max_iterations=self.max_iterations,
+                          newton=self.newton_for(n), growth=self.growth, safety=self.safety, warmup=self.warmup,
+                          max_rejects=self.max_rejects)
 
     def solve_batch(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float, *,
                     progress: Callable[[float], None] | None = None

@@ -49,7 +49,8 @@ from atlasnn.solutions import gauss_tableau
 from atlasnn.solver._exported import exported_program
 from atlasnn.solver._gauss_step import compensated_add, continued_stages, gauss_step, local_error, tableau_arrays
 
-__all__ = ["GaussState", "GaussChunk", "ReplayState", "clock", "compiled_gauss_march", "compiled_gauss_replay",
+__all__ = ["GaussState", "GaussChunk", "ReplayState", "clock", "marching", "started", "try_window", "compiled_gauss_march",
+           "compiled_gauss_replay",
            "compiled_gauss_windows", "initial_state", "FAILURES", "STEP_MODES"]
 
 #: the ways window lengths are chosen (module docstring)
@@ -100,7 +101,7 @@ class GaussChunk(NamedTuple):
 
 def initial_state(z0: np.ndarray, t0: float, stages: int) -> GaussState:
     """The state before the first window (host NumPy arrays); the program sets the first length and
-    the first window's guess on its first call (:func:`_started`)."""
+    the first window's guess on its first call (:func:`started`)."""
     z0 = np.asarray(z0, np.float64)
     zero, izero = np.float64(0.0), np.int64(0)
     return GaussState(np.float64(t0), zero, z0, np.zeros_like(z0), zero, zero, np.zeros((stages,) + z0.shape),
@@ -112,7 +113,7 @@ def clock(st: GaussState, until: int | None):
     return st.t if until is None else st.z[..., until] + st.e[..., until]
 
 
-def _started(system, tab, st: GaussState, T, h_given, until: int | None = None) -> GaussState:
+def started(system, tab, st: GaussState, T, h_given, until: int | None = None) -> GaussState:
     """``st`` with its first length and guess where the march has not started (h_prev = 0): the
     given length, else 1/ω with ω the field's fastest frequency at z0 (:func:`_frequency`; at most
     the interval — with ``until``, the span that component's rate at z0 takes to cover what is left
@@ -126,7 +127,7 @@ def _started(system, tab, st: GaussState, T, h_given, until: int | None = None) 
         omega = _frequency(system, st.z)
         h0 = jnp.where(omega > 0, 1.0 / jnp.where(omega > 0, omega, 1.0), span)
         h0 = jnp.minimum(span, h0)
-        h0 = jnp.where(h_given > 0, h_given, h0)
+        h0 = lax.stop_gradient(jnp.where(h_given > 0, h_given, h0))
         failed = jnp.where(jnp.all(jnp.isfinite(f0)), st.failed, 4).astype(st.failed.dtype)
         return st._replace(h=h0, h_prev=h0, L_prev=h0 * tab["b"][:, None] * f0[None, :], failed=failed)
 
@@ -197,7 +198,8 @@ def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
     last = (st.h >= span - floor) if settings["until"] is None else jnp.asarray(False)
     h = jnp.where(last, span, st.h)
     Y0 = continued_stages(tab, st.z, st.e, st.L_prev, h / st.h_prev)
-    r = gauss_step(field, jac, tab, st.z, st.e, h, Y0, max_iterations=settings["max_iterations"])
+    r = gauss_step(field, jac, tab, st.z, st.e, h, Y0, max_iterations=settings["max_iterations"],
+                   implicit_gradients=settings.get("implicit", False))
     end, dense = local_error(field, tab, st.z, st.e, h, r.L)
     # a tolerance below what float64 resolves counts as round-off: a few ulps of z and of the
     # increments, the latter for each of the check's s + 1 coefficients, which carry their own
@@ -221,8 +223,40 @@ def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
         settled = jnp.where(ok & (st.accepted >= settings["warmup"]) & (fac < settings["growth"]), 1, settled)
         fac = jnp.where(ok & (settled > 0), 1.0, fac)
     fac = jnp.where(ok, fac, jnp.where(r.converged, jnp.minimum(fac, 0.9), 0.5))
-    h_next = jnp.where(given, h_given, jnp.where(ok & last, st.h, h * fac))
+    # the lengths are the control's, not functions of the state: a derivative of the march is that
+    # of the map over the windows taken (the last one's length, T − t, carries T's)
+    h_next = lax.stop_gradient(jnp.where(given, h_given, jnp.where(ok & last, st.h, h * fac)))
     return ok, r, h, ratio, h_next, last, settled.astype(st.settled.dtype)
+
+
+def marching(st: GaussState, T, until: int | None = None):
+    """Whether a march goes on: its clock before T and nothing failed."""
+    return (clock(st, until) < T) & (st.failed == 0)
+
+
+def try_window(system, tab, settings, st: GaussState, streak, T, rtol, atol, h_given):
+    """One try of one window from ``st``: (the state after it, the rejections in a row, accepted?,
+    its row: start, length, start state and compensation, L, check ratio). ``settings`` as the
+    program's (with ``implicit``: the stage equations differentiated implicitly, for the traced
+    core, :mod:`._gauss_core`)."""
+    until = settings["until"]
+    ends = T if until is None else jnp.maximum(jnp.abs(T), jnp.abs(st.t))  # the round-off of the march's time
+    floor = 1e-14 * jnp.maximum(jnp.abs(ends), 1.0)
+    ok, r, h, ratio, h_next, last, settled = _window(system, tab, settings, st, T, rtol, atol, h_given)
+    t1, te1 = compensated_add(st.t, st.te, h)
+    t1, te1 = jnp.where(last, T, t1), jnp.where(last, 0.0, te1)
+    streak = jnp.where(ok, 0, streak + 1)
+    failed = jnp.where(~r.converged & (h_given > 0), 3,
+                       jnp.where(streak > settings["max_rejects"], jnp.where(r.converged, 2, 3),
+                                 jnp.where(h_next < floor, 1, 0)))
+    keep = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
+    new = GaussState(keep(t1, st.t), keep(te1, st.te), keep(r.z, st.z), keep(r.e, st.e), h_next,
+                     keep(h, st.h_prev), keep(r.L, st.L_prev), st.accepted + ok.astype(st.accepted.dtype),
+                     st.rejected + (~ok).astype(st.rejected.dtype), st.iterations + r.iterations,
+                     st.newton + r.newton.astype(st.newton.dtype),
+                     jnp.where(ok, 0, failed).astype(st.failed.dtype),
+                     jnp.where(ok, jnp.maximum(st.worst, ratio), st.worst), settled)
+    return new, streak, ok, (st.t + st.te, h, st.z, st.e, r.L, ratio)
 
 
 @program_cache
@@ -231,35 +265,18 @@ def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety
             settings_key):
     tab = tableau_arrays(gauss_tableau(stages))  # NumPy float64: constants of the program (traced in x64)
     settings = {"steps": steps, "max_iterations": max_iterations, "newton": newton, "growth": growth,
-                "safety": safety, "warmup": warmup, "until": until}
+                "safety": safety, "warmup": warmup, "until": until, "max_rejects": max_rejects}
 
     def attempt(st, streak, T, rtol, atol, h_given):
-        """One try of one window: (the state after it, the rejections in a row, accepted?, its row)."""
-        ends = T if until is None else jnp.maximum(jnp.abs(T), jnp.abs(st.t))  # the round-off of the march's time
-        floor = 1e-14 * jnp.maximum(jnp.abs(ends), 1.0)
-        ok, r, h, ratio, h_next, last, settled = _window(system, tab, settings, st, T, rtol, atol, h_given)
-        t1, te1 = compensated_add(st.t, st.te, h)
-        t1, te1 = jnp.where(last, T, t1), jnp.where(last, 0.0, te1)
-        streak = jnp.where(ok, 0, streak + 1)
-        failed = jnp.where(~r.converged & (h_given > 0), 3,
-                           jnp.where(streak > max_rejects, jnp.where(r.converged, 2, 3),
-                                     jnp.where(h_next < floor, 1, 0)))
-        keep = lambda new, old: jnp.where(ok, new, old)  # noqa: E731
-        new = GaussState(keep(t1, st.t), keep(te1, st.te), keep(r.z, st.z), keep(r.e, st.e), h_next,
-                         keep(h, st.h_prev), keep(r.L, st.L_prev), st.accepted + ok.astype(st.accepted.dtype),
-                         st.rejected + (~ok).astype(st.rejected.dtype), st.iterations + r.iterations,
-                         st.newton + r.newton.astype(st.newton.dtype),
-                         jnp.where(ok, 0, failed).astype(st.failed.dtype),
-                         jnp.where(ok, jnp.maximum(st.worst, ratio), st.worst), settled)
-        return new, streak, ok, (st.t + st.te, h, st.z, st.e, r.L, ratio)
+        return try_window(system, tab, settings, st, streak, T, rtol, atol, h_given)
 
     def running(st, T):
-        return (clock(st, until) < T) & (st.failed == 0)
+        return marching(st, T, until)
 
     def alone(state: GaussState, T, rtol, atol, h_given):
         """One member: a while loop that stops at T; row k of the buffers is the k-th accepted window
         (written in place whatever the outcome: a rejected try is overwritten by the next)."""
-        st = _started(system, tab, jax.tree_util.tree_map(lambda x: x[0], state), T, h_given, until)
+        st = started(system, tab, jax.tree_util.tree_map(lambda x: x[0], state), T, h_given, until)
         n, dt = st.z.shape[0], st.z.dtype
         buf = (jnp.zeros(chunk, dt), jnp.zeros(chunk, dt), jnp.zeros((chunk, n), dt), jnp.zeros((chunk, n), dt),
                jnp.zeros((chunk, stages, n), dt), jnp.zeros(chunk, dt))
@@ -279,7 +296,7 @@ def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety
         finished one idling), until all are done or ``chunk`` trips; trip j's rows go to row j of
         the buffers for every member at once (written in place: a row index per member, under
         ``vmap``, would make every write a scatter that copies the buffers)."""
-        st = jax.vmap(_started, in_axes=(None, None, 0, None, None, None))(system, tab, state, T, h_given, until)
+        st = jax.vmap(started, in_axes=(None, None, 0, None, None, None))(system, tab, state, T, h_given, until)
         b, n, dt = st.z.shape[0], st.z.shape[1], st.z.dtype
         buf = (jnp.zeros((chunk, b), bool), jnp.zeros((chunk, b), dt), jnp.zeros((chunk, b), dt),
                jnp.zeros((chunk, b, n), dt), jnp.zeros((chunk, b, n), dt), jnp.zeros((chunk, b, stages, n), dt),

@@ -190,14 +190,44 @@ def solve_stages(field: Callable, jacobian: Callable | None, tab: dict, z: jax.A
     return L, k, ok, used_newton
 
 
+#: the largest stage system (s·n unknowns) whose tangent solve falls back to a dense LU when the
+#: linear iteration does not converge (the window was a stiff one, solved by Newton)
+DENSE_TANGENT_SIZE = 1024
+
+
 def _dense_tangent_solve(linear: Callable, y: jax.Array) -> jax.Array:
-    """x with linear(x) = y, ``linear`` the stage equations' residual linearised at their solution
-    (I − the derivative of hb ⊙ f(z + (e + μL)) in L): its (sn × sn) matrix from sn products with
-    the unit vectors, then one LU solve (s n is a few dozen to a few hundred)."""
+    """x with linear(x) = y: the (sn × sn) matrix of ``linear`` from sn products with the unit
+    vectors, then one LU solve."""
     shape = y.shape
     size = y.size
     columns = jax.vmap(linear)(jnp.eye(size, dtype=y.dtype).reshape((size,) + shape))
     return jnp.linalg.solve(columns.reshape(size, size).T, y.reshape(-1)).reshape(shape)
+
+
+def _linear_iteration(linear: Callable, y: jax.Array, max_iterations: int) -> jax.Array:
+    """x with linear(x) = y, ``linear`` = I − K the stage equations' residual linearised at their
+    solution (or its transpose), by the iteration x ← y + K x from x = y: it contracts as the
+    fixed-point iteration of the stages did (the same K), at the cost of one derivative of the
+    field at the stages an iteration. Where it does not reach round-off (the window was stiff and
+    solved by Newton), the dense solve for at most DENSE_TANGENT_SIZE unknowns, else NaN — a
+    derivative that is not there says so."""
+    scale = jnp.full(y.shape[-1], jnp.maximum(jnp.max(jnp.abs(y)), jnp.finfo(y.dtype).tiny))
+    x, _, dmin, dlast = _iterate(lambda x: y + (x - linear(x)), y, scale, max_iterations, unroll=FIXED_POINT_UNROLL)
+    size = jnp.maximum(jnp.max(jnp.abs(x)), jnp.max(jnp.abs(y)))
+    ok = jnp.isfinite(dlast) & (dmin <= FIXED_POINT_FLOOR * size)
+    fallback = (lambda: _dense_tangent_solve(linear, y)) if y.size <= DENSE_TANGENT_SIZE \
+        else (lambda: jnp.full_like(y, jnp.nan))
+    # a loop that runs once where the iteration failed (under vmap only such members pay for it)
+    return lax.while_loop(lambda c: ~c[1], lambda c: (fallback(), jnp.asarray(True)), (x, ok))[0]
+
+
+def _tangent_solve(max_iterations: int) -> Callable:
+    """``lax.custom_root``'s tangent solve: :func:`_linear_iteration` as a ``lax.custom_linear_solve``
+    (so that reverse mode transposes it: the same iteration on the transposed equations)."""
+    def solve(linear, y):
+        return _linear_iteration(linear, y, max_iterations)
+
+    return lambda linear, y: lax.custom_linear_solve(linear, y, solve, transpose_solve=solve)
 
 
 def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Array, e: jax.Array, h, Y0: jax.Array,
@@ -226,7 +256,7 @@ def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Arr
             L, k, ok, used = solve_stages(field, jacobian, tab, z, e, hb, guess, max_iterations)
             return L, jnp.stack([k, ok, used]).astype(L.dtype)
 
-        L, aux = lax.custom_root(residual, L0, solve, _dense_tangent_solve, has_aux=True)
+        L, aux = lax.custom_root(residual, L0, solve, _tangent_solve(max_iterations), has_aux=True)
         k, ok, used_newton = aux[0].astype(jnp.int32), aux[1] > 0, aux[2] > 0
     else:
         L, k, ok, used_newton = solve_stages(field, jacobian, tab, z, e, hb, L0, max_iterations)

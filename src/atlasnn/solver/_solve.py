@@ -6,6 +6,7 @@ import math
 from numbers import Integral
 from typing import Any, Callable
 
+import jax
 import numpy as np
 
 from atlasnn.errors import ConfigError
@@ -40,6 +41,22 @@ def _solver(solver: Any, rtol: Any, atol: Any) -> AbstractSolver:
     return solver.with_tolerance(rtol, atol)
 
 
+def _traced(system: HamiltonianSystem, *values: Any) -> bool:
+    """Whether a solve runs inside a JAX transformation: its inputs, or what H closes over, traced."""
+    return system.traced or any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(values))
+
+
+def _solve_traced(system: HamiltonianSystem, z0: Any, interval: Any, solver: AbstractSolver):
+    if not isinstance(solver, GaussCollocation):
+        raise ConfigError(f"inside jit/grad/vmap solve needs a GaussCollocation solver, got {type(solver).__name__}")
+    try:
+        t0, T = interval
+    except (TypeError, ValueError):
+        raise ConfigError(f"interval must be (t0, T), got {interval!r}") from None
+    z0 = system.initial_state(None) if z0 is None else z0
+    return solver.solve_traced(system, z0, t0, T)
+
+
 def solve(system: HamiltonianSystem, z0: Any = None, interval: tuple[float, float] | None = None, *,
           solver: AbstractSolver | None = None, rtol: float | None = None, atol: float | None = None,
           progress: Callable[[float], None] | None = None) -> AbstractSolution:
@@ -61,7 +78,15 @@ def solve(system: HamiltonianSystem, z0: Any = None, interval: tuple[float, floa
     Returns the solution: evaluate ẑ and dẑ/dt at any times (``sol(t)``, ``sol.derivative(t)``),
     its energy, residual and a-posteriori ``error_estimate(t)``; save it with
     [`atlasnn.save`][atlasnn.checkpoint.save].
+
+    Inside ``jax.jit``, ``jax.grad``, ``jax.vmap`` or ``jax.jvp`` (z0, the interval or what H
+    closes over traced) it runs the Gauss solver's traceable core and returns a
+    [`TracedSolution`][atlasnn.solutions.TracedSolution]: the same windows and numbers, as JAX
+    values (``sol(t)``, ``sol.derivative(t)``, ``sol.energy(t)``), differentiable with respect to
+    z0, the interval and H's parameters (docs/JAX.md).
     """
+    if isinstance(system, HamiltonianSystem) and _traced(system, z0, interval):
+        return _solve_traced(system, z0, interval, _solver(solver, rtol, atol))
     t0, T = _interval(system, interval)
     z = system.initial_state(z0)
     return _solver(solver, rtol, atol).solve(system, z, t0, T, progress=progress)

@@ -83,13 +83,20 @@ class HamiltonianSystem:
         object.__setattr__(self, "params", dict(self.params))
         if self.parametric is not None and not callable(self.parametric):
             raise SystemError_(f"parametric must be callable, got {type(self.parametric).__name__}")
-        _probe(self)
+        object.__setattr__(self, "_traced", _probe(self))
 
     # ------------------------------------------------------------------ basics
     @property
     def state_dim(self) -> int:
         """2d, the length of a state vector."""
         return 2 * self.dim
+
+    @property
+    def traced(self) -> bool:
+        """Whether H closes over values JAX is tracing (the system was built inside ``jax.jit``,
+        ``jax.grad`` or ``jax.vmap``, e.g. from a network's weights): ``solve`` then runs its
+        traceable core."""
+        return self._traced
 
     @property
     def state_names(self) -> tuple[str, ...]:
@@ -236,13 +243,14 @@ class HamiltonianSystem:
         }
 
 
-def _probe(system: HamiltonianSystem) -> None:
+def _probe(system: HamiltonianSystem) -> bool:
     """Refuse, in one line, a user's H that JAX cannot trace (it turns q or p into a NumPy array or
     a Python number) or that indexes past the d components of q or p (JAX would clamp ``q[1]`` to
     ``q[0]`` with d = 1 and solve another system without a word): H, and ``parametric`` when
     given, traced once at the default state (0.5 everywhere without one) with index checks.
     atlasnn's own functions (built-ins, expressions) index by d and are not probed; any other
-    failure is left to the computation that meets it."""
+    failure is left to the computation that meets it. Returns whether H closes over values traced
+    by JAX (the system was built inside ``jit``, ``grad`` or ``vmap``: :attr:`HamiltonianSystem.traced`)."""
     from jax.experimental import checkify
 
     d = system.dim
@@ -250,6 +258,7 @@ def _probe(system: HamiltonianSystem) -> None:
         z = jnp.full(2 * d, 0.5) if system.z0 is None else jnp.asarray(system.z0)
         theta = jnp.asarray([float(v) for v in system.params.values()])
     calls = [("H(q, p)", system.hamiltonian, (z[:d], z[d:]))]
+    traced = False
     if system.parametric is not None:
         calls.append(("parametric(q, p, theta)", system.parametric, (z[:d], z[d:], theta)))
     for what, user_fn, args in calls:
@@ -261,9 +270,10 @@ def _probe(system: HamiltonianSystem) -> None:
         # the float64 march (6.9e-7 off with K = np.array([2.3]))
         fn = lambda *a, _fn=user_fn: _fn(*a)  # noqa: E731
         try:
-            traced = str(jax.make_jaxpr(fn)(*args))  # what JAX cannot trace raises here
-            problem = None
-            if "gather" in traced or "dynamic_slice" in traced:  # indexing by a number: checked, op by op
+            closed = jax.make_jaxpr(fn)(*args)  # what JAX cannot trace raises here
+            traced = traced or any(isinstance(c, jax.core.Tracer) for c in closed.consts)
+            program, problem = str(closed), None
+            if "gather" in program or "dynamic_slice" in program:  # indexing by a number: checked, op by op
                 error, _ = checkify.checkify(fn, errors=checkify.index_checks)(*args)
                 problem = error.get()
         except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError,
@@ -278,6 +288,7 @@ def _probe(system: HamiltonianSystem) -> None:
             raise SystemError_(f"system {system.name!r}: {what} indexes past the state with dim = {d} "
                                f"({problem.strip().rstrip('.')}): q and p have {d} component(s) each, "
                                f"{list(system.q_names)} and {list(system.p_names)}; give the right dim or fix the index")
+    return traced
 
 
 @program_cache

@@ -1,0 +1,91 @@
+"""The Gauss collocation's solution as JAX values: what :func:`atlasnn.solve` returns when it runs
+inside ``jax.jit``, ``jax.grad``, ``jax.vmap`` or ``jax.jvp`` (its traceable core,
+:mod:`atlasnn.solver._gauss_core`). The same polynomials as :class:`PolynomialSolution` — window k
+covers [t_k, t_k + h_k] and ẑ(t) = z_k + Σ_j L_kj Λ_j(θ)/b_j there — held in arrays of a fixed
+number of rows (the window budget), of which the first ``count`` are the windows; evaluating it is
+a JAX function of the times and of every array, so it can be returned from ``jit`` and
+differentiated.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from atlasnn.solutions._tableau import gauss_tableau, shifted_legendre
+
+__all__ = ["TracedSolution"]
+
+
+class TracedSolution(eqx.Module):
+    """A Gauss collocation solution over [t0, T] as a pytree of arrays, callable at any times
+    inside it (a time outside is served by the nearest window's polynomial, extrapolated).
+
+    Attributes:
+        t0: the start of the interval.
+        T: its end.
+        starts: each window's start t_k (budget,); rows past ``count`` are +inf.
+        lengths: each window's length h_k (budget,).
+        z: each window's start state z_k (budget, 2d); ``e``: its compensation.
+        L: the stage increments (budget, s, 2d).
+        count: the number of windows.
+        rejected: windows tried and rejected.
+        iterations: stage iterations over the march.
+        stages: s.
+        system: the Hamiltonian system (for ``energy``).
+    """
+
+    t0: jax.Array
+    T: jax.Array
+    starts: jax.Array
+    lengths: jax.Array
+    z: jax.Array
+    e: jax.Array
+    L: jax.Array
+    count: jax.Array
+    rejected: jax.Array
+    iterations: jax.Array
+    stages: int = eqx.field(static=True)
+    system: object = eqx.field(static=True)
+
+    def _window(self, t: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """(window index, θ) of each time: k with t_k ≤ t < t_{k+1}, clipped to the windows."""
+        k = jnp.clip(jnp.searchsorted(self.starts, t, side="right") - 1, 0, self.count - 1)
+        return k, (t - self.starts[k]) / self.lengths[k]
+
+    def _values(self, t) -> tuple[jax.Array, jax.Array]:
+        t = jnp.asarray(t, self.z.dtype)
+        flat = t.reshape(-1)
+        tab = gauss_tableau(self.stages)
+        k, theta = self._window(flat)
+        basis = shifted_legendre(theta, self.stages, jnp)  # (m, s + 1)
+        value = theta[:, None] * (basis[:, :-1] @ jnp.asarray(tab.value.T, t.dtype))
+        rate = basis @ jnp.asarray(tab.rate.T, t.dtype)
+        rows = self.L[k]  # (m, s, 2d)
+        z = self.z[k] + (self.e[k] + jnp.einsum("ms,msn->mn", value, rows))
+        dz = jnp.einsum("ms,msn->mn", rate, rows) / self.lengths[k][:, None]
+        shape = t.shape + (self.z.shape[-1],)
+        return z.reshape(shape), dz.reshape(shape)
+
+    def __call__(self, t) -> jax.Array:
+        """ẑ(t), shape t.shape + (2d,)."""
+        return self._values(t)[0]
+
+    def derivative(self, t) -> jax.Array:
+        """dẑ/dt(t), shape t.shape + (2d,)."""
+        return self._values(t)[1]
+
+    def energy(self, t) -> jax.Array:
+        """H(ẑ(t)), shape t.shape."""
+        return self.system.energy(self(t))
+
+    @property
+    def end_state(self) -> jax.Array:
+        """ẑ(T)."""
+        return self(self.T)
+
+    @property
+    def interval(self) -> tuple[jax.Array, jax.Array]:
+        """(t0, T)."""
+        return self.t0, self.T

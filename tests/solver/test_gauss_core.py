@@ -1,0 +1,147 @@
+"""``solve`` as a JAX function: inside jit, grad, vmap and jvp it runs the traceable core, which must
+compute the host march's numbers and exact derivatives of them (against central differences,
+forward against reverse mode, Diffrax's checkpointed adjoint through the same method, and closed
+forms of the harmonic oscillator)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from atlasnn.errors import ConfigError
+from atlasnn.solutions import TracedSolution
+from atlasnn.solver import GaussCollocation, solve
+from atlasnn.systems import HamiltonianSystem, expression_system
+
+E = 0.6
+PERIOD = 2 * np.pi
+
+
+@pytest.fixture(autouse=True)
+def x64():
+    with jax.enable_x64(True):
+        yield
+
+
+def kepler():
+    return expression_system("(p1**2 + p2**2)/2 - 1/sqrt(q1**2 + q2**2)", ["q1", "q2"], ["p1", "p2"],
+                             z0=[1 - E, 0.0, 0.0, float(np.sqrt((1 + E) / (1 - E)))], separable=True,
+                             name="kepler-core")
+
+
+def oscillator(k):
+    return HamiltonianSystem(lambda q, p: p[0] ** 2 / 2 + k * q[0] ** 2 / 2, 1, name="oscillator-core")
+
+
+def test_jit_gives_the_host_numbers():
+    """Given windows (h): the same windows and, to round-off, the same polynomials; with the control:
+    the same tolerance met (a length may tip where the check's round-off differs between programs)."""
+    system, T = kepler(), 3 * PERIOD
+    t = np.linspace(0.0, T, 301)
+    for solver, close in ((GaussCollocation(h=2.0 ** -4, stages=6), 1e-13), (GaussCollocation(), 1e-10)):
+        host = solve(system, None, (0.0, T), solver=solver)
+        traced = jax.jit(lambda z: solve(system, z, (0.0, T), solver=solver))(jnp.asarray(system.z0))
+        assert isinstance(traced, TracedSolution)
+        assert abs(int(traced.count) - host.n_windows) <= (0 if solver.h else 0.05 * host.n_windows)
+        assert np.abs(np.asarray(traced(t)) - host(t)).max() <= close * np.abs(host(t)).max()
+        assert np.abs(np.asarray(traced.derivative(t)) - host.derivative(t)).max() <= 1e3 * close
+
+
+def richardson(f, z0, eps):
+    """Central differences of f at z0 along each axis, Richardson-extrapolated over eps and eps/2."""
+    def central(h):
+        return np.stack([(np.asarray(f(z0 + h * u)) - np.asarray(f(z0 - h * u))) / (2 * h)
+                         for u in np.eye(z0.size)], axis=-1)
+    return (4 * central(eps / 2) - central(eps)) / 3
+
+
+def test_gradients_agree_with_differences_forward_mode_and_diffrax():
+    """Kepler e = 0.6 over 2 periods on fixed windows: reverse mode, forward mode, Richardson
+    differences and Diffrax's RecursiveCheckpointAdjoint through its GaussLegendre agree."""
+    diffrax = pytest.importorskip("diffrax")
+    from atlasnn.solver.diffrax import GaussLegendre
+
+    system, T, h = kepler(), 2 * PERIOD, 2.0 ** -4
+    z0 = jnp.asarray(system.z0)
+    end = lambda z, how="reverse": solve(system, z, (0.0, T), solver=GaussCollocation(  # noqa: E731
+        h=h, stages=6, differentiation=how))(T)
+    reverse = np.asarray(jax.jit(jax.jacrev(end))(z0))
+    forward = np.asarray(jax.jit(jax.jacfwd(lambda z: end(z, "forward")))(z0))
+    size = np.abs(reverse).max()
+    assert np.abs(reverse - forward).max() <= 1e-12 * size
+    assert np.abs(reverse - richardson(jax.jit(end), np.asarray(z0), 1e-5)).max() <= 1e-8 * size
+    term = diffrax.ODETerm(lambda t, y, args: system.vector_field(y[None])[0])
+    steps = int(np.ceil(T / h)) + 4
+    other = np.asarray(jax.jacrev(lambda z: diffrax.diffeqsolve(
+        term, GaussLegendre(stages=6), 0.0, T, h, z, stepsize_controller=diffrax.ConstantStepSize(),
+        max_steps=steps).ys[-1])(z0))
+    assert np.abs(reverse - other).max() <= 1e-10 * size
+
+
+def test_adaptive_windows_differentiate_as_the_map_they_take():
+    """With the control (lengths from the check, not differentiated): the gradient is that of the
+    map over the windows taken, which central differences reproduce only where a nudge of z0 does
+    not move the lengths by more than the tolerance allows: ≤ 1e-6 relative at rtol 1e-11."""
+    system, T = kepler(), PERIOD
+    z0 = np.asarray(system.z0)
+    end = jax.jit(lambda z: solve(system, z, (0.0, T))(T))
+    g = np.asarray(jax.jacrev(end)(jnp.asarray(z0)))
+    assert np.abs(g - richardson(end, z0, 1e-4)).max() <= 1e-6 * np.abs(g).max()
+
+
+def test_derivatives_in_the_interval_and_in_hs_parameters_match_closed_forms():
+    """Harmonic oscillator H = p²/2 + k q²/2 from (1, 0): q(T) = cos(√k T), so ∂q/∂T = −√k sin(√k T)
+    and ∂q/∂k = −T sin(√k T)/(2√k); the parameter closed over by a system built inside grad."""
+    T, k = 7.3, 2.3
+
+    def q_end(k, T):
+        return solve(oscillator(k), jnp.array([1.0, 0.0]), (0.0, T))(T)[0]
+
+    dk, dT = jax.grad(q_end, argnums=(0, 1))(k, T)
+    w = np.sqrt(k)
+    assert abs(float(dT) + w * np.sin(w * T)) <= 1e-9
+    assert abs(float(dk) + T * np.sin(w * T) / (2 * w)) <= 1e-9
+    sol = jax.jit(lambda k: solve(oscillator(k), jnp.array([1.0, 0.0]), (0.0, T)))(k)
+    t = jnp.linspace(0.0, T, 50)
+    assert np.abs(np.asarray(sol(t))[:, 0] - np.cos(w * np.asarray(t))).max() <= 1e-10
+
+
+def test_vmap_gives_each_members_own_solve():
+    system, T = kepler(), PERIOD
+    z0s = np.asarray(system.z0) * np.array([[1.0], [1.02], [0.97]])
+    end = jax.jit(lambda z: solve(system, z, (0.0, T))(T))
+    ends = jax.jit(jax.vmap(end))(jnp.asarray(z0s))
+    for z, got in zip(z0s, np.asarray(ends)):
+        alone = end(jnp.asarray(z))
+        assert np.abs(got - np.asarray(alone)).max() <= 1e-13
+
+
+def test_a_march_past_its_budget_raises_naming_it():
+    system = kepler()
+    run = jax.jit(lambda z: solve(system, z, (0.0, 10 * PERIOD), solver=GaussCollocation(max_windows=5))(1.0))
+    with pytest.raises(Exception, match=r"max_windows=5\), was spent before T"):  # JAX wraps Equinox's error
+        jax.block_until_ready(run(jnp.asarray(system.z0)))
+
+
+def test_what_the_core_cannot_do_is_refused_in_one_line():
+    system = kepler()
+    with pytest.raises(ConfigError, match="jax_enable_x64"):
+        with jax.enable_x64(False):
+            jax.jit(lambda z: solve(system, z, (0.0, 1.0))(1.0))(jnp.asarray(system.z0, jnp.float32))
+    with pytest.raises(ConfigError, match="time_scale"):
+        jax.jit(lambda z: solve(system, z, (0.0, 1.0), solver=GaussCollocation(time_scale="potential"))(1.0))(
+            jnp.asarray(system.z0))
+    with pytest.raises(ConfigError, match="differentiation"):
+        GaussCollocation(differentiation="backward")
+
+
+def test_a_system_built_from_traced_values_says_so():
+    seen = []
+
+    def f(k):
+        system = oscillator(k)
+        seen.append(system.traced)
+        return k
+
+    jax.grad(f)(1.0)
+    assert seen == [True] and not oscillator(1.0).traced
