@@ -15,7 +15,10 @@ the pages hold what it makes, so no number on them can drift from its record):
 * ``orders``: docs/benchmarks/gauss_orders.json (``python -m benchmarks.gauss_orders``);
 * ``scaling``: docs/benchmarks/gauss_scaling.json (``python -m benchmarks.gauss_scaling``);
 * ``time_transform``: docs/benchmarks/time_transform.json (``python -m benchmarks.time_transform``);
-* ``rebound``: docs/benchmarks/rebound_anchor.json (``python -m benchmarks.rebound_anchor``).
+* ``rebound``: docs/benchmarks/rebound_anchor.json (``python -m benchmarks.rebound_anchor``);
+* ``gradients``: docs/benchmarks/gauss_gradients.json (``python -m benchmarks.gauss_gradients``, docs/JAX.md);
+* ``learned``: docs/runs/learned-hamiltonian/pendulum.json and pendulum-noiseless.json
+  (``python examples/learn_hamiltonian.py``, docs/howto/LEARN_H.md).
 
 The prose around the tables is written by hand; a few of its key numbers (and the machines
 PERFORMANCE.md names) are checked against their records all the same (``PROSE`` below): each check
@@ -36,7 +39,8 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGES = [ROOT / "docs" / "SOLVER.md", ROOT / "docs" / "CHOOSING.md"]
+PAGES = [ROOT / "docs" / "SOLVER.md", ROOT / "docs" / "CHOOSING.md", ROOT / "docs" / "JAX.md",
+         ROOT / "docs" / "howto" / "LEARN_H.md"]
 RECORDS = {
     "suite": "docs/runs/solver/suite.json",
     "workprecision": "docs/benchmarks/solver_workprecision.json",
@@ -50,6 +54,8 @@ RECORDS = {
     "scaling": "docs/benchmarks/gauss_scaling.json",
     "time_transform": "docs/benchmarks/time_transform.json",
     "rebound": "docs/benchmarks/rebound_anchor.json",
+    "gradients": "docs/benchmarks/gauss_gradients.json",
+    "learned": "docs/runs/learned-hamiltonian/pendulum.json",
 }
 METHODS = [("gauss-adaptive", "Gauss, adaptive"), ("diffrax-dopri8", "Diffrax Dopri8"),
            ("diffrax-tsit5", "Diffrax Tsit5"), ("dop853", "SciPy DOP853"), ("yoshida4", "Yoshida-4"),
@@ -275,7 +281,53 @@ def rebound(record: dict) -> str:
                               f"{record['reference']}{note}.")
 
 
-MAKERS = {"suite": suite, "workprecision": workprecision, "energy": energy, "step_modes": step_modes, "batch": batch,
+def gradients(record: dict) -> str:
+    k = record["kepler"]
+    rows = ["| call | time | error at T |", "|---|---|---|"]
+    for name, r in k["rows"].items():
+        error = f"{r['error_at_T']:.1e}" if "error_at_T" in r else ""
+        rows.append(f"| {name} | {_ms(r['time_ms'] / 1e3)} | {error} |")
+    a = k["agreement"]
+    text = "\n".join(rows) + (
+        f"\n\n{k['windows']} windows (host). A gradient costs {k['grad_over_forward']:.1f}× the jitted forward solve "
+        f"and {k['grad_over_diffrax_gauss_grad']:.2f}× Diffrax's gradient through `GaussLegendre`. On {a['windows']} "
+        f"fixed windows (h = {a['h']:g}) ∂z(T)/∂z0 agrees with Richardson-extrapolated central differences to "
+        f"{a['vs_central_differences']:.0e} and with Diffrax's (RecursiveCheckpointAdjoint, same steps) to "
+        f"{a['vs_diffrax_gauss_legendre']:.0e}, relative to its largest entry.")
+    over = "; ".join(f"{o['overhead_us']:.0f} µs with `max_windows={o['max_windows']}`" for o in record["call_overhead"])
+    o = record["call_overhead"][0]
+    text += (f"\n\nA jitted one-window call (Hénon–Heiles, t ∈ [0, 0.1]) costs beyond its window ({o['per_window_us']:.0f} µs "
+             f"in a long run): {over}; the host `solve` of the same window {o['host_one_window_call_us']:.0f} µs.")
+    rows = ["| states | `jax.vmap` | `jax.lax.map` | `solve_batch` |", "|---|---|---|---|"]
+    for v in record["vmap"]:
+        rows.append(f"| {v['states']} | {v['vmap_s']:.2f} s | {v['lax_map_s']:.2f} s | {v['solve_batch_s']:.2f} s |")
+    return text + ("\n\nHénon–Heiles over [0, 10] from perturbed states, `max_windows="
+                   f"{record['vmap'][0]['max_windows']}`:\n\n" + "\n".join(rows))
+
+
+def learned(record: dict) -> str:
+    records = [record]
+    other = ROOT / "docs" / "runs" / "learned-hamiltonian" / "pendulum-noiseless.json"
+    if other.is_file():
+        records.append(json.loads(other.read_text(encoding="utf-8")))
+    rows = ["| σ | H learned | final loss | training | held-out state error | held-out true energy error |",
+            "|---|---|---|---|---|---|"]
+    for r in records:
+        for name, m in r["methods"].items():
+            state = statistics.median(h["state_error"] for h in m["held_out"])
+            energy = statistics.median(h["energy_error_median"] for h in m["held_out"])
+            rows.append(f"| {r['sigma']:g} | {name} | {m['loss']:.1e} | {m['train_seconds']:.0f} s | {state:.1e} | "
+                        f"{energy:.1e} |")
+    return "\n".join(rows) + (
+        f"\n\n{record['steps']} Adam steps each, one core. Held-out: three initial states solved over [0, "
+        f"{record['horizon']:g}] ({record['horizon'] / record['span']:g}× the training span); the state error is the "
+        "largest over the output (median over the three states), the energy error the median of |H(ẑ(t)) − H(z0)|/|H(z0)| "
+        "of the true H along the prediction (median over the three). Figures: "
+        "[σ = 0.01](../runs/learned-hamiltonian/pendulum.png), "
+        "[σ = 0](../runs/learned-hamiltonian/pendulum-noiseless.png).")
+
+
+MAKERS = {"learned": learned, "gradients": gradients, "suite": suite, "workprecision": workprecision, "energy": energy, "step_modes": step_modes, "batch": batch,
           "first_run": first_run, "stages": stages,
           "roundoff": roundoff, "orders": orders, "scaling": scaling,
           "rebound": rebound, "time_transform": time_transform}

@@ -133,6 +133,9 @@ def test_what_the_core_cannot_do_is_refused_in_one_line():
             jnp.asarray(system.z0))
     with pytest.raises(ConfigError, match="differentiation"):
         GaussCollocation(differentiation="backward")
+    with pytest.raises(ConfigError, match="differentiation='forward'"):
+        z0 = jnp.asarray(system.z0)
+        jax.jvp(lambda z: solve(system, z, (0.0, 1.0))(1.0), (z0,), (z0,))
 
 
 def test_a_system_built_from_traced_values_says_so():

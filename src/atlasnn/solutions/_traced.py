@@ -1,6 +1,6 @@
-"""The Gauss collocation's solution as JAX values: what :func:`atlasnn.solve` returns when it runs
+"""The Gauss collocation's solution as JAX values: what ``atlasnn.solve`` returns when it runs
 inside ``jax.jit``, ``jax.grad``, ``jax.vmap`` or ``jax.jvp`` (its traceable core,
-:mod:`atlasnn.solver._gauss_core`). The same polynomials as :class:`PolynomialSolution` — window k
+``atlasnn/solver/_gauss_core.py``). The same polynomials as ``PolynomialSolution`` — window k
 covers [t_k, t_k + h_k] and ẑ(t) = z_k + Σ_j L_kj Λ_j(θ)/b_j there — held in arrays of a fixed
 number of rows (the window budget), of which the first ``count`` are the windows; evaluating it is
 a JAX function of the times and of every array, so it can be returned from ``jit`` and
@@ -25,10 +25,12 @@ class TracedSolution(eqx.Module):
     Attributes:
         t0: the start of the interval.
         T: its end.
-        starts: each window's start t_k (budget,); rows past ``count`` are +inf.
-        lengths: each window's length h_k (budget,).
-        z: each window's start state z_k (budget, 2d); ``e``: its compensation.
-        L: the stage increments (budget, s, 2d).
+        starts: each window's start t_k in order (budget,); entries past ``count`` are +inf.
+        rows: the row of window k in the arrays below (budget,): they hold every try of a window,
+            accepted or not, in the order tried (sorting them would copy them all).
+        lengths: each try's length (budget,).
+        z: each try's start state (budget, 2d); ``e``: its compensation.
+        L: each try's stage increments (budget, s, 2d).
         count: the number of windows.
         rejected: windows tried and rejected.
         iterations: stage iterations over the march.
@@ -39,6 +41,7 @@ class TracedSolution(eqx.Module):
     t0: jax.Array
     T: jax.Array
     starts: jax.Array
+    rows: jax.Array
     lengths: jax.Array
     z: jax.Array
     e: jax.Array
@@ -50,9 +53,10 @@ class TracedSolution(eqx.Module):
     system: object = eqx.field(static=True)
 
     def _window(self, t: jax.Array) -> tuple[jax.Array, jax.Array]:
-        """(window index, θ) of each time: k with t_k ≤ t < t_{k+1}, clipped to the windows."""
+        """(row of the window, θ) of each time: window k with t_k ≤ t < t_{k+1}, clipped to the windows."""
         k = jnp.clip(jnp.searchsorted(self.starts, t, side="right") - 1, 0, self.count - 1)
-        return k, (t - self.starts[k]) / self.lengths[k]
+        row = self.rows[k]
+        return row, (t - self.starts[k]) / self.lengths[row]
 
     def _values(self, t) -> tuple[jax.Array, jax.Array]:
         t = jnp.asarray(t, self.z.dtype)

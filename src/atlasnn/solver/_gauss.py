@@ -199,9 +199,10 @@ class GaussCollocation(AbstractSolver):
             raise
 
     def solve_traced(self, system: HamiltonianSystem, z0: Any, t0: Any, T: Any) -> TracedSolution:
-        """The solution as JAX values, by the traceable core (:mod:`._gauss_core`): what ``solve``
-        returns inside ``jax.jit``, ``jax.grad``, ``jax.vmap`` or ``jax.jvp``. The same windows and
-        numbers as :meth:`solve` (to round-off); no progress, no error estimate, no time scale."""
+        """The solution as JAX values, by the traceable core (``solver/_gauss_core.py``): what
+        ``solve`` returns inside ``jax.jit``, ``jax.grad``, ``jax.vmap`` or ``jax.jvp``. The same
+        windows and numbers as ``solve`` on numbers (to round-off); no progress, no error estimate,
+        no time scale (docs/JAX.md)."""
         if self.time_scale is not None:
             raise ConfigError("GaussCollocation time_scale is not available inside jit/grad/vmap: solve without it "
                               "there, or call solve on numbers")

@@ -81,18 +81,25 @@ def gauss_core(system: HamiltonianSystem, z0: Any, t0: Any, T: Any, *, stages: i
         written = tuple(b.at[c.tries].set(x) for b, x in zip(c.rows, (*row[:5], ok)))
         return _Carry(st, streak, c.tries + 1, written)
 
-    out = eqxi.while_loop(lambda c: marching(c.st, T), body, _Carry(st, jnp.asarray(0), jnp.asarray(0), rows),
-                          max_steps=budget, buffers=lambda c: c.rows, kind=LOOPS[differentiation],
-                          **({"checkpoints": budget} if differentiation == "reverse" else {}))
+    try:
+        out = eqxi.while_loop(lambda c: marching(c.st, T), body, _Carry(st, jnp.asarray(0), jnp.asarray(0), rows),
+                              max_steps=budget, buffers=lambda c: c.rows, kind=LOOPS[differentiation],
+                              **({"checkpoints": budget} if differentiation == "reverse" else {}))
+    except TypeError as exc:
+        if "forward-mode" not in str(exc):
+            raise
+        raise ConfigError("jax.jvp/jax.jacfwd through solve need GaussCollocation(differentiation='forward') "
+                          "(the default, 'reverse', serves jax.grad/jax.vjp)") from None
     return _solution(system, stages, t0, T, out)
 
 
 def _solution(system: HamiltonianSystem, stages: int, t0, T, out: _Carry) -> TracedSolution:
-    """The accepted tries' rows, in order, as a TracedSolution; a failed march raises at run time."""
+    """The tries' rows as a TracedSolution, the accepted ones indexed in order; a failed march
+    raises at run time."""
     start, length, z, e, L, accepted = out.rows
     budget = start.shape[0]
     position = jnp.arange(budget)
-    order = jnp.argsort(jnp.where(accepted, position, budget + position))  # accepted rows first, in order
+    order = jnp.nonzero(accepted, size=budget, fill_value=0)[0]  # the accepted rows, in order
     count = jnp.sum(accepted)
     st = out.st
     code = jnp.where(st.failed > 0, st.failed, jnp.where(st.t < T, _BUDGET, 0))
@@ -100,5 +107,4 @@ def _solution(system: HamiltonianSystem, stages: int, t0, T, out: _Carry) -> Tra
                 f"solve (traced core): the window budget, GaussCollocation(max_windows={budget}), was spent before T: "
                 "raise max_windows or loosen the tolerance"]
     starts = eqx.branched_error_if(jnp.where(position < count, start[order], jnp.inf), code > 0, code, messages)
-    return TracedSolution(t0, T, starts, length[order], z[order], e[order], L[order], count, st.rejected,
-                          st.iterations, stages, system)
+    return TracedSolution(t0, T, starts, order, length, z, e, L, count, st.rejected, st.iterations, stages, system)

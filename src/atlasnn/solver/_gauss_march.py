@@ -200,18 +200,20 @@ def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
     Y0 = continued_stages(tab, st.z, st.e, st.L_prev, h / st.h_prev)
     r = gauss_step(field, jac, tab, st.z, st.e, h, Y0, max_iterations=settings["max_iterations"],
                    implicit_gradients=settings.get("implicit", False))
-    end, dense = local_error(field, tab, st.z, st.e, h, r.L)
+    # the check only steers the lengths, which carry no derivative (below): kept out of gradients
+    zc, ec, hc, Lc, z1 = lax.stop_gradient((st.z, st.e, h, r.L, r.z))
+    end, dense = local_error(field, tab, zc, ec, hc, Lc)
     # a tolerance below what float64 resolves counts as round-off: a few ulps of z and of the
     # increments, the latter for each of the check's s + 1 coefficients, which carry their own
     # rounding (their sum measured up to 0.45 (s + 1) eps Σ|L| on Kepler and the oscillator, s = 8–16;
     # with 8 ulps a component through zero failed at s = 15, 16 with rtol 1e-15 and atol 0)
     eps = jnp.finfo(st.z.dtype).eps
-    noise = eps * (8 * jnp.abs(st.z) + max(8, 2 * (s + 1)) * jnp.sum(jnp.abs(r.L), axis=0))
-    tol = jnp.maximum(atol + rtol * jnp.maximum(jnp.abs(st.z), jnp.abs(r.z)), noise)
+    noise = eps * (8 * jnp.abs(zc) + max(8, 2 * (s + 1)) * jnp.sum(jnp.abs(Lc), axis=0))
+    tol = jnp.maximum(atol + rtol * jnp.maximum(jnp.abs(zc), jnp.abs(z1)), noise)
     ratio = settings["safety"] * jnp.max(jnp.maximum(end, dense) / tol)
     # … and the field's own round-off over the window, where the check fails without it
     ratio = lax.cond(r.converged & (ratio > 1.0), lambda: settings["safety"] * jnp.max(
-        jnp.maximum(end, dense) / jnp.maximum(tol, h * field_roundoff(field, st.z))), lambda: ratio)
+        jnp.maximum(end, dense) / jnp.maximum(tol, hc * field_roundoff(field, zc))), lambda: ratio)
     given = h_given > 0
     ok = r.converged & jnp.all(jnp.isfinite(r.z)) & (given | (jnp.isfinite(ratio) & (ratio <= 1.0)))
     fac = jnp.clip(0.9 * ratio ** (-1.0 / (s + 1)), 0.2, settings["growth"])

@@ -87,7 +87,7 @@ def continued_stages(tab, z: jax.Array, e: jax.Array, L_prev: jax.Array, ratio) 
     return z + (e + small_matmul(basis @ tab["series"].T, L_prev))
 
 
-def _iterate(update, L0, scale, max_iterations, unroll=1):
+def _iterate(update, L0, scale, max_iterations, unroll=1, enough=0.0):
     """Iterate ``L ← update(L)`` from L0 until round-off: until the update is zero, or its size has
     not fallen below its smallest so far for two iterations in a row (IRKGL16's rule, on the
     largest entry of the update relative to ``scale``, its component's size (n,): the rule entry by
@@ -96,7 +96,8 @@ def _iterate(update, L0, scale, max_iterations, unroll=1):
     sufficed). ``unroll`` iterations per trip of the loop (the rule is checked after each, the
     loop left between trips: a trip of XLA's loop costs several iterations' worth on a CPU, so a
     few iterations at round-off are cheaper than the trips they save). Returns (L, iterations, the
-    smallest update's largest entry, the last update's largest entry)."""
+    smallest update's largest entry, the last update's largest entry). ``enough``: an update whose
+    largest entry relative to ``scale`` is at most this also ends it (0: only round-off does)."""
 
     def body(carry):
         L, k, rmin, stall, dmin, dlast = carry
@@ -110,8 +111,8 @@ def _iterate(update, L0, scale, max_iterations, unroll=1):
         return L, k, rmin, stall, dmin, dlast
 
     def going(carry):
-        _, k, _, stall, _, dmax = carry
-        return (k < max_iterations) & (stall < 2) & (dmax > 0) & jnp.isfinite(dmax)
+        _, k, rmin, stall, _, dmax = carry
+        return (k < max_iterations) & (stall < 2) & (dmax > 0) & jnp.isfinite(dmax) & ~(rmin <= enough)
 
     inf = jnp.asarray(jnp.inf, L0.dtype)
     big = jnp.asarray(jnp.finfo(L0.dtype).max, L0.dtype)
@@ -190,6 +191,9 @@ def solve_stages(field: Callable, jacobian: Callable | None, tab: dict, z: jax.A
     return L, k, ok, used_newton
 
 
+#: the tangent iteration stops once its update is at most this relative to the right-hand side (a
+#: derivative to ~1e-14 of its size; iterating on to round-off cost a third more iterations)
+TANGENT_ENOUGH = 1e-14
 #: the largest stage system (s·n unknowns) whose tangent solve falls back to a dense LU when the
 #: linear iteration does not converge (the window was a stiff one, solved by Newton)
 DENSE_TANGENT_SIZE = 1024
@@ -212,7 +216,8 @@ def _linear_iteration(linear: Callable, y: jax.Array, max_iterations: int) -> ja
     solved by Newton), the dense solve for at most DENSE_TANGENT_SIZE unknowns, else NaN — a
     derivative that is not there says so."""
     scale = jnp.full(y.shape[-1], jnp.maximum(jnp.max(jnp.abs(y)), jnp.finfo(y.dtype).tiny))
-    x, _, dmin, dlast = _iterate(lambda x: y + (x - linear(x)), y, scale, max_iterations, unroll=FIXED_POINT_UNROLL)
+    x, _, dmin, dlast = _iterate(lambda x: y + (x - linear(x)), y, scale, max_iterations, unroll=FIXED_POINT_UNROLL,
+                                 enough=TANGENT_ENOUGH)
     size = jnp.maximum(jnp.max(jnp.abs(x)), jnp.max(jnp.abs(y)))
     ok = jnp.isfinite(dlast) & (dmin <= FIXED_POINT_FLOOR * size)
     fallback = (lambda: _dense_tangent_solve(linear, y)) if y.size <= DENSE_TANGENT_SIZE \
