@@ -6,7 +6,8 @@ cost, against the host ``solve``, ``solve_batch`` and Diffrax (one core, compile
    ``jax.grad`` of q2(T) (reverse mode) and ``jax.jvp`` (forward mode) through it; Diffrax's
    ``diffeqsolve`` with atlasnn's ``GaussLegendre`` (same s, PID controller at the same rtol/atol)
    and with Dopri8 at rtol 1e-12, forward and ``jax.grad`` through its RecursiveCheckpointAdjoint;
-   each one's error at T against the exact orbit. Gradients compared on fixed windows (h = 2⁻⁴):
+   each one's error at T against the exact orbit. Gradients compared on fixed windows (h = 2⁻⁴, T
+   rounded up to a multiple of h so that Diffrax's constant steps are the same windows):
    atlasnn's reverse mode against Richardson-extrapolated central differences and against Diffrax's
    gradient through the same method on the same steps.
 2. The fixed cost of a jitted call: Hénon–Heiles over one window (t ∈ [0, 0.1]) against the
@@ -84,19 +85,21 @@ def kepler_gradients(repeats: int) -> dict:
 
     # agreement, on fixed windows (the adaptive lengths carry no derivative, so differences of an
     # adaptive solve see the lengths move as well)
+    # T_fixed a multiple of h: Diffrax's constant steps divide [0, T] evenly, so these are the same windows
     h = 2.0 ** -4
+    windows = int(np.ceil(T / h))
+    T_fixed = windows * h
     fixed = GaussCollocation(h=h, stages=s)
-    end = jax.jit(lambda z: solve(system, z, (0.0, T), solver=fixed)(T))
+    end = jax.jit(lambda z: solve(system, z, (0.0, T_fixed), solver=fixed)(T_fixed))
     jac = np.asarray(jax.jit(jax.jacrev(end))(z0))
     central = lambda eps: np.stack([(np.asarray(end(z0 + eps * u)) - np.asarray(end(z0 - eps * u))) / (2 * eps)  # noqa: E731
                                     for u in np.eye(4)], axis=-1)
     richardson = (4 * central(1e-6) - central(2e-6)) / 3
-    steps = int(np.ceil(T / h)) + 4
     other = np.asarray(jax.jacrev(lambda z: diffrax.diffeqsolve(
-        term, GaussLegendre(stages=s), 0.0, T, h, z, stepsize_controller=diffrax.ConstantStepSize(),
-        max_steps=steps).ys[-1])(z0))
+        term, GaussLegendre(stages=s), 0.0, T_fixed, h, z, stepsize_controller=diffrax.ConstantStepSize(),
+        max_steps=windows + 4).ys[-1])(z0))
     size = np.abs(jac).max()
-    agreement = {"windows": int(np.ceil(T / h)), "h": h,
+    agreement = {"windows": windows, "h": h, "T": T_fixed,
                  "vs_central_differences": float(np.abs(jac - richardson).max() / size),
                  "vs_diffrax_gauss_legendre": float(np.abs(jac - other).max() / size)}
     print(f"  agreement on fixed windows: {agreement}")

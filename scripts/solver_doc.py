@@ -291,8 +291,8 @@ def gradients(record: dict) -> str:
     text = "\n".join(rows) + (
         f"\n\n{k['windows']} windows (host). A gradient costs {k['grad_over_forward']:.1f}× the jitted forward solve "
         f"and {k['grad_over_diffrax_gauss_grad']:.2f}× Diffrax's gradient through `GaussLegendre`. On {a['windows']} "
-        f"fixed windows (h = {a['h']:g}) ∂z(T)/∂z0 agrees with Richardson-extrapolated central differences to "
-        f"{a['vs_central_differences']:.0e} and with Diffrax's (RecursiveCheckpointAdjoint, same steps) to "
+        f"fixed windows (h = {a['h']:g}, T = {a['T']:g}) ∂z(T)/∂z0 agrees with Richardson-extrapolated central differences to "
+        f"{a['vs_central_differences']:.0e} and with Diffrax's (RecursiveCheckpointAdjoint, the same steps) to "
         f"{a['vs_diffrax_gauss_legendre']:.0e}, relative to its largest entry.")
     over = "; ".join(f"{o['overhead_us']:.0f} µs with `max_windows={o['max_windows']}`" for o in record["call_overhead"])
     o = record["call_overhead"][0]
