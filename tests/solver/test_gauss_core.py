@@ -109,14 +109,17 @@ def test_derivatives_in_the_interval_and_in_hs_parameters_match_closed_forms():
     assert np.abs(np.asarray(sol(t))[:, 0] - np.cos(w * np.asarray(t))).max() <= 1e-10
 
 
-def test_vmap_gives_each_members_own_solve():
+def test_vmap_gives_each_members_own_solve_and_gradient():
     system, T = kepler(), PERIOD
     z0s = np.asarray(system.z0) * np.array([[1.0], [1.02], [0.97]])
     end = jax.jit(lambda z: solve(system, z, (0.0, T))(T))
     ends = jax.jit(jax.vmap(end))(jnp.asarray(z0s))
-    for z, got in zip(z0s, np.asarray(ends)):
+    grad = jax.grad(lambda z: end(z)[1])
+    grads = jax.jit(jax.vmap(grad))(jnp.asarray(z0s))  # the adjoint, batched
+    for z, got, g in zip(z0s, np.asarray(ends), np.asarray(grads)):
         alone = end(jnp.asarray(z))
         assert np.abs(got - np.asarray(alone)).max() <= 1e-13
+        assert np.abs(g - np.asarray(grad(jnp.asarray(z)))).max() <= 1e-10 * np.abs(g).max()
 
 
 def test_a_march_past_its_budget_raises_naming_it():

@@ -62,13 +62,13 @@ class TracedSolution(eqx.Module):
         t = jnp.asarray(t, self.z.dtype)
         flat = t.reshape(-1)
         tab = gauss_tableau(self.stages)
-        k, theta = self._window(flat)
+        row, theta = self._window(flat)
         basis = shifted_legendre(theta, self.stages, jnp)  # (m, s + 1)
         value = theta[:, None] * (basis[:, :-1] @ jnp.asarray(tab.value.T, t.dtype))
         rate = basis @ jnp.asarray(tab.rate.T, t.dtype)
-        rows = self.L[k]  # (m, s, 2d)
-        z = self.z[k] + (self.e[k] + jnp.einsum("ms,msn->mn", value, rows))
-        dz = jnp.einsum("ms,msn->mn", rate, rows) / self.lengths[k][:, None]
+        L = self.L[row]  # (m, s, 2d)
+        z = self.z[row] + (self.e[row] + jnp.einsum("ms,msn->mn", value, L))
+        dz = jnp.einsum("ms,msn->mn", rate, L) / self.lengths[row][:, None]
         shape = t.shape + (self.z.shape[-1],)
         return z.reshape(shape), dz.reshape(shape)
 

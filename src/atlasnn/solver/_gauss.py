@@ -123,7 +123,7 @@ class GaussCollocation(AbstractSolver):
             ``jax.grad``, ``jax.vmap`` or ``jax.jvp`` (its traceable core has static shapes, as
             Diffrax's ``max_steps``); a march that needs more raises when it runs.
         differentiation: how that core may be differentiated: ``"reverse"`` (``jax.grad``,
-            ``jax.vjp``: a checkpointed loop) or ``"forward"`` (``jax.jvp``, ``jax.jacfwd``).
+            ``jax.vjp``: the march's adjoint) or ``"forward"`` (``jax.jvp``, ``jax.jacfwd``: through its loop).
     """
 
     name: ClassVar[str] = "gauss"

@@ -5,32 +5,39 @@ same control) in one loop of at most ``max_windows`` tries, so that shapes are s
 
 Derivatives are those of the discrete solution over the windows taken: the window lengths are the
 control's and carry no derivative (but the last window's, T − t, which carries T's), and each
-window's stage equations are differentiated implicitly (``gauss_step(implicit_gradients=True)``:
-one linear solve with their Jacobian at the solution, never the iterations). The loop is
-Equinox's ``while_loop``: ``"checkpointed"`` for reverse mode (``jax.grad``; every window's state
-kept, so memory grows with windows × state, not with iterations), ``"lax"`` for forward mode
-(``jax.jvp``, ``jax.jacfwd``), chosen by ``GaussCollocation(differentiation=...)``.
+window's stage equations are differentiated at their solution (implicit function theorem: one
+linear solve with their Jacobian, never the iterations). Reverse mode (``jax.grad``; the default,
+``GaussCollocation(differentiation="reverse")``) is the march's adjoint, written here
+(:func:`_backward`): the forward march keeps every window's start state and stage solution (its
+rows), and the backward pass walks the accepted windows back, each by its transposed linear solve
+and one derivative of its residual — memory grows with windows × state, not with iterations, and
+no window is solved twice. The values H closes over (a network's weights) are made explicit
+arguments by ``jax.closure_convert`` so that the adjoint returns their derivatives. Forward mode
+(``jax.jvp``, ``jax.jacfwd``; ``differentiation="forward"``) goes through the loop itself, each
+window's stages differentiated by ``gauss_step(implicit_gradients=True)``.
 """
 
 from __future__ import annotations
 
+import functools
 from typing import Any, NamedTuple
 
 import equinox as eqx
 import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
+from jax import lax
 
 from atlasnn.errors import ConfigError
 from atlasnn.solutions import TracedSolution, gauss_tableau
 from atlasnn.solver._gauss_march import FAILURES, GaussState, started, marching, try_window
-from atlasnn.solver._gauss_step import tableau_arrays
+from atlasnn.solver._gauss_step import solved_step, tableau_arrays
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["gauss_core", "LOOPS"]
 
-#: GaussCollocation.differentiation → the kind of Equinox loop (module docstring)
-LOOPS = {"reverse": "checkpointed", "forward": "lax"}
+#: GaussCollocation.differentiation → how (module docstring)
+LOOPS = {"reverse": "the march's adjoint", "forward": "through the loop"}
 
 #: the failure codes beyond the march's: the window budget spent before T
 _BUDGET = max(FAILURES) + 1
@@ -61,35 +68,124 @@ def _traced_inputs(system: HamiltonianSystem, z0: Any, t0: Any, T: Any) -> tuple
     return z0, jnp.asarray(t0, jnp.float64), jnp.asarray(T, jnp.float64)
 
 
+class _Field:
+    """What the march reads of a system — its vector field on rows of states and their Jacobians —
+    made from f(z, *consts) for one state, the values H closes over as explicit arguments (the
+    adjoint returns their derivatives)."""
+
+    def __init__(self, f1, consts):
+        self.f1, self.consts = f1, tuple(consts)
+
+    def vector_field(self, Z):
+        return jax.vmap(lambda z: self.f1(z, *self.consts))(Z)
+
+    def jacobian(self, Z):
+        return jax.vmap(jax.jacfwd(lambda z: self.f1(z, *self.consts)))(Z)
+
+
+class _Static(NamedTuple):
+    """The core's settings (hashable: they select the traced program)."""
+
+    stages: int
+    steps: str
+    rtol: float
+    atol: float
+    h: float | None
+    budget: int
+    max_iterations: int
+    newton: bool
+    growth: float
+    safety: float
+    warmup: int
+    max_rejects: int
+
+
+def _march(field, static: _Static, z0, t0, T, kind: str, implicit: bool) -> _Carry:
+    """The loop of the module docstring, its rows written once per try."""
+    tab = tableau_arrays(gauss_tableau(static.stages))
+    settings = {"steps": static.steps, "max_iterations": static.max_iterations, "newton": static.newton,
+                "growth": static.growth, "safety": static.safety, "warmup": static.warmup, "until": None,
+                "max_rejects": static.max_rejects, "implicit": implicit}
+    h_given = jnp.asarray(0.0 if static.h is None else static.h, jnp.float64)
+    n, budget = z0.shape[0], static.budget
+    st = started(field, tab, _start(z0, t0, static.stages), T, h_given)
+    rows = (jnp.zeros(budget), jnp.zeros(budget), jnp.zeros((budget, n)), jnp.zeros((budget, n)),
+            jnp.zeros((budget, static.stages, n)), jnp.zeros(budget, bool))
+
+    def body(c: _Carry) -> _Carry:
+        st, streak, ok, row = try_window(field, tab, settings, c.st, c.streak, T, static.rtol, static.atol, h_given)
+        written = tuple(b.at[c.tries].set(x) for b, x in zip(c.rows, (*row[:5], ok)))
+        return _Carry(st, streak, c.tries + 1, written)
+
+    return eqxi.while_loop(lambda c: marching(c.st, T), body, _Carry(st, jnp.asarray(0), jnp.asarray(0), rows),
+                           max_steps=budget, buffers=lambda c: c.rows, kind=kind)
+
+
+@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1))
+def _adjoint_march(f1, static: _Static, consts, z0, t0, T) -> _Carry:
+    """The march, differentiated in reverse by its adjoint (:func:`_backward`)."""
+    return _march(_Field(f1, consts), static, z0, t0, T, "lax", False)
+
+
+def _forward(f1, static, consts, z0, t0, T):
+    out = _march(_Field(f1, consts), static, z0, t0, T, "lax", False)
+    return out, (out.rows, consts, t0, T)
+
+
+def _backward(f1, static: _Static, residuals, cotangent: _Carry):
+    """The adjoint of the march: its accepted windows walked back, each through its step from the
+    stored stage solution (:func:`solved_step`: the transposed linear solve and one derivative of
+    the residual, never the stage iteration again). The cotangents of the rows (start, length, z, e,
+    L) come from the solution's evaluation; a start depends on t0, the last length (T − t) on T
+    and t0, the others on nothing."""
+    (start, length, z, e, L, accepted), consts, t0, T = residuals
+    start_bar, length_bar, z_bar, e_bar, L_bar = cotangent.rows[:5]
+    tab = tableau_arrays(gauss_tableau(static.stages))
+    count = jnp.sum(accepted)
+    order = jnp.nonzero(accepted, size=accepted.shape[0], fill_value=0)[0]
+
+    def step(zk, ek, hk, cs, Lk):
+        return solved_step(_Field(f1, cs).vector_field, tab, zk, ek, hk, Lk, static.max_iterations)
+
+    def body(j, carry):
+        lam_z, lam_e, cs_bar, t0_bar, T_bar = carry
+        w = count - 1 - j
+        r = order[w]
+        _, pull = jax.vjp(lambda zk, ek, hk, cs: step(zk, ek, hk, cs, L[r]), z[r], e[r], length[r], consts)
+        zk_bar, ek_bar, hk_bar, c_bar = pull((L_bar[r], lam_z, lam_e))
+        h_total = jnp.where(w == count - 1, hk_bar + length_bar[r], 0.0)
+        cs_bar = jax.tree_util.tree_map(jnp.add, cs_bar, c_bar)
+        return (zk_bar + z_bar[r], ek_bar + e_bar[r], cs_bar, t0_bar + start_bar[r] - h_total, T_bar + h_total)
+
+    zero = jnp.zeros_like(z[0])
+    init = (zero, zero, jax.tree_util.tree_map(jnp.zeros_like, consts), jnp.zeros_like(t0), jnp.zeros_like(T))
+    z0_bar, _, consts_bar, t0_bar, T_bar = lax.fori_loop(0, count, body, init)
+    return consts_bar, z0_bar, t0_bar, T_bar
+
+
+_adjoint_march.defvjp(_forward, _backward)
+
+
 def gauss_core(system: HamiltonianSystem, z0: Any, t0: Any, T: Any, *, stages: int, steps: str, rtol: float,
                atol: float, h: float | None, max_windows: int, differentiation: str, max_iterations: int,
                newton: bool, growth: float, safety: float, warmup: int, max_rejects: int) -> TracedSolution:
     """The march of the module docstring from z0 over [t0, T] (traced or not). A march that fails
     or spends ``max_windows`` tries before T raises when it runs (``eqx.error_if``), naming why."""
     z0, t0, T = _traced_inputs(system, z0, t0, T)
-    tab = tableau_arrays(gauss_tableau(stages))
-    settings = {"steps": steps, "max_iterations": max_iterations, "newton": newton, "growth": growth,
-                "safety": safety, "warmup": warmup, "until": None, "max_rejects": max_rejects, "implicit": True}
-    h_given = jnp.asarray(0.0 if h is None else h, jnp.float64)
-    n, budget = z0.shape[0], int(max_windows)
-    st = started(system, tab, _start(z0, t0, stages), T, h_given)
-    rows = (jnp.zeros(budget), jnp.zeros(budget), jnp.zeros((budget, n)), jnp.zeros((budget, n)),
-            jnp.zeros((budget, stages, n)), jnp.zeros(budget, bool))
-
-    def body(c: _Carry) -> _Carry:
-        st, streak, ok, row = try_window(system, tab, settings, c.st, c.streak, T, rtol, atol, h_given)
-        written = tuple(b.at[c.tries].set(x) for b, x in zip(c.rows, (*row[:5], ok)))
-        return _Carry(st, streak, c.tries + 1, written)
-
-    try:
-        out = eqxi.while_loop(lambda c: marching(c.st, T), body, _Carry(st, jnp.asarray(0), jnp.asarray(0), rows),
-                              max_steps=budget, buffers=lambda c: c.rows, kind=LOOPS[differentiation],
-                              **({"checkpoints": budget} if differentiation == "reverse" else {}))
-    except TypeError as exc:
-        if "forward-mode" not in str(exc):
-            raise
-        raise ConfigError("jax.jvp/jax.jacfwd through solve need GaussCollocation(differentiation='forward') "
-                          "(the default, 'reverse', serves jax.grad/jax.vjp)") from None
+    static = _Static(int(stages), str(steps), float(rtol), float(atol), None if h is None else float(h),
+                     int(max_windows), int(max_iterations), bool(newton), float(growth), float(safety), int(warmup),
+                     int(max_rejects))
+    if differentiation == "forward":
+        out = _march(system, static, z0, t0, T, "lax", True)
+    else:
+        f1, consts = jax.closure_convert(lambda z: system.vector_field(z[None])[0], z0)
+        try:
+            out = _adjoint_march(f1, static, consts, z0, t0, T)
+        except TypeError as exc:
+            if "forward-mode" not in str(exc):
+                raise
+            raise ConfigError("jax.jvp/jax.jacfwd through solve need GaussCollocation(differentiation='forward') "
+                              "(the default, 'reverse', serves jax.grad/jax.vjp)") from None
     return _solution(system, stages, t0, T, out)
 
 

@@ -49,9 +49,9 @@ from atlasnn.solutions import gauss_tableau
 from atlasnn.solver._exported import exported_program
 from atlasnn.solver._gauss_step import compensated_add, continued_stages, gauss_step, local_error, tableau_arrays
 
-__all__ = ["GaussState", "GaussChunk", "ReplayState", "clock", "marching", "started", "try_window", "compiled_gauss_march",
-           "compiled_gauss_replay",
-           "compiled_gauss_windows", "initial_state", "FAILURES", "STEP_MODES"]
+__all__ = ["GaussState", "GaussChunk", "ReplayState", "clock", "marching", "started", "try_window",
+           "compiled_gauss_march", "compiled_gauss_replay", "compiled_gauss_windows", "initial_state", "FAILURES",
+           "STEP_MODES"]
 
 #: the ways window lengths are chosen (module docstring)
 STEP_MODES = ("constant", "adaptive")

@@ -28,7 +28,7 @@ from jax import lax
 
 from atlasnn.solutions import shifted_legendre
 
-__all__ = ["StepResult", "gauss_step", "solve_stages", "compensated_add", "small_matmul", "continued_stages",
+__all__ = ["StepResult", "gauss_step", "solved_step", "solve_stages", "compensated_add", "small_matmul", "continued_stages",
            "local_error", "tableau_arrays", "FIXED_POINT_FLOOR"]
 
 #: fixed-point iterations per trip of the loop (measured on Hénon–Heiles, s = 12: 6.1 µs a window
@@ -267,6 +267,24 @@ def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Arr
         L, k, ok, used_newton = solve_stages(field, jacobian, tab, z, e, hb, L0, max_iterations)
     z1, e1 = compensated_add(z, e, jnp.sum(L, axis=0))
     return StepResult(z1, e1, L, k, ok, used_newton)
+
+
+def solved_step(field: Callable, tab: dict, z: jax.Array, e: jax.Array, h, L: jax.Array,
+                max_iterations: int = 100) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """(L, z_{n+1}, e_{n+1}) of a window whose stage equations were already solved (``L``, their
+    solution from z, e and h), as a function of z, e, h and whatever ``field`` closes over: the
+    values are L's own, the derivatives those of the implicit function (as ``gauss_step`` with
+    ``implicit_gradients``), and nothing is iterated but the derivative's linear solve. The
+    adjoint of a march walks its windows back through this (:mod:`._gauss_core`)."""
+    hb = h * tab["b"]
+    mu = tab["mu"]
+
+    def residual(L):
+        return L - hb[:, None] * field(z + (e + small_matmul(mu, L)))
+
+    L = lax.custom_root(residual, lax.stop_gradient(L), lambda _, guess: guess, _tangent_solve(max_iterations))
+    z1, e1 = compensated_add(z, e, jnp.sum(L, axis=0))
+    return L, z1, e1
 
 
 def local_error(field: Callable, tab: dict, z: jax.Array, e: jax.Array, h, L: jax.Array) -> tuple[jax.Array, jax.Array]:
