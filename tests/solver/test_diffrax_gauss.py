@@ -291,6 +291,7 @@ def test_vmap_over_initial_states():
 
 
 # ------------------------------------------------------------------ gradients
+@pytest.mark.slow  # 20 s; the door's gradients are checked against atlasnn.solve's in test_gauss_core
 def test_gradients_match_finite_differences():
     """∂z(T)/∂z0 and ∂z(T)/∂λ of Hénon–Heiles by RecursiveCheckpointAdjoint (reverse mode through the
     implicit function theorem) against central differences, and against forward mode."""

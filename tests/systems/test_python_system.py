@@ -148,6 +148,7 @@ def test_bad_python_configs_name_the_key(chain_file, tmp_path, system, z0, messa
     assert "system." in str(err.value) and "\n" not in str(err.value)
 
 
+@pytest.mark.slow  # a whole run (15-20 s); outside CI to keep it under 30 minutes
 def test_run_with_a_python_system_and_the_figure_sets(chain_file, tmp_path):
     (tmp_path / "chain.toml").write_text(_config())
     cfg = load_config(tmp_path / "chain.toml")
