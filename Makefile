@@ -3,7 +3,7 @@ PY ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: quick test test-isa docs reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc solve-runs bench clean-venv
+.PHONY: quick test test-slow test-isa docs reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc solve-runs bench clean-venv
 
 $(BIN)/atlasnn: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -20,6 +20,10 @@ TEST_WORKERS ?= 2
 PYTEST = $(BIN)/python -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile)
 test: $(BIN)/atlasnn
 	$(PYTEST)
+
+# the tests marked slow (each over a minute here; CI leaves them out to stay under 30 minutes)
+test-slow: $(BIN)/atlasnn
+	$(PYTEST) -m slow
 
 # The suite again with XLA's code limited to older x86 instruction sets, as on a CPU without
 # AVX-512 (AVX2) or without AVX (SSE4_2): results move in the last bits with the instruction set,
@@ -94,13 +98,20 @@ ONE_CORE := taskset -c 0 env XLA_FLAGS=--xla_cpu_multi_thread_eigen=false OMP_NU
 BENCH ?= throughput seed_batch device_accuracy time_to_accuracy compile_once cold_start chain_cost rerun_drift \
 	estimate_effectivity window_optimisers bundle_eval bundle_cost flowmap_estimate flowmap_gauss_newton \
 	inverse_starts inverse_collocation_untuned inverse_noise solver_workprecision solver_suite solver_batch \
-	solver_first_run gauss_stages gauss_roundoff outer_solar energy_long step_modes diffrax_gauss shooting_solver
+	solver_first_run gauss_stages gauss_roundoff outer_solar energy_long step_modes diffrax_gauss shooting_solver \
+	nls_pde fput_recurrence
 BR := docs/benchmarks
 
 bench: $(BIN)/atlasnn
 	$(BIN)/pip install -q -e '.[bench]'
 	$(MAKE) $(addprefix bench-,$(BENCH))
 
+bench-nls_pde:
+	taskset -c 1 $(BIN)/python -m benchmarks.nls_pde --points 256 512 1024 --T 5 --out $(BR)/nls_pde.json --figure $(BR)/nls_pde.png
+	taskset -c 1 $(BIN)/python -m benchmarks.nls_pde --scaling 64 128 256 512 1024 2048 4096 --out $(BR)/nls_pde_scaling.json \
+	  --figure $(BR)/nls_pde_scaling.png
+bench-fput_recurrence:
+	$(BIN)/python examples/fput_recurrence.py --T 20000 --out docs/runs/fput/recurrence.json --figure docs/runs/fput/recurrence.png
 bench-throughput:
 	taskset -c 0 $(BIN)/python -m benchmarks.throughput --rounds 3 --torch-threads 1 --out $(BR)/throughput.json --doc docs/PERFORMANCE.md
 bench-seed_batch:

@@ -16,16 +16,16 @@ each accuracy level, the fastest (s, rtol) that reaches it: the table that
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import time
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from atlasnn import HamiltonianSystem, solve
 from atlasnn.solver import GaussCollocation
-from atlasnn.systems import builtin_system, expression_system
+from atlasnn.systems import builtin_system, expression_system, fput
 
 from benchmarks.common import machine_info, write_result
 from benchmarks.problems import gauss_reference, kepler_exact, kepler_system, timed
@@ -36,15 +36,10 @@ LEVELS = (1e-5, 1e-7, 1e-9, 1e-11)
 
 
 def fput_chain(n: int, beta: float = 1.0, alpha: float = 0.0) -> HamiltonianSystem:
-    """The FPUT chain of n moving particles between fixed ends, unit masses and springs, written
-    as a vectorised Python H; q = 0 and p_i = sin(π i/(n + 1)) at the start (the first normal mode)."""
-
-    def hamiltonian(q, p):
-        dq = jnp.diff(jnp.concatenate([jnp.zeros(1, q.dtype), q, jnp.zeros(1, q.dtype)]))
-        return jnp.sum(p ** 2) / 2 + jnp.sum(dq ** 2 / 2 + alpha * dq ** 3 / 3 + beta * dq ** 4 / 4)
-
+    """The built-in FPUT chain (``atlasnn.systems.fput``: n moving particles between fixed ends,
+    unit masses and springs) started with q = 0 and p_i = sin(π i/(n + 1)) (the first normal mode)."""
     z0 = np.concatenate([np.zeros(n), np.sin(np.pi * np.arange(1, n + 1) / (n + 1))])
-    return HamiltonianSystem(hamiltonian, n, name=f"fput-beta-{n}", z0=z0, separable=True)
+    return dataclasses.replace(fput(particles=n, alpha=alpha, beta=beta), z0=z0, name=f"fput-beta-{n}")
 
 
 def problems() -> dict:

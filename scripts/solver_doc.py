@@ -18,7 +18,8 @@ the pages hold what it makes, so no number on them can drift from its record):
 * ``rebound``: docs/benchmarks/rebound_anchor.json (``python -m benchmarks.rebound_anchor``);
 * ``gradients``: docs/benchmarks/gauss_gradients.json (``python -m benchmarks.gauss_gradients``, docs/JAX.md);
 * ``learned``: docs/runs/learned-hamiltonian/pendulum.json and pendulum-noiseless.json
-  (``python examples/learn_hamiltonian.py``, docs/howto/LEARN_H.md).
+  (``python examples/learn_hamiltonian.py``, docs/howto/LEARN_H.md);
+* ``pde`` and ``fput``: docs/howto/PDE.md (``scripts/_pde_tables.py``).
 
 The prose around the tables is written by hand; a few of its key numbers (and the machines
 PERFORMANCE.md names) are checked against their records all the same (``PROSE`` below): each check
@@ -39,8 +40,11 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import _pde_tables as pde_tables  # noqa: E402  (the PDE page's tables, beside this script)
+
 PAGES = [ROOT / "docs" / "SOLVER.md", ROOT / "docs" / "CHOOSING.md", ROOT / "docs" / "JAX.md",
-         ROOT / "docs" / "howto" / "LEARN_H.md"]
+         ROOT / "docs" / "howto" / "LEARN_H.md", ROOT / "docs" / "howto" / "PDE.md"]
 RECORDS = {
     "suite": "docs/runs/solver/suite.json",
     "workprecision": "docs/benchmarks/solver_workprecision.json",
@@ -56,6 +60,7 @@ RECORDS = {
     "rebound": "docs/benchmarks/rebound_anchor.json",
     "gradients": "docs/benchmarks/gauss_gradients.json",
     "learned": "docs/runs/learned-hamiltonian/pendulum.json",
+    **pde_tables.RECORDS,
 }
 METHODS = [("gauss-adaptive", "Gauss, adaptive"), ("diffrax-dopri8", "Diffrax Dopri8"),
            ("diffrax-tsit5", "Diffrax Tsit5"), ("dop853", "SciPy DOP853"), ("yoshida4", "Yoshida-4"),
@@ -330,7 +335,7 @@ def learned(record: dict) -> str:
 MAKERS = {"learned": learned, "gradients": gradients, "suite": suite, "workprecision": workprecision, "energy": energy, "step_modes": step_modes, "batch": batch,
           "first_run": first_run, "stages": stages,
           "roundoff": roundoff, "orders": orders, "scaling": scaling,
-          "rebound": rebound, "time_transform": time_transform}
+          "rebound": rebound, "time_transform": time_transform, **pde_tables.MAKERS}
 
 
 # ------------------------------------------------------------------ key numbers of the prose

@@ -10,6 +10,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from support import TRANSFER, assert_same_runs
 
@@ -22,6 +23,7 @@ def _run(cfg, out):
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
 
 
+@pytest.mark.slow  # over a minute on the 2-core machine: run with -m slow (CI stays under 30 min)
 def test_a_transfer_run_twice_with_two_jobs_is_bit_identical(tmp_path):
     cfg = tmp_path / "transfer.toml"
     cfg.write_text(TRANSFER)

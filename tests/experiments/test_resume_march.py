@@ -110,6 +110,7 @@ def _atlasnn(args, env, **kw):
                             text=True, **kw)
 
 
+@pytest.mark.slow  # over a minute on the 2-core machine: run with -m slow (CI stays under 30 min)
 def test_sigint_during_a_march_with_two_jobs_then_resume(tmp_path):
     text = FIXED.replace("seeds = [0]", "seeds = [0, 1]").replace("T = 4.0", "T = 8.0").replace(
         "epochs = 120", "epochs = 400")

@@ -29,6 +29,7 @@ def test_joint_fit_recovers_g_from_noise_free_data():
     assert fit.method == "network (joint)" and fit.identifiable
 
 
+@pytest.mark.slow  # over a minute on the 2-core machine: run with -m slow (CI stays under 30 min)
 def test_joint_fit_agrees_with_shooting_under_noise():
     """Same data, same unknowns (g and the initial momentum): the network's estimate lies well
     within shooting's standard error of shooting's, and its own σ (the tangent Gauss–Newton

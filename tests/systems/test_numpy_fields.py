@@ -19,7 +19,9 @@ def test_each_written_field_is_the_systems_own(name):
     field = numpy_field(system)
     assert field is not None, f"{name}: no NumPy field written"
     for z in rng.standard_normal((5, system.state_dim)):
-        assert np.allclose(field(0.0, z), reference_rhs(system)(0.0, z), rtol=1e-14, atol=1e-14)
+        want = reference_rhs(system)(0.0, z)
+        # to round-off of the field's size (a spectral derivative's FFT rounds relative to its largest entry)
+        assert np.allclose(field(0.0, z), want, rtol=1e-14, atol=1e-14 * max(1.0, float(np.max(np.abs(want)))))
 
 
 def test_a_system_without_one_gets_none():

@@ -138,6 +138,7 @@ def test_member_shape_errors(small_bundle):
         sol(np.asarray([0.0]), np.zeros((3, 2)), np.zeros((3, 2)))
 
 
+@pytest.mark.slow  # over a minute on the 2-core machine: run with -m slow (CI stays under 30 min)
 def test_run_command_trains_a_bundle_from_a_config(tmp_path):
     """`atlasnn run` on a config with [bundle]: a checkpoint per seed, held-out errors against the
     references, the figures, and a --quick that caps the budget."""

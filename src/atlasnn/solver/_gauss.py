@@ -107,7 +107,8 @@ class GaussCollocation(AbstractSolver):
         newton: solve a window by simplified Newton iterations where the fixed-point iteration fails
             (decoupled: s/2 complex systems of the state's size); None: for states of at most
             ``NEWTON_AUTO_SIZE`` components, else the window is shortened instead (its Jacobian and
-            their factorisations cost more than many fixed-point windows there).
+            their factorisations cost more than many fixed-point windows there). A system that
+            declares a ``linear_part`` is solved by Newton iterations with it whatever this says.
         max_iterations: iterations per window at most (each kind).
         max_rejects: rejected tries in a row before the march gives up.
         keep: keep every window's polynomial (True), only the window starts (False: a window is
@@ -206,6 +207,10 @@ class GaussCollocation(AbstractSolver):
         if self.time_scale is not None:
             raise ConfigError("GaussCollocation time_scale is not available inside jit/grad/vmap: solve without it "
                               "there, or call solve on numbers")
+        if system.linear_part is not None:
+            # its derivatives would need the tangent solve preconditioned by the linear part as well
+            raise ConfigError(f"system {system.name!r} declares a linear_part, which solve inside jit/grad/vmap does "
+                              "not use yet: call solve on numbers, or build the system without linear_part")
         n = system.state_dim
         return gauss_core(system, z0, t0, T, stages=self.stage_count, steps=self.steps, rtol=self.rtol,
                           atol=self.atol, h=self.h, max_windows=self.max_windows,
@@ -271,7 +276,8 @@ class GaussCollocation(AbstractSolver):
                     "h_min": float(length.min(initial=math.inf)), "h_max": float(length.max(initial=0.0)),
                     "solve_time": wall, "first_call_time": first_call, "batch": b}
             if failed or start.size == 0 or end < T:
-                problem = problem or self._stopped_line(m, b, end, t0, T, stopped, failed, z0s[m])
+                problem = problem or self._stopped_line(m, b, end, t0, T, stopped, failed, z0s[m],
+                                                        system.linear_part is not None)
                 # what was computed up to the stop is kept: the error's .partial
                 out.append(self._solution(system, np.append(start, state.t[m]), z, e, L, ratio, info)
                            if start.size else None)
@@ -288,9 +294,9 @@ class GaussCollocation(AbstractSolver):
         return out
 
     def _stopped_line(self, m: int, b: int, end: float, t0: float, T: float, stopped: str | None, failed: int,
-                      z0: np.ndarray) -> str:
+                      z0: np.ndarray, linear: bool = False) -> str:
         """Why member m stopped (``stopped``: the host's reason, else the program's code ``failed``),
-        and the remedy for that reason."""
+        and the remedy for that reason (``linear``: the system declares a linear part)."""
         who = "the Gauss march" + ("" if b == 1 else f" of member {m}")
         if failed == 4:
             return (f"{who} cannot start: the vector field J∇H is not finite at z0 = {np.asarray(z0).tolist()} "
@@ -305,6 +311,10 @@ class GaussCollocation(AbstractSolver):
                       "start the interval nearer 0 (H does not depend on t)")
         elif failed == 3 and self.max_iterations < default_iterations:
             remedy = f"raise max_iterations ({self.max_iterations}; the default is {default_iterations})"
+        elif failed == 3 and linear:
+            why = "the stage equations did not converge (Newton's iteration with the declared linear_part failed)"
+            remedy = ("try a shorter h" if self.h else "loosen the tolerance") + \
+                ", or declare in linear_part more of H's stiff quadratic part"
         elif failed == 3 and not self.newton_for(np.asarray(z0).size):
             off = "newton=False" if self.newton is False else \
                 f"Newton is off by default above {NEWTON_AUTO_SIZE} components"

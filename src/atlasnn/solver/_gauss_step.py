@@ -136,47 +136,83 @@ def _fixed_point(field, tab, z, e, hb, L0, max_iterations):
     return L, k + 1, _solved(L, L0, dmin, dlast)
 
 
-def _newton(field, jacobian, tab, z, e, hb, L0, max_iterations):
+def _dense_factor(jacobian: Callable) -> Callable:
+    """The Newton matrix from the field's Jacobian at z_n: ``factor(z, shifts)`` LU-factorises
+    I − c_j A(z) for each shift and returns the solve of those systems (one right-hand side each)."""
+    def factor(z, shifts):
+        a = jacobian(z).astype(shifts.dtype)
+        eye = jnp.eye(a.shape[0], dtype=a.dtype)
+        factors = jax.vmap(lambda c: jax.scipy.linalg.lu_factor(eye - c * a))(shifts)
+        return lambda r: jax.vmap(lambda lu, piv, rj: jax.scipy.linalg.lu_solve((lu, piv), rj))(*factors, r)
+
+    return factor
+
+
+#: with a declared linear part, each component's size for the iteration's rule is at least this
+#: times the largest one's: the shifted solves are global (FFTs), so every component carries
+#: round-off of the largest, and a component near zero (a soliton's tail) would otherwise stop the
+#: iteration on its noise while the others still converge (NLS, 1 024 points: stopped at 3e-11;
+#: with 1e-8 here, 512 points stopped at 1e-13 of max|L| now and then, and the window was halved:
+#: the noise of a component of relative size f is eps/f of the largest's, so f must be ≫ eps/1e-12)
+GLOBAL_FLOOR = 1e-2
+
+
+def _newton(field, factor, tab, z, e, hb, L0, max_iterations, floor=0.0, noise=0.0):
     """L by simplified Newton iterations from L0, decoupled (Hairer & Wanner, *Solving ODEs II*,
-    IV.8): the window's matrix I − h (diag(b) μ) ⊗ A(z_n) is block-diagonalised by the eigenvectors
+    IV.8): the window's matrix I − h (diag(b) μ) ⊗ A is block-diagonalised by the eigenvectors
     V of diag(b) μ, so that a Newton step is one solve of I − hλ_j A per eigenvalue λ_j — s/2
     complex systems of size n (the conjugate of each pair gives the conjugate solution), not one
-    of size s·n. V's conditioning (1e6 at s = 12) only slows the iteration a little: each step is
-    checked against the true residual, so the result is the same to round-off. Returns (L,
-    iterations, whether it reached round-off)."""
-    n = L0.shape[1]
+    of size s·n. A is the field's Jacobian at z_n (:func:`_dense_factor`) or a declared linear part
+    (``LinearPart.factor``, which ignores z). V's conditioning (1e6 at s = 12) only slows the
+    iteration a little: each step is checked against the true residual, so the result is the same
+    to round-off. Returns (L, iterations, whether it reached round-off)."""
     mu, lam, to_modes, from_modes = tab["mu"], tab["newton_lam"], tab["newton_to"], tab["newton_from"]
     h = jnp.sum(hb)
-    a = jacobian(z).astype(jnp.result_type(z.dtype, jnp.complex64))  # complex of the state's precision
-    eye = jnp.eye(n, dtype=a.dtype)
-    factors = jax.vmap(lambda l: jax.scipy.linalg.lu_factor(eye - (h * l) * a))(jnp.asarray(lam, a.dtype))
+    m = lam.shape[0]
+    cdtype = jnp.result_type(z.dtype, jnp.complex64)  # complex of the state's precision
+    solve = factor(z, h * jnp.asarray(lam, cdtype))
+    # the maps to the modes and back as real products (the residual and the update are real): a
+    # complex product of a real array cost 4-5x as much (NLS, 1 024 components, s = 16)
+    to_real = jnp.asarray(np.concatenate([to_modes.real, to_modes.imag]), z.dtype)  # (2m, s)
+    from_real = jnp.asarray(np.concatenate([from_modes.real, -from_modes.imag], axis=1), z.dtype)  # (s, 2m)
 
     def update(L):
         g = L - hb[:, None] * field(z + (e + small_matmul(mu, L)))
-        r = jnp.matmul(jnp.asarray(to_modes, a.dtype), g.astype(a.dtype), precision=lax.Precision.HIGHEST)
-        x = jax.vmap(lambda lu, piv, rj: jax.scipy.linalg.lu_solve((lu, piv), -rj))(*factors, r)
-        return L + jnp.real(jnp.matmul(jnp.asarray(from_modes, a.dtype), x, precision=lax.Precision.HIGHEST))
+        r = jnp.matmul(to_real, g, precision=lax.Precision.HIGHEST)
+        x = solve(-lax.complex(r[:m], r[m:]))
+        return L + jnp.matmul(from_real, jnp.concatenate([jnp.real(x), jnp.imag(x)]), precision=lax.Precision.HIGHEST)
 
-    L, k, dmin, dlast = _iterate(update, L0, _scale(z, L0), max_iterations)
-    return L, k, _solved(L, L0, dmin, dlast)
+    scale = _scale(z, L0)
+    L, k, dmin, dlast = _iterate(update, L0, jnp.maximum(scale, floor * jnp.max(scale)), max_iterations)
+    return L, k, _solved(L, L0, dmin, dlast, noise)
 
 
-def _solved(L, L0, dmin, dlast):
+def _solved(L, L0, dmin, dlast, noise=0.0):
     """Whether the iteration reached round-off: finite, its smallest update at most
     FIXED_POINT_FLOOR and its last at most 100·FIXED_POINT_FLOOR of the stages' size (the smaller of
     the guess's and the result's, so that a diverging iteration, whose result grows, is not judged
-    by its own size)."""
+    by its own size) — or at most ``noise``, the round-off of the field's evaluation itself where
+    that is larger (a stiff linear part: its products carry eps·‖JS‖·|z|)."""
     scale = jnp.minimum(jnp.max(jnp.abs(L)), jnp.max(jnp.abs(L0)))
-    return (jnp.all(jnp.isfinite(L)) & jnp.isfinite(dlast) & (dmin <= FIXED_POINT_FLOOR * scale)
-            & (dlast <= 100 * FIXED_POINT_FLOOR * scale))
+    floor = jnp.maximum(FIXED_POINT_FLOOR * scale, noise)
+    return (jnp.all(jnp.isfinite(L)) & jnp.isfinite(dlast) & (dmin <= floor) & (dlast <= 100 * floor))
 
 
 def solve_stages(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Array, e: jax.Array, hb: jax.Array,
-                 L0: jax.Array, max_iterations: int) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+                 L0: jax.Array, max_iterations: int, linear=None) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     """The stage equations L = hb ⊙ f(z + (e + μL)) solved from L0 = hb ⊙ f(Y0): by fixed-point
-    iteration, and by simplified Newton where that fails and ``jacobian`` is given. Returns (L,
-    iterations, whether it reached round-off, whether Newton was used). Forward only: its loops
-    cannot be differentiated in reverse (:func:`gauss_step` with ``implicit_gradients``)."""
+    iteration, and by simplified Newton where that fails and ``jacobian`` is given; with a
+    ``linear`` part (:class:`atlasnn.systems.LinearPart`), by simplified Newton with it as the
+    matrix from the start (the fixed-point iteration would not contract on its stiff modes).
+    Returns (L, iterations, whether it reached round-off, whether Newton was used). Forward only:
+    its loops cannot be differentiated in reverse (:func:`gauss_step` with ``implicit_gradients``)."""
+    if linear is not None:
+        # the round-off an evaluation of the stiff part carries into L: a few ulps of ‖JS‖·|z| times h·b_i
+        # (NLS with 4 096 points, ‖JS‖ = 2e4: above FIXED_POINT_FLOOR of the stages' size)
+        noise = 8 * jnp.finfo(z.dtype).eps * linear.norm() * jnp.max(jnp.abs(z)) * jnp.max(jnp.abs(hb))
+        L, k, ok = _newton(field, lambda _, shifts: linear.factor(shifts), tab, z, e, hb, L0, max_iterations,
+                           GLOBAL_FLOOR, noise)
+        return L, k, ok, jnp.asarray(True)
     L, k, ok = _fixed_point(field, tab, z, e, hb, L0, max_iterations)
     used_newton = jnp.asarray(False)
     if jacobian is not None:
@@ -184,7 +220,7 @@ def solve_stages(field: Callable, jacobian: Callable | None, tab: dict, z: jax.A
         # batch (vmap) only a member that needs it makes the batch pay for the factorisation
         def newton(carry):
             _, _, k_fp, _, _ = carry
-            L_n, k_n, ok_n = _newton(field, jacobian, tab, z, e, hb, L0, max_iterations)
+            L_n, k_n, ok_n = _newton(field, _dense_factor(jacobian), tab, z, e, hb, L0, max_iterations)
             return L_n, ok_n, k_fp + k_n, jnp.asarray(False), jnp.asarray(True)
 
         L, ok, k, _, used_newton = lax.while_loop(lambda c: c[3], newton, (L, ok, k, ~ok, used_newton))
@@ -236,12 +272,13 @@ def _tangent_solve(max_iterations: int) -> Callable:
 
 
 def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Array, e: jax.Array, h, Y0: jax.Array,
-               *, max_iterations: int = 100, implicit_gradients: bool = False) -> StepResult:
+               *, max_iterations: int = 100, implicit_gradients: bool = False, linear=None) -> StepResult:
     """One window of length ``h`` from (z, e) with the stage guess Y0 (s, n).
 
     ``field`` maps stage values (s, n) to f(Y) (s, n); ``jacobian`` maps a state (n,) to A(z)
     (n, n), for the simplified Newton iteration (None: fixed-point only); ``tab`` holds the
-    tableau's arrays (:func:`tableau_arrays`).
+    tableau's arrays (:func:`tableau_arrays`); ``linear``: the system's declared linear part, the
+    Newton iteration's matrix from the start (:func:`solve_stages`).
 
     ``implicit_gradients``: differentiable (forward and reverse) with respect to z, e, h and
     whatever ``field`` closes over, by the implicit function theorem on the stage equations
@@ -258,13 +295,13 @@ def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Arr
         def solve(_, guess):
             # the counts travel as floats: custom_root gives its auxiliary outputs zero tangents of their
             # own dtype, which JAX refuses for integers and booleans (their tangents must be float0)
-            L, k, ok, used = solve_stages(field, jacobian, tab, z, e, hb, guess, max_iterations)
+            L, k, ok, used = solve_stages(field, jacobian, tab, z, e, hb, guess, max_iterations, linear)
             return L, jnp.stack([k, ok, used]).astype(L.dtype)
 
         L, aux = lax.custom_root(residual, L0, solve, _tangent_solve(max_iterations), has_aux=True)
         k, ok, used_newton = aux[0].astype(jnp.int32), aux[1] > 0, aux[2] > 0
     else:
-        L, k, ok, used_newton = solve_stages(field, jacobian, tab, z, e, hb, L0, max_iterations)
+        L, k, ok, used_newton = solve_stages(field, jacobian, tab, z, e, hb, L0, max_iterations, linear)
     z1, e1 = compensated_add(z, e, jnp.sum(L, axis=0))
     return StepResult(z1, e1, L, k, ok, used_newton)
 

@@ -23,10 +23,25 @@ from atlasnn.systems._compile import CompiledExpression, compile_expression
 from atlasnn.systems._expression import expression_system, is_syntactically_separable
 from atlasnn.systems._float64 import narrow_floats, require_float64_field
 from atlasnn.systems._hamiltonian import HamiltonianFn, HamiltonianSystem, ParametricFn, parametric_field
+from atlasnn.systems._linear import DenseLinearPart, FourierLinearPart, LinearPart, fourier_wavenumbers
+from atlasnn.systems._pdes import (fput, fput_modes, nls, nls_mass, nls_soliton, periodic_grid, sine_gordon,
+                                   sine_gordon_breather)
 from atlasnn.systems._python import load_python_function, python_system
 from atlasnn.systems._parse import CONSTANTS, FUNCTIONS, MAX_DEPTH, MAX_EXPRESSION_LENGTH, MAX_OPERATIONS
 
 __all__ = [
+    "LinearPart",
+    "FourierLinearPart",
+    "DenseLinearPart",
+    "fourier_wavenumbers",
+    "periodic_grid",
+    "fput",
+    "fput_modes",
+    "nls",
+    "nls_soliton",
+    "nls_mass",
+    "sine_gordon",
+    "sine_gordon_breather",
     "parametric_field",
     "require_float64_field",
     "narrow_floats",

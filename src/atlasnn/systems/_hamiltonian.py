@@ -21,6 +21,7 @@ import numpy as np
 
 from atlasnn.compile_cache import program_cache
 from atlasnn.errors import SystemError_
+from atlasnn.systems._linear import LinearPart
 
 HamiltonianFn = Callable[[jax.Array, jax.Array], jax.Array]
 #: H(q, p, θ) with the parameters as a traced vector θ (ordered as ``system.param_names``)
@@ -48,6 +49,11 @@ class HamiltonianSystem:
             (P,) in the order of ``params`` (set by the built-ins and expression systems). Bundles
             over parameters and parameter identification need it; ``H(q, p)`` must equal
             ``parametric(q, p, θ)`` at θ = the values of ``params``.
+        linear_part: a stiff linear part of H, H = ½ zᵀ S z + N(z) (a :class:`LinearPart` of 2d
+            components: ``FourierLinearPart`` for a PDE on a periodic grid, ``DenseLinearPart``),
+            which the Gauss solver uses as the matrix of its stage iteration so that its windows
+            are set by accuracy, not by the stiffness. H stays the truth: S only steers the
+            iteration (a poor S costs iterations, never accuracy).
 
     Equality is identity, so a system can key a cache of compiled functions.
     """
@@ -62,6 +68,7 @@ class HamiltonianSystem:
     params: Mapping[str, float] = field(default_factory=dict)
     spec: Mapping[str, Any] | None = None
     parametric: ParametricFn | None = None
+    linear_part: LinearPart | None = None
 
     def __post_init__(self) -> None:
         if not callable(self.hamiltonian):
@@ -83,6 +90,13 @@ class HamiltonianSystem:
         object.__setattr__(self, "params", dict(self.params))
         if self.parametric is not None and not callable(self.parametric):
             raise SystemError_(f"parametric must be callable, got {type(self.parametric).__name__}")
+        if self.linear_part is not None:
+            if not isinstance(self.linear_part, LinearPart):
+                raise SystemError_(f"linear_part must be a LinearPart (FourierLinearPart, DenseLinearPart), got "
+                                   f"{type(self.linear_part).__name__}")
+            if self.linear_part.size != 2 * d:
+                raise SystemError_(f"linear_part has {self.linear_part.size} components, the state {2 * d} "
+                                   f"(dim = {d}: q then p)")
         object.__setattr__(self, "_traced", _probe(self))
 
     # ------------------------------------------------------------------ basics
@@ -240,6 +254,7 @@ class HamiltonianSystem:
             "z0": None if self.z0 is None else [float(x) for x in self.z0],
             "separable": bool(self.separable),
             "spec": None if self.spec is None else dict(self.spec),
+            **({} if self.linear_part is None else {"linear_part": self.linear_part.describe()}),
         }
 
 
