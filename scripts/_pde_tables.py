@@ -74,7 +74,7 @@ def _runs(record: dict) -> str:
 def pde(record: dict) -> str:
     return _runs(record) + (
         "\n\nErrors: max over the grid of |z(T) − the exact soliton|, relative to its amplitude 1 (the grid's own error "
-        "is the floor). \"×k\": atlasnn's time over the fastest run of that method at least as accurate (Strang, "
+        "is the floor). \"×k\": atlasnn's time over the fastest run of that method at least as accurate, within 2× of its error (Strang, "
         "Yoshida-4 and ETDRK4 100 … 12 800 steps, Tsit5 rtol 1e-6 … 1e-12 with atol = rtol/100); \"never\": none of its runs was. "
         "One core, compiled, the whole call, best of 3.")
 
@@ -82,7 +82,7 @@ def pde(record: dict) -> str:
 def sine_gordon(record: dict) -> str:
     return _runs(record) + (
         "\n\nErrors: max over the grid of |z(T) − the exact breather| (u and u_t). \"×k\": atlasnn's time over the "
-        "fastest run of that method at least as accurate (Störmer–Verlet and Yoshida-4 with the spectral Laplacian, "
+        "fastest run of that method at least as accurate, within 2× of its error (Störmer–Verlet and Yoshida-4 with the spectral Laplacian, "
         "100 … 12 800 steps, Tsit5 rtol 1e-6 … 1e-12 with atol = rtol/100); \"never\": none of its runs was. One core, "
         "compiled, the whole call, best of 3.")
 

