@@ -23,6 +23,9 @@ Markers (an HTML comment on the line(s) just before the fence, invisible on the 
   commands are still parsed and their configs validated, and its Python is compiled;
 * ``<!-- docs-test: file NAME -->`` — the block's text is written to NAME first, as the page
   tells the reader to save it;
+* ``<!-- docs-test: slow (reason) -->`` — the block runs only with ``-m slow`` (``make
+  test-slow``), not in CI: a command of minutes that another test covers; it must be the last
+  block of its page, or no later block may need what it writes;
 * ``<!-- docs-test: needs MODULE -->`` — the block runs where MODULE (an optional extra, such as
   ``diffrax``) is installed and is reported as skipped, with that reason, where it is not (its
   Python is still compiled).
@@ -71,7 +74,7 @@ SHELL_LANGS = {"bash", "sh", "shell", "console"}
 KNOWN_LANGS = SHELL_LANGS | {"python", "toml", "json", "text"}
 
 _FENCE = re.compile(r"^(?P<indent>\s*)(?P<fence>`{3,}|~{3,})(?P<lang>[\w+-]*)\s*$")
-_MARKER = re.compile(r"^\s*<!--\s*docs-test:\s*(?P<kind>skip|file|needs)\s*(?P<arg>.*?)\s*-->\s*$")
+_MARKER = re.compile(r"^\s*<!--\s*docs-test:\s*(?P<kind>skip|file|needs|slow)\s*(?P<arg>.*?)\s*-->\s*$")
 
 
 @dataclass
@@ -83,6 +86,7 @@ class Block:
     skip: str | None = None  # the reason, when marked skip
     file: str | None = None  # the file name, when marked file
     needs: str | None = None  # the optional module it needs, when marked needs
+    slow: str | None = None  # the reason, when marked slow (run with -m slow, not in CI)
 
     @property
     def id(self) -> str:
@@ -112,12 +116,12 @@ def extract_blocks(text: str, page: str = "page.md") -> list[Block]:
             mk = _MARKER.match(lines[k])
             if mk:
                 arg = mk.group("arg")
-                if mk.group("kind") == "skip":
+                if mk.group("kind") in ("skip", "slow"):
                     reason = re.fullmatch(r"\((.+)\)", arg)
                     if not reason:
-                        raise AssertionError(f"{page}:{k + 1}: a skip marker needs a reason: "
-                                             "<!-- docs-test: skip (why) -->")
-                    block.skip = reason.group(1)
+                        raise AssertionError(f"{page}:{k + 1}: a {mk.group('kind')} marker needs a reason: "
+                                             f"<!-- docs-test: {mk.group('kind')} (why) -->")
+                    setattr(block, mk.group("kind"), reason.group(1))
                 elif mk.group("kind") == "needs":
                     if not re.fullmatch(r"[A-Za-z_]\w*(\.\w+)*", arg):
                         raise AssertionError(f"{page}:{k + 1}: bad module name {arg!r} in a needs marker")
@@ -330,7 +334,8 @@ def test_every_block_has_a_known_language():
     assert not unknown, f"fence languages must be one of {sorted(KNOWN_LANGS)} (text for output samples): {unknown}"
 
 
-@pytest.mark.parametrize("block", CODE_BLOCKS, ids=[b.id for b in CODE_BLOCKS])
+@pytest.mark.parametrize("block", [pytest.param(b, marks=pytest.mark.slow) if b.slow else b for b in CODE_BLOCKS],
+                         ids=[b.id for b in CODE_BLOCKS])
 def test_block(block: Block, workspaces, epoch_cap, monkeypatch):
     if block.lang not in KNOWN_LANGS:
         pytest.fail(f"{block.id}: unknown fence language {block.lang or '(none)'!r}")
