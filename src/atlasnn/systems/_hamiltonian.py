@@ -49,7 +49,7 @@ class HamiltonianSystem:
             (P,) in the order of ``params`` (set by the built-ins and expression systems). Bundles
             over parameters and parameter identification need it; ``H(q, p)`` must equal
             ``parametric(q, p, θ)`` at θ = the values of ``params``.
-        linear_part: a stiff linear part of H, H = ½ zᵀ S z + N(z) (a :class:`LinearPart` of 2d
+        linear_part: a stiff linear part of H, H = ½ zᵀ S z + N(z) (a ``LinearPart`` of 2d
             components: ``FourierLinearPart`` for a PDE on a periodic grid, ``DenseLinearPart``),
             which the Gauss solver uses as the matrix of its stage iteration so that its windows
             are set by accuracy, not by the stiffness. H stays the truth: S only steers the

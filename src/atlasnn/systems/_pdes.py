@@ -83,7 +83,7 @@ def _periodic_speed(speed: float, length: float) -> float:
 
 def nls_soliton(t, points: int = 512, length: float = 64.0, amplitude: float = 1.0, speed: float = 1.0,
                 center: float = 0.0) -> np.ndarray:
-    """The moving soliton of :func:`nls` at times ``t`` (a number or an array): states (…, 2·points),
+    """The moving soliton of ``nls`` at times ``t`` (a number or an array): states (…, 2·points),
     q = Re ψ then p = Im ψ on the grid, summed over the periodic images that reach it (its tails,
     a·2e^{−a·length/2} at the domain's edge, are below 1e-12 for a·length ≥ 60)."""
     points, length = _points(points), _length(length)
