@@ -409,10 +409,15 @@ def main(argv=None) -> None:
             scaling_figure(rows, args.figure)
         return
     runs = [compare(m, args.T, (None, *TOLS), 1e-10, (None, *args.stages)) for m in args.points]
-    command = "taskset -c 1 python -m benchmarks.nls_pde " + " ".join(
+    record_runs("nls_pde", args, runs)
+
+
+def record_runs(name: str, args, runs: list[dict]) -> None:
+    """Write a work–precision record (its command, the machine, the runs) and its figure."""
+    command = f"taskset -c 1 python -m benchmarks.{name} " + " ".join(
         ["--points", *map(str, args.points), "--T", f"{args.T:g}", "--out", args.out]
         + (["--figure", args.figure] if args.figure else []))
-    result = {"benchmark": "nls_pde", "command": command, "machine": machine_info(), "runs": runs}
+    result = {"benchmark": name, "command": command, "machine": machine_info(), "runs": runs}
     write_result(args.out, result)
     if args.figure:
         figure(result, args.figure)

@@ -21,8 +21,8 @@ import numpy as np  # noqa: E402
 
 from atlasnn.systems import fourier_wavenumbers, sine_gordon, sine_gordon_breather  # noqa: E402
 
-from benchmarks.common import machine_info, write_result  # noqa: E402
-from benchmarks.nls_pde import SPLIT_STEPS, TOLS, against, atlasnn_points, composed, figure, tsit5_points  # noqa: E402
+from benchmarks.nls_pde import (SPLIT_STEPS, TOLS, against, atlasnn_points, composed, record_runs,  # noqa: E402
+                                tsit5_points)
 from benchmarks.problems import timed  # noqa: E402
 
 LENGTH, OMEGA = 60.0, 0.5
@@ -81,13 +81,7 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
     runs = [compare(m, args.T, (None, *args.stages)) for m in args.points]
-    command = "taskset -c 1 python -m benchmarks.sine_gordon_pde " + " ".join(
-        ["--points", *map(str, args.points), "--T", f"{args.T:g}", "--out", args.out]
-        + (["--figure", args.figure] if args.figure else []))
-    result = {"benchmark": "sine_gordon_pde", "command": command, "machine": machine_info(), "runs": runs}
-    write_result(args.out, result)
-    if args.figure:
-        figure(result, args.figure)
+    record_runs("sine_gordon_pde", args, runs)
 
 
 if __name__ == "__main__":
