@@ -1,7 +1,8 @@
 """The Gauss method on a Hamiltonian wave equation: the sine-Gordon breather on a periodic Fourier
 grid (``atlasnn.systems.sine_gordon``, its linear part 1 + k² on u declared) against the explicit
 symplectic methods a user of wave equations picks — Störmer–Verlet (order 2) and Yoshida's
-composition of it (order 4), with the spectral Laplacian, in JAX, compiled — and Diffrax's Tsit5,
+composition of it (order 4), with the spectral Laplacian, in JAX, compiled — and Diffrax's Tsit5 and
+Kvaerno5,
 at equal accuracy (one core, the whole call; errors against the exact breather).
 
     taskset -c 1 python -m benchmarks.sine_gordon_pde --out docs/benchmarks/sine_gordon_pde.json \\
@@ -22,7 +23,7 @@ import numpy as np  # noqa: E402
 from atlasnn.systems import fourier_wavenumbers, sine_gordon, sine_gordon_breather  # noqa: E402
 
 from benchmarks.nls_pde import (SPLIT_STEPS, TOLS, against, atlasnn_points, composed, record_runs,  # noqa: E402
-                                tsit5_points)
+                                diffrax_points)
 from benchmarks.problems import timed  # noqa: E402
 
 LENGTH, OMEGA = 60.0, 0.5
@@ -67,7 +68,9 @@ def compare(points: int, T: float, stages) -> dict:
            "atlasnn": atlasnn_points(system, system.z0, T, exact, (None, *TOLS), stages, mass=None),
            "verlet": verlet_points(system, points, T, exact, 2),
            "yoshida4": verlet_points(system, points, T, exact, 4),
-           "tsit5": tsit5_points(system, T, exact, mass=None), "rivals": ["verlet", "yoshida4", "tsit5"]}
+           "tsit5": diffrax_points(system, T, exact, mass=None),
+           "kvaerno5": diffrax_points(system, T, exact, mass=None, method="kvaerno5"),
+           "rivals": ["verlet", "yoshida4", "tsit5", "kvaerno5"]}
     return against(out)
 
 

@@ -91,7 +91,7 @@ def test_one_window_is_a_symplectic_map():
             return gauss_step(system.vector_field, None, tab, z, jnp.zeros(4), 0.6, Y0).z
 
         z = jnp.asarray([0.3, -0.3, 0.3, 0.15])
-        M = np.asarray(jax.jacfwd(step)(z))
+        M = np.asarray(jax.jit(jax.jacfwd(step))(z))
     assert np.abs(M.T @ J @ M - J).max() < 1e-13
     assert np.abs(M - np.eye(4)).max() > 0.1  # a map far from the identity
 

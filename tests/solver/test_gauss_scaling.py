@@ -64,7 +64,8 @@ def test_the_decoupled_newton_iteration_equals_the_dense_one(stages):
         L0 = hb[:, None] * np.asarray(field(jnp.tile(z, (stages, 1))))
         dense = dense_newton(field, a, tab, np.asarray(z), hb, L0)
         jacobian = _dense_factor(lambda x: system.jacobian(x[None])[0])
-        L, iterations, ok = _newton(field, jacobian, tab, z, jnp.zeros_like(z), jnp.asarray(hb), jnp.asarray(L0), 100)
+        L, iterations, ok = jax.jit(lambda z, hb, L0: _newton(field, jacobian, tab, z, jnp.zeros_like(z), hb, L0, 100))(
+            z, jnp.asarray(hb), jnp.asarray(L0))
         assert bool(ok)
         scale = np.abs(dense).max()
         assert np.abs(np.asarray(L) - dense).max() <= 1e-13 * scale

@@ -38,8 +38,8 @@ def test_one_window_is_a_symplectic_map_of_the_extended_space():
             Y0 = jnp.broadcast_to(z, (8, n))
             return gauss_step(extended.vector_field, None, tab, z, jnp.zeros(n), 1.0, Y0, implicit_gradients=True)
 
-        M = np.asarray(jax.jacfwd(lambda z: step(z).z)(jnp.asarray(Z0)))
-        done = step(jnp.asarray(Z0))
+        M = np.asarray(jax.jit(jax.jacfwd(lambda z: step(z).z))(jnp.asarray(Z0)))
+        done = jax.jit(step)(jnp.asarray(Z0))
         moved = np.asarray(done.z)
     assert bool(done.converged)
     assert np.abs(M.T @ J @ M - J).max() < 1e-12

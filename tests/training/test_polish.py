@@ -114,6 +114,7 @@ def test_polish_config_errors_name_the_field(field, value):
         PolishConfig(**{field: value})
 
 
+@pytest.mark.slow  # its own compile of the L-BFGS step in float64: 40 s
 def test_float64_polishing_returns_a_float32_model_no_worse_than_its_input(trained, ho):
     res = polish(trained, ho, T_END, PCFG.replace(steps=30, precision="float64"))
     assert res.model.z0.dtype == jnp.float32

@@ -207,10 +207,6 @@ class GaussCollocation(AbstractSolver):
         if self.time_scale is not None:
             raise ConfigError("GaussCollocation time_scale is not available inside jit/grad/vmap: solve without it "
                               "there, or call solve on numbers")
-        if system.linear_part is not None:
-            # its derivatives would need the tangent solve preconditioned by the linear part as well
-            raise ConfigError(f"system {system.name!r} declares a linear_part, which solve inside jit/grad/vmap does "
-                              "not use yet: call solve on numbers, or build the system without linear_part")
         n = system.state_dim
         return gauss_core(system, z0, t0, T, stages=self.stage_count, steps=self.steps, rtol=self.rtol,
                           atol=self.atol, h=self.h, max_windows=self.max_windows,

@@ -69,12 +69,12 @@ def _traced_inputs(system: HamiltonianSystem, z0: Any, t0: Any, T: Any) -> tuple
 
 
 class _Field:
-    """What the march reads of a system — its vector field on rows of states and their Jacobians —
-    made from f(z, *consts) for one state, the values H closes over as explicit arguments (the
-    adjoint returns their derivatives)."""
+    """What the march reads of a system — its vector field on rows of states, their Jacobians and
+    its declared linear part — made from f(z, *consts) for one state, the values H closes over as
+    explicit arguments (the adjoint returns their derivatives)."""
 
-    def __init__(self, f1, consts):
-        self.f1, self.consts = f1, tuple(consts)
+    def __init__(self, f1, consts, linear_part=None):
+        self.f1, self.consts, self.linear_part = f1, tuple(consts), linear_part
 
     def vector_field(self, Z):
         return jax.vmap(lambda z: self.f1(z, *self.consts))(Z)
@@ -121,18 +121,19 @@ def _march(field, static: _Static, z0, t0, T, kind: str, implicit: bool) -> _Car
                            max_steps=budget, buffers=lambda c: c.rows, kind=kind)
 
 
-@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1))
-def _adjoint_march(f1, static: _Static, consts, z0, t0, T) -> _Carry:
-    """The march, differentiated in reverse by its adjoint (:func:`_backward`)."""
-    return _march(_Field(f1, consts), static, z0, t0, T, "lax", False)
+@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1, 2))
+def _adjoint_march(f1, static: _Static, linear, consts, z0, t0, T) -> _Carry:
+    """The march, differentiated in reverse by its adjoint (:func:`_backward`); ``linear``: the
+    system's declared linear part or None."""
+    return _march(_Field(f1, consts, linear), static, z0, t0, T, "lax", False)
 
 
-def _forward(f1, static, consts, z0, t0, T):
-    out = _march(_Field(f1, consts), static, z0, t0, T, "lax", False)
+def _forward(f1, static, linear, consts, z0, t0, T):
+    out = _march(_Field(f1, consts, linear), static, z0, t0, T, "lax", False)
     return out, (out.rows, consts, t0, T)
 
 
-def _backward(f1, static: _Static, residuals, cotangent: _Carry):
+def _backward(f1, static: _Static, linear, residuals, cotangent: _Carry):
     """The adjoint of the march: its accepted windows walked back, each through its step from the
     stored stage solution (:func:`solved_step`: the transposed linear solve and one derivative of
     the residual, never the stage iteration again). The cotangents of the rows (start, length, z, e,
@@ -145,7 +146,7 @@ def _backward(f1, static: _Static, residuals, cotangent: _Carry):
     order = jnp.nonzero(accepted, size=accepted.shape[0], fill_value=0)[0]
 
     def step(zk, ek, hk, cs, Lk):
-        return solved_step(_Field(f1, cs).vector_field, tab, zk, ek, hk, Lk, static.max_iterations)
+        return solved_step(_Field(f1, cs).vector_field, tab, zk, ek, hk, Lk, static.max_iterations, linear)
 
     def body(j, carry):
         lam_z, lam_e, cs_bar, t0_bar, T_bar = carry
@@ -180,7 +181,7 @@ def gauss_core(system: HamiltonianSystem, z0: Any, t0: Any, T: Any, *, stages: i
     else:
         f1, consts = jax.closure_convert(lambda z: system.vector_field(z[None])[0], z0)
         try:
-            out = _adjoint_march(f1, static, consts, z0, t0, T)
+            out = _adjoint_march(f1, static, system.linear_part, consts, z0, t0, T)
         except TypeError as exc:
             if "forward-mode" not in str(exc):
                 raise

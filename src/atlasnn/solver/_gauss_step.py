@@ -157,17 +157,14 @@ def _dense_factor(jacobian: Callable) -> Callable:
 GLOBAL_FLOOR = 1e-2
 
 
-def _newton(field, factor, tab, z, e, hb, L0, max_iterations, floor=0.0, noise=0.0):
-    """L by simplified Newton iterations from L0, decoupled (Hairer & Wanner, *Solving ODEs II*,
-    IV.8): the window's matrix I − h (diag(b) μ) ⊗ A is block-diagonalised by the eigenvectors
-    V of diag(b) μ, so that a Newton step is one solve of I − hλ_j A per eigenvalue λ_j — s/2
-    complex systems of size n (the conjugate of each pair gives the conjugate solution), not one
-    of size s·n. A is the field's Jacobian at z_n (:func:`_dense_factor`) or a declared linear part
-    (``LinearPart.factor``, which ignores z). V's conditioning (1e6 at s = 12) only slows the
-    iteration a little: each step is checked against the true residual, so the result is the same
-    to round-off. Returns (L, iterations, whether it reached round-off)."""
-    mu, lam, to_modes, from_modes = tab["mu"], tab["newton_lam"], tab["newton_to"], tab["newton_from"]
-    h = jnp.sum(hb)
+def _mode_solve(factor, tab, z, h) -> Callable:
+    """r ↦ (I − h (diag(b) μ) ⊗ A)⁻¹ r for stage arrays r (s, n), decoupled (Hairer & Wanner, *Solving
+    ODEs II*, IV.8): the matrix is block-diagonalised by the eigenvectors V of diag(b) μ, so that
+    the solve is one of I − hλ_j A per eigenvalue λ_j — s/2 complex systems of size n (the conjugate
+    of each pair gives the conjugate solution), not one of size s·n. ``factor(z, shifts)``: the
+    solves of I − c A (:func:`_dense_factor`, or a declared linear part's ``factor``, which ignores
+    z). Linear in r (reverse mode transposes it: :func:`_tangent_solve`)."""
+    lam, to_modes, from_modes = tab["newton_lam"], tab["newton_to"], tab["newton_from"]
     m = lam.shape[0]
     cdtype = jnp.result_type(z.dtype, jnp.complex64)  # complex of the state's precision
     solve = factor(z, h * jnp.asarray(lam, cdtype))
@@ -176,11 +173,25 @@ def _newton(field, factor, tab, z, e, hb, L0, max_iterations, floor=0.0, noise=0
     to_real = jnp.asarray(np.concatenate([to_modes.real, to_modes.imag]), z.dtype)  # (2m, s)
     from_real = jnp.asarray(np.concatenate([from_modes.real, -from_modes.imag], axis=1), z.dtype)  # (s, 2m)
 
+    def apply(r):
+        r = jnp.matmul(to_real, r, precision=lax.Precision.HIGHEST)
+        x = solve(lax.complex(r[:m], r[m:]))
+        return jnp.matmul(from_real, jnp.concatenate([jnp.real(x), jnp.imag(x)]), precision=lax.Precision.HIGHEST)
+
+    return apply
+
+
+def _newton(field, factor, tab, z, e, hb, L0, max_iterations, floor=0.0, noise=0.0):
+    """L by simplified Newton iterations from L0, each step one decoupled solve with the window's
+    matrix I − h (diag(b) μ) ⊗ A (:func:`_mode_solve`), A the field's Jacobian at z_n or a declared
+    linear part. V's conditioning (1e6 at s = 12) only slows the iteration a little: each step is
+    checked against the true residual, so the result is the same to round-off. Returns (L,
+    iterations, whether it reached round-off)."""
+    mu = tab["mu"]
+    solve = _mode_solve(factor, tab, z, jnp.sum(hb))
+
     def update(L):
-        g = L - hb[:, None] * field(z + (e + small_matmul(mu, L)))
-        r = jnp.matmul(to_real, g, precision=lax.Precision.HIGHEST)
-        x = solve(-lax.complex(r[:m], r[m:]))
-        return L + jnp.matmul(from_real, jnp.concatenate([jnp.real(x), jnp.imag(x)]), precision=lax.Precision.HIGHEST)
+        return L - solve(L - hb[:, None] * field(z + (e + small_matmul(mu, L))))
 
     scale = _scale(z, L0)
     L, k, dmin, dlast = _iterate(update, L0, jnp.maximum(scale, floor * jnp.max(scale)), max_iterations)
@@ -244,16 +255,22 @@ def _dense_tangent_solve(linear: Callable, y: jax.Array) -> jax.Array:
     return jnp.linalg.solve(columns.reshape(size, size).T, y.reshape(-1)).reshape(shape)
 
 
-def _linear_iteration(linear: Callable, y: jax.Array, max_iterations: int) -> jax.Array:
+def _linear_iteration(linear: Callable, y: jax.Array, max_iterations: int, precondition=None) -> jax.Array:
     """x with linear(x) = y, ``linear`` = I − K the stage equations' residual linearised at their
     solution (or its transpose), by the iteration x ← y + K x from x = y: it contracts as the
     fixed-point iteration of the stages did (the same K), at the cost of one derivative of the
-    field at the stages an iteration. Where it does not reach round-off (the window was stiff and
+    field at the stages an iteration. With ``precondition`` (P⁻¹, P the Newton matrix of a declared
+    linear part, or its transpose), x ← x + P⁻¹(y − linear(x)) from x = P⁻¹y: it contracts as the
+    Newton iteration of the stages did. Where it does not reach round-off (the window was stiff and
     solved by Newton), the dense solve for at most DENSE_TANGENT_SIZE unknowns, else NaN — a
     derivative that is not there says so."""
     scale = jnp.full(y.shape[-1], jnp.maximum(jnp.max(jnp.abs(y)), jnp.finfo(y.dtype).tiny))
-    x, _, dmin, dlast = _iterate(lambda x: y + (x - linear(x)), y, scale, max_iterations, unroll=FIXED_POINT_UNROLL,
-                                 enough=TANGENT_ENOUGH)
+    if precondition is None:
+        x, _, dmin, dlast = _iterate(lambda x: y + (x - linear(x)), y, scale, max_iterations,
+                                     unroll=FIXED_POINT_UNROLL, enough=TANGENT_ENOUGH)
+    else:
+        x, _, dmin, dlast = _iterate(lambda x: x + precondition(y - linear(x)), precondition(y), scale,
+                                     max_iterations, enough=TANGENT_ENOUGH)
     size = jnp.maximum(jnp.max(jnp.abs(x)), jnp.max(jnp.abs(y)))
     ok = jnp.isfinite(dlast) & (dmin <= FIXED_POINT_FLOOR * size)
     fallback = (lambda: _dense_tangent_solve(linear, y)) if y.size <= DENSE_TANGENT_SIZE \
@@ -262,13 +279,29 @@ def _linear_iteration(linear: Callable, y: jax.Array, max_iterations: int) -> ja
     return lax.while_loop(lambda c: ~c[1], lambda c: (fallback(), jnp.asarray(True)), (x, ok))[0]
 
 
-def _tangent_solve(max_iterations: int) -> Callable:
+def _tangent_solve(max_iterations: int, tab: dict | None = None, linear=None, z=None, h=None) -> Callable:
     """``lax.custom_root``'s tangent solve: :func:`_linear_iteration` as a ``lax.custom_linear_solve``
-    (so that reverse mode transposes it: the same iteration on the transposed equations)."""
-    def solve(linear, y):
-        return _linear_iteration(linear, y, max_iterations)
+    (so that reverse mode transposes it: the same iteration on the transposed equations). With a
+    declared ``linear`` part, preconditioned by the window's Newton matrix with it (:func:`_mode_solve`
+    at the window's z and length h, which carry no derivative here), transposed for the transposed
+    equations."""
+    if linear is None:
+        forward = transposed = None
+    else:
+        z, h = lax.stop_gradient(z), lax.stop_gradient(h)
+        forward = _mode_solve(lambda _, shifts: linear.factor(shifts), tab, z, h)
+        like = jnp.zeros((tab["mu"].shape[0], z.shape[-1]), z.dtype)
 
-    return lambda linear, y: lax.custom_linear_solve(linear, y, solve, transpose_solve=solve)
+        def transposed(r):
+            return jax.linear_transpose(forward, like)(r)[0]
+
+    def solve(operator, y):
+        return _linear_iteration(operator, y, max_iterations, forward)
+
+    def transpose_solve(operator, y):
+        return _linear_iteration(operator, y, max_iterations, transposed)
+
+    return lambda operator, y: lax.custom_linear_solve(operator, y, solve, transpose_solve=transpose_solve)
 
 
 def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Array, e: jax.Array, h, Y0: jax.Array,
@@ -298,7 +331,7 @@ def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Arr
             L, k, ok, used = solve_stages(field, jacobian, tab, z, e, hb, guess, max_iterations, linear)
             return L, jnp.stack([k, ok, used]).astype(L.dtype)
 
-        L, aux = lax.custom_root(residual, L0, solve, _tangent_solve(max_iterations), has_aux=True)
+        L, aux = lax.custom_root(residual, L0, solve, _tangent_solve(max_iterations, tab, linear, z, h), has_aux=True)
         k, ok, used_newton = aux[0].astype(jnp.int32), aux[1] > 0, aux[2] > 0
     else:
         L, k, ok, used_newton = solve_stages(field, jacobian, tab, z, e, hb, L0, max_iterations, linear)
@@ -307,7 +340,7 @@ def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Arr
 
 
 def solved_step(field: Callable, tab: dict, z: jax.Array, e: jax.Array, h, L: jax.Array,
-                max_iterations: int = 100) -> tuple[jax.Array, jax.Array, jax.Array]:
+                max_iterations: int = 100, linear=None) -> tuple[jax.Array, jax.Array, jax.Array]:
     """(L, z_{n+1}, e_{n+1}) of a window whose stage equations were already solved (``L``, their
     solution from z, e and h), as a function of z, e, h and whatever ``field`` closes over: the
     values are L's own, the derivatives those of the implicit function (as ``gauss_step`` with
@@ -319,7 +352,8 @@ def solved_step(field: Callable, tab: dict, z: jax.Array, e: jax.Array, h, L: ja
     def residual(L):
         return L - hb[:, None] * field(z + (e + small_matmul(mu, L)))
 
-    L = lax.custom_root(residual, lax.stop_gradient(L), lambda _, guess: guess, _tangent_solve(max_iterations))
+    L = lax.custom_root(residual, lax.stop_gradient(L), lambda _, guess: guess,
+                        _tangent_solve(max_iterations, tab, linear, z, h))
     z1, e1 = compensated_add(z, e, jnp.sum(L, axis=0))
     return L, z1, e1
 
