@@ -22,6 +22,7 @@ TIMES = np.linspace(0.2, 6.0, 30)
 SMALL = JointConfig(width=24, epochs=500, lm_steps=60)
 
 
+@pytest.mark.slow  # 30-60 s; the family end to end below checks the joint fit against shooting
 def test_joint_fit_recovers_g_from_noise_free_data():
     obs = synthetic_observations(PEND, PEND.z0, TIMES, ["x"], 0.0, 0, t0=0.0)
     fit = fit_joint(PEND, obs, [Unknown("g", 0.6, 0.2, 3.0)], config=SMALL)

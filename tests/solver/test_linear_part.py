@@ -121,7 +121,8 @@ def test_a_stiff_pair_solved_with_a_dense_linear_part_and_differentiated():
     assert abs(energy[1] / energy[0] - 1.0) < 1e-11
     # the gradient through the same windows (h fixed) against central differences of the host solve
     fixed = GaussCollocation(h=0.05, stages=6)
-    grad = jax.grad(lambda z0: atlasnn.solve(stiff, z0, (0.0, 1.0), solver=fixed)(1.0)[1])(jnp.asarray(stiff.z0))
+    grad = jax.jit(jax.grad(lambda z0: atlasnn.solve(stiff, z0, (0.0, 1.0), solver=fixed)(1.0)[1]))(
+        jnp.asarray(stiff.z0))
     eps, direction = 1e-6, np.array([0.3, -0.2, 0.5, 0.1])
 
     def end(z0):
@@ -142,7 +143,7 @@ def test_the_gradient_through_an_nls_grid_by_the_preconditioned_tangent_solve():
     def functional(z0):
         return jnp.dot(jnp.asarray(w), atlasnn.solve(system, z0, (0.0, T), solver=fixed)(T))
 
-    value, grad = jax.value_and_grad(functional)(jnp.asarray(system.z0))
+    value, grad = jax.jit(jax.value_and_grad(functional))(jnp.asarray(system.z0))
     host = w @ atlasnn.solve(system, system.z0, (0.0, T), solver=fixed)(T)
     assert float(value) == pytest.approx(host, rel=1e-12)
     direction = np.random.default_rng(1).normal(size=system.state_dim)
