@@ -14,14 +14,14 @@ $(BIN)/atlasnn: pyproject.toml
 quick: $(BIN)/atlasnn
 	$(BIN)/atlasnn reproduce oscillator-short --quick --overwrite
 
-# two workers (pytest-xdist), a test file per worker at a time: 5.7 min on the 2-core machine
-# against 9.6 min in one process (CONTRIBUTING.md); TEST_WORKERS=0 runs them in this process
+# two workers (pytest-xdist), a test file per worker at a time: 24.4 min on the 2-core machine
+# from a fresh clone (CONTRIBUTING.md); TEST_WORKERS=0 runs them in this process
 TEST_WORKERS ?= 2
 PYTEST = $(BIN)/python -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile)
 test: $(BIN)/atlasnn
 	$(PYTEST)
 
-# the tests marked slow (each over a minute here; CI leaves them out to stay under 30 minutes)
+# the tests marked slow (half a minute or more each; CI leaves them out to stay under 30 minutes)
 test-slow: $(BIN)/atlasnn
 	$(PYTEST) -m slow
 
