@@ -174,8 +174,8 @@ def split_points(system, points, T, exact, order) -> list[dict]:
     return rows
 
 
-#: Diffrax's methods tried as rivals: Tsit5 (explicit) over TSIT5_TOLS, Kvaerno5 (an implicit
-#: ESDIRK for stiff problems: a Newton solve with the field's dense Jacobian a step) over KVAERNO5_TOLS
+#: the rtol each of Diffrax's rivals is swept over: Tsit5 (explicit) and Kvaerno5 (an implicit ESDIRK
+#: for stiff problems: a Newton solve with the field's dense Jacobian a step)
 DIFFRAX_TOLS = {"tsit5": TSIT5_TOLS, "kvaerno5": (1e-6, 1e-8, 1e-10)}
 #: a Diffrax run slower than this (seconds) ends its sweep: the tighter tolerances only cost more
 SLOWEST = 60.0
