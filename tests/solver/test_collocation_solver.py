@@ -167,6 +167,11 @@ def test_bad_solver_settings_are_one_line(settings, needle):
         Collocation(**settings)
 
 
+def test_building_one_warns_that_it_is_deprecated():
+    with pytest.warns(FutureWarning, match=r"Collocation \(random features\) is deprecated.*GaussCollocation"):
+        Collocation(features=8)
+
+
 def test_solvers_registry_names_all_three():
     assert {"gauss", "collocation", "adam-march"} <= set(SOLVERS)
     assert isinstance(solver_from_name("collocation", features=12), Collocation)
@@ -179,6 +184,18 @@ def test_a_march_that_cannot_meet_its_tolerance_says_so(ho):
     """Two features cannot reach 1e-14 on any window: the march gives up in one line."""
     with pytest.raises(AtlasError, match="collocation march stopped at t ="):
         solve(ho, [1.0, 0.0], (0.0, 1.0), solver=Collocation(features=2, max_rejects=5), rtol=1e-14, atol=1e-14)
+
+
+def test_a_march_that_stops_keeps_its_windows():
+    """q'' = q³ from (1, 0) blows up at t ≈ 1.854: the march stops there, and the error carries
+    the windows it accepted before, which agree with a reference on [0, 1]."""
+    blowup = expression_system("p**2/2 - q**4/4", ["q"], ["p"], z0=[1.0, 0.0], separable=True, name="blowup")
+    with pytest.raises(AtlasError, match="collocation march stopped at t =.*error's .partial") as err:
+        solve(blowup, None, (0.0, 3.0), solver=Collocation(max_rejects=5))
+    part = err.value.partial
+    assert part is not None and 1.0 < part.edges[-1] < 1.86
+    t = np.linspace(0.0, 1.0, 11)
+    assert np.max(np.abs(part(t) - reference_solution(blowup, [1.0, 0.0], t))) < 1e-9
 
 
 def test_the_solution_is_float64_even_with_float32_default(ho):

@@ -9,8 +9,8 @@ windows into the :class:`~atlasnn.solutions.PiecewiseSolution` every other part 
 from __future__ import annotations
 
 import functools
-
 import time
+import warnings
 from dataclasses import dataclass
 from typing import Any, Callable, ClassVar
 
@@ -60,11 +60,21 @@ def _positive(name: str, value: Any) -> float:
     return float(value)
 
 
+#: why Collocation is on its way out: on no problem of the work–precision suite is it as accurate
+#: as the default, and at its tightest it takes 4.9–46× the default's time (docs/CHOOSING.md,
+#: from docs/benchmarks/solver_workprecision.json)
+DEPRECATION = ("Collocation (random features) is deprecated and will be removed: GaussCollocation(), the "
+               "default, is more accurate and faster on every problem measured (docs/CHOOSING.md)")
+
+
 @register_solver
 @dataclass(frozen=True)
 class Collocation(AbstractSolver):
     """Windows of ẑ_k(s) = z_k + f(s) W_k φ(s/h), W_k found by float64 Gauss–Newton on collocation
     points, each accepted when its estimated local error meets atol + rtol·|z| (docs/SOLVER.md).
+
+    Deprecated (a ``FutureWarning`` when built): :class:`GaussCollocation` is more accurate and
+    faster on every problem of the work–precision suite.
 
     Attributes:
         rtol: relative tolerance: each window's estimated local error must be within atol + rtol·|z|
@@ -120,6 +130,7 @@ class Collocation(AbstractSolver):
     chunk: int = 64
 
     def __post_init__(self) -> None:
+        warnings.warn(DEPRECATION, FutureWarning, stacklevel=4)  # the caller of Collocation(...)
         self.check_tolerances()
         m = _positive_int("features", self.features)
         p = m + 4 if self.points is None else _positive_int("points", self.points)
@@ -144,7 +155,12 @@ class Collocation(AbstractSolver):
     # ------------------------------------------------------------------ solving
     def solve(self, system: HamiltonianSystem, z0: np.ndarray, t0: float, T: float, *,
               progress: Callable[[float], None] | None = None) -> PiecewiseSolution:
-        return self.solve_batch(system, np.asarray(z0)[None], t0, T, progress=progress)[0]
+        try:
+            return self.solve_batch(system, np.asarray(z0)[None], t0, T, progress=progress)[0]
+        except ConfigError as exc:
+            if isinstance(getattr(exc, "partial", None), list):
+                exc.partial = exc.partial[0]  # one solution: the part up to the stop, or None
+            raise
 
     def solve_batch(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float, *, seeds: Any = None,
                     progress: Callable[[float], None] | None = None) -> list[PiecewiseSolution]:
@@ -164,21 +180,31 @@ class Collocation(AbstractSolver):
         started = time.perf_counter()
         rows, state, first_call = self._march(program, feats, z0s, t0, T, rtol, atol, progress)
         wall = time.perf_counter() - started
-        out = []
+        out, problem = [], None
         for b, z0 in enumerate(z0s):
             start, length, z_start, weights, est_max, ratio = (np.concatenate([r[i][b] for r in rows]) for i in range(6))
             end, failed = float(state.t[b]), int(state.failed[b])
-            if failed or start.size == 0 or end < T:
-                raise ConfigError(
-                    f"the collocation march{'' if len(z0s) == 1 else f' of member {b}'} stopped at t = {end:.6g} of "
-                    f"[{t0:.6g}, {T:.6g}]: windows shrank below round-off or failed {self.max_rejects} times in a row "
-                    f"(rtol={rtol:g}, atol={atol:g}); loosen the tolerance or raise features")
+            stopped = failed or start.size == 0 or end < T
+            if stopped and problem is None:
+                problem = (f"the collocation march{'' if len(z0s) == 1 else f' of member {b}'} stopped at t = {end:.6g} "
+                           f"of [{t0:.6g}, {T:.6g}]: windows shrank below round-off or failed {self.max_rejects} times "
+                           f"in a row (rtol={rtol:g}, atol={atol:g}); loosen the tolerance or raise features")
+            if stopped and start.size == 0:
+                out.append(None)  # a member that stopped before its first window: nothing to keep
+                continue
             info = {"solver": self.name, "settings": {**self.settings(), "seed": seeds[b]}, "rtol": float(rtol),
                     "atol": float(atol), "windows": int(start.size), "rejected": int(state.rejected[b]),
                     "newton_iterations": int(state.newton[b]), "running_estimate_max": float(est_max.max()),
                     "running_estimate_end": np.asarray(state.delta[b]).tolist(), "solve_time": wall,
                     "first_call_time": first_call, "batch": len(z0s)}
+            # a member that stopped keeps the windows it accepted (the error's .partial)
             out.append(self._solution(system, z0, feats[b], start, length, z_start, weights, est_max, ratio, info))
+        if problem is not None:
+            kept = any(part is not None for part in out)
+            error = ConfigError(problem + ("; the solution" + ("s" if len(z0s) > 1 else "") + " computed so far: the "
+                                           "error's .partial" if kept else ""))
+            error.partial = out
+            raise error
         return out
 
     def _march(self, program, feats, z0s, t0, T, rtol, atol, progress):
