@@ -12,6 +12,15 @@ from atlasnn.compile_cache import clear_programs
 from atlasnn.systems import harmonic_oscillator
 
 
+@pytest.fixture
+def x64():
+    """JAX in float64 for the test (the traced solve and the learning need it; JAX's default is off)."""
+    import jax
+
+    with jax.enable_x64(True):
+        yield
+
+
 @pytest.fixture(scope="session")
 def ho():
     """H = p²/2 + x²/2 with z0 = (1, 0); exact solution x = cos t, p = −sin t."""

@@ -9,6 +9,8 @@ The face: one door per question, each taking method objects that hold their sett
   :class:`FlowMap` (default) or :class:`NetworkBundle`;
 * parameters from observations: :func:`fit` with :class:`Shooting` (default), :class:`CollocationFit`,
   :class:`Joint` or :class:`BundleFit`, returning a :class:`FitResult`;
+* a Hamiltonian from trajectories: :func:`learn_hamiltonian` with :class:`ThroughSolver` (default)
+  or :class:`HNN`;
 * the paper's experiments: :func:`load_config`, :func:`run_experiment` (and ``atlasnn reproduce``);
 * any solution: :func:`save`, :func:`load`.
 
@@ -41,7 +43,8 @@ _FACE = {
                "FlowMap", "NetworkBundle"),
     "checkpoint": ("save", "load"),
     "evaluation": ("reference_solution", "integrate"),
-    "inverse": ("fit", "Shooting", "CollocationFit", "Joint", "BundleFit", "FitResult"),
+    "inverse": ("fit", "Shooting", "CollocationFit", "Joint", "BundleFit", "FitResult", "learn_hamiltonian",
+                "ThroughSolver", "HNN"),
     "observations": ("Observations", "Unknown", "load_observations"),
     "experiments": ("run_experiment", "load_config"),
 }

@@ -17,10 +17,7 @@ E = 0.6
 PERIOD = 2 * np.pi
 
 
-@pytest.fixture(autouse=True)
-def x64():
-    with jax.enable_x64(True):
-        yield
+pytestmark = pytest.mark.usefixtures("x64")  # every test in float64 (tests/conftest.py)
 
 
 def kepler():

@@ -1,0 +1,338 @@
+"""Hamiltonians learned from observed trajectories: one door, :func:`learn_hamiltonian`, taking a
+model H_θ(q, p) (a network, a known part plus a network, a known form with unknown parameters: any
+Equinox module or JAX-traceable callable whose floating-point arrays are θ) and a method object:
+
+* :class:`ThroughSolver` (default) — from every observed state, the next observations predicted
+  by ``atlasnn.solve`` with H_θ (the Gauss collocation, differentiated by ``jax.grad``);
+* :class:`HNN` — a Hamiltonian neural network's loss (Greydanus et al. 2019): J∇H_θ at the
+  observed states against central differences of the observations.
+
+Both train θ by Adam (Optax), keep the model of least held-out loss (the last part of every
+trajectory is held out), and return a :class:`LearnedHamiltonian` judged by trust rules: a loss
+far above the noise, a held-out loss far above the training loss, a training stopped early.
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+import math
+import time
+from typing import Any, Callable, ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from atlasnn.errors import ConfigError
+from atlasnn.inverse._learn_data import check_trajectories, rates, segments
+from atlasnn.solver import GaussCollocation, solve
+from atlasnn.systems import HamiltonianSystem
+
+__all__ = ["AbstractLearnMethod", "ThroughSolver", "HNN", "LearnedHamiltonian", "learn_hamiltonian"]
+
+#: a loss this many times the noise's own (2σ² for predicted states) is "far above the noise"
+NOISE_FACTOR = 3.0
+#: a held-out loss this many times the training loss (or the noise's) is "does not generalise"
+HELD_OUT_FACTOR = 3.0
+
+
+def _positive_int(owner: str, name: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ConfigError(f"{owner} {name} must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
+def _positive(owner: str, name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise ConfigError(f"{owner} {name} must be a finite number > 0, got {value!r}")
+    return float(value)
+
+
+class AbstractLearnMethod(abc.ABC):
+    """A way of learning H_θ: a frozen dataclass of settings (``steps``, ``rate`` and its own) and
+    :meth:`losses`, the training and held-out losses as JAX functions of the model."""
+
+    name: ClassVar[str]
+    steps: int
+    rate: float
+
+    def __post_init__(self) -> None:
+        _positive_int(type(self).__name__, "steps", self.steps)
+        _positive(type(self).__name__, "rate", self.rate)
+
+    @abc.abstractmethod
+    def losses(self, trajectories: list, held_out: float, dof: int) -> tuple[Callable, Callable | None]:
+        """(training loss, held-out loss or None), each a function of the model."""
+
+    def noise_loss(self, sigma: float) -> float | None:
+        """The loss that noise of σ alone gives (None: this method has no such rule)."""
+        return None
+
+
+@dataclasses.dataclass(frozen=True)
+class ThroughSolver(AbstractLearnMethod):
+    """H_θ trained through the solver: from every observed state, the next ``ahead`` observations
+    of its trajectory predicted by ``atlasnn.solve`` with H_θ, their mean squared error minimised.
+
+    Attributes:
+        ahead: observations predicted from each observed state (short segments keep the loss smooth
+            in θ; long ones carry the start's noise further).
+        steps: Adam steps.
+        rate: Adam's learning rate.
+        solver: the solve differentiated through: a loose tolerance (the noise is far larger than
+            any solver error), few stages and a small window budget (the arrays each prediction
+            carries).
+    """
+
+    ahead: int = 5
+    steps: int = 1000
+    rate: float = 3e-3
+    solver: GaussCollocation = GaussCollocation(stages=4, rtol=1e-7, atol=1e-9, max_windows=64)
+    name: ClassVar[str] = "through the solver"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _positive_int("ThroughSolver", "ahead", self.ahead)
+        if not isinstance(self.solver, GaussCollocation):
+            raise ConfigError(f"ThroughSolver solver must be a GaussCollocation, got {type(self.solver).__name__}")
+
+    def losses(self, trajectories, held_out, dof):
+        train, test = segments(trajectories, self.ahead, held_out)
+        return self._loss(train, dof), (None if test is None else self._loss(test, dof))
+
+    def _loss(self, pieces, dof: int) -> Callable:
+        data = tuple(jnp.asarray(a) for a in (pieces.t0, pieces.starts, pieces.times, pieces.targets))
+        solver = self.solver
+
+        def loss(model):
+            system = HamiltonianSystem(model, dof, name="learned")
+
+            def predict(piece):
+                t0, z0, times, _ = piece
+                return solve(system, z0, (t0, times[-1]), solver=solver)(times)
+
+            return jnp.mean((jax.lax.map(predict, data) - data[3]) ** 2)
+
+        return loss
+
+    def noise_loss(self, sigma):
+        # the target's noise and the start's, carried forward (about σ² each for short segments)
+        return 2.0 * sigma ** 2
+
+
+@dataclasses.dataclass(frozen=True)
+class HNN(AbstractLearnMethod):
+    """A Hamiltonian neural network's training (Greydanus et al. 2019): J∇H_θ at the observed
+    states against central differences of the observations, mean squared error.
+
+    Attributes:
+        steps: Adam steps.
+        rate: Adam's learning rate.
+    """
+
+    steps: int = 1000
+    rate: float = 3e-3
+    name: ClassVar[str] = "HNN"
+
+    def losses(self, trajectories, held_out, dof):
+        train, test = rates(trajectories, held_out)
+        return self._loss(train, dof), (None if test is None else self._loss(test, dof))
+
+    @staticmethod
+    def _loss(pairs, dof: int) -> Callable:
+        states, slopes = (jnp.asarray(a) for a in pairs)
+
+        def loss(model):
+            return jnp.mean((HamiltonianSystem(model, dof, name="learned").vector_field(states) - slopes) ** 2)
+
+        return loss
+
+
+@dataclasses.dataclass(eq=False)
+class LearnedHamiltonian:
+    """What :func:`learn_hamiltonian` learned.
+
+    Attributes:
+        model: the trained H_θ (the one of least held-out loss, or of least training loss where
+            nothing is held out).
+        dof: its degrees of freedom.
+        method: the method, in words.
+        loss: the kept model's training loss.
+        held_out_loss: its loss on the held-out part (None: nothing held out).
+        noise: the σ given to the rules (None: not given).
+        steps: Adam steps taken.
+        curve: the training loss at every step.
+        seconds: the training's wall time.
+        stopped: why training stopped early (interrupted, a non-finite loss, the solver failing), or None.
+        notes: the reasons behind ``trusted``, each with what to do.
+        trusted: False when a rule found a reason not to believe the learned H.
+    """
+
+    model: Any
+    dof: int
+    method: str
+    loss: float
+    held_out_loss: float | None
+    noise: float | None
+    steps: int
+    curve: list
+    seconds: float
+    stopped: str | None
+    notes: list
+    trusted: bool
+
+    @property
+    def system(self) -> HamiltonianSystem:
+        """The learned H as a :class:`HamiltonianSystem`: solve it, save it, check it like any other."""
+        return HamiltonianSystem(self.model, self.dof, name="learned")
+
+
+def learn_hamiltonian(model: Any, trajectories: Any, method: AbstractLearnMethod | None = None, *,
+                      dof: int | None = None, noise: float | None = None, held_out: float = 0.2,
+                      progress: Callable[[int, float], None] | None = None) -> LearnedHamiltonian:
+    """H_θ(q, p) learned from observed trajectories.
+
+    Args:
+        model: H_θ: an Equinox module (or any JAX-traceable callable pytree) taking (q, p), each
+            (d,), to a scalar; its floating-point arrays are θ (cast to float64).
+        trajectories: (times, states) pairs: times (M,) strictly increasing, states (M, 2d), q then p.
+        method: [`ThroughSolver`][atlasnn.inverse.ThroughSolver] (default) or
+            [`HNN`][atlasnn.inverse.HNN], holding the training's settings.
+        dof: d (default: half the states' width).
+        noise: σ of the observations' noise, if known: a loss far above the noise's own is flagged.
+        held_out: the fraction of every trajectory's observations, at its end, kept out of training
+            and used to pick the model and to judge whether it generalises (0: none).
+        progress: called as ``progress(step, loss)`` about 50 times in a training.
+
+    Returns a [`LearnedHamiltonian`][atlasnn.inverse.LearnedHamiltonian] (``.system`` is the
+    learned H as a system to solve); ``trusted`` is False, with ``notes`` saying why, when a rule
+    finds a reason not to believe it. Ctrl-C during training keeps the best H so far."""
+    method = ThroughSolver() if method is None else method
+    if not isinstance(method, AbstractLearnMethod):
+        raise ConfigError(f"method must be ThroughSolver() or HNN(), got {type(method).__name__}")
+    if isinstance(held_out, bool) or not isinstance(held_out, (int, float)) or not 0 <= held_out < 1:
+        raise ConfigError(f"held_out must be a fraction in [0, 1), got {held_out!r}")
+    if noise is not None and (isinstance(noise, bool) or not isinstance(noise, (int, float))
+                              or not math.isfinite(noise) or noise < 0):
+        raise ConfigError(f"noise must be a finite number >= 0 (the noise's σ), got {noise!r}")
+    with jax.enable_x64(True):
+        data = check_trajectories(trajectories)
+        width = data[0].z.shape[1]
+        dof = width // 2 if dof is None else _positive_int("learn_hamiltonian", "dof", dof)
+        if 2 * dof != width:
+            raise ConfigError(f"dof = {dof} needs states of {2 * dof} components, the trajectories have {width}")
+        model = jax.tree_util.tree_map(lambda x: x.astype(jnp.float64) if eqx.is_inexact_array(x) else x, model)
+        notes = _check_model(model, dof, data)
+        train_loss, test_loss = method.losses(data, float(held_out), dof)
+        if test_loss is None:
+            notes.append("nothing was held out: whether H_θ generalises is not checked")
+        record = _train(model, method, train_loss, test_loss, progress)
+    return _judge(LearnedHamiltonian(dof=dof, method=method.name, noise=noise, notes=notes, trusted=True, **record),
+                  method)
+
+
+def _check_model(model: Any, dof: int, data: list) -> list[str]:
+    """Refuse, before training, a model with nothing to train or whose H is affine in (q, p) for
+    its θ and a perturbed θ (its flow a constant drift whatever θ); the notes to keep."""
+    params, static = eqx.partition(model, eqx.is_inexact_array)
+    count = sum(int(np.size(x)) for x in jax.tree_util.tree_leaves(params))
+    if count == 0:
+        raise ConfigError("the model has no floating-point arrays to train (θ is empty): H_θ must hold its weights "
+                          "or parameters as JAX or NumPy float arrays")
+    HamiltonianSystem(model, dof, name="learned")  # refuses an H that is not a scalar function of (q, p)
+    z = jnp.asarray(data[0].z[0])
+    nudged = jax.tree_util.tree_map(lambda x: x + 0.1 * (1 + jnp.abs(x)), params)
+
+    def hessian(p):
+        h = eqx.combine(p, static)
+        return jax.hessian(lambda x: h(x[:dof], x[dof:]))(z)
+
+    if not np.any(np.asarray(hessian(params))) and not np.any(np.asarray(hessian(nudged))):
+        raise ConfigError("H_θ is affine in (q, p) (its Hessian is zero), so its flow is a constant drift that cannot "
+                          "follow an orbit that turns: give the network a nonlinear activation and a hidden layer")
+    observed = sum(traj.z.size for traj in data)
+    if count > observed:
+        return [f"θ has {count} numbers and the data {observed}: the held-out loss is the check that H_θ did not "
+                "merely fit the noise"]
+    return []
+
+
+def _train(model: Any, method: AbstractLearnMethod, train_loss: Callable, test_loss: Callable | None,
+           progress: Callable[[int, float], None] | None) -> dict:
+    """Adam on ``train_loss``; the model of least held-out loss (checked about 50 times) or of least
+    training loss is kept. A Ctrl-C, a non-finite loss or a failing solve ends the training early."""
+    params, static = eqx.partition(model, eqx.is_inexact_array)
+    opt = optax.adam(method.rate)
+
+    @eqx.filter_jit  # (Equinox's jit shows the solve's own message when it fails at run time)
+    def step(params, state):
+        value, grads = jax.value_and_grad(lambda p: train_loss(eqx.combine(p, static)))(params)
+        updates, state = opt.update(grads, state, params)
+        return optax.apply_updates(params, updates), state, value
+
+    held = None if test_loss is None else eqx.filter_jit(lambda p: test_loss(eqx.combine(p, static)))
+    every = max(1, method.steps // 50)
+    state, curve, stopped = opt.init(params), [], None
+    best = (math.inf, params, math.inf, None)  # (score, θ, its training loss, its held-out loss)
+    started = time.perf_counter()
+    for k in range(method.steps):
+        try:
+            new, state, value = step(params, state)
+            value = float(value)  # the loss of ``params``, before this step's update
+            if not math.isfinite(value):
+                stopped = f"the training loss is not finite at step {k + 1} (H_θ blew up along a prediction)"
+                break
+            if held is None and value < best[0]:
+                best = (value, params, value, None)
+            elif held is not None and (k % every == 0 or k == method.steps - 1):
+                check = float(held(params))
+                if check < best[0]:
+                    best = (check, params, value, check)
+            curve.append(value)
+            params = new
+            if progress is not None and (k % every == 0 or k == method.steps - 1):
+                progress(k + 1, value)
+        except KeyboardInterrupt:  # anywhere in the step: the best model so far is kept
+            stopped = f"interrupted after {k} of {method.steps} steps"
+            break
+        except (jax.errors.JaxRuntimeError, eqx.EquinoxRuntimeError) as exc:
+            stopped = f"the solve failed at step {k + 1}: {_runtime_message(exc)}"
+            break
+    _, kept, loss, held_loss = best
+    return {"model": eqx.combine(kept, static), "loss": loss, "held_out_loss": held_loss, "steps": len(curve),
+            "curve": curve, "seconds": time.perf_counter() - started, "stopped": stopped}
+
+
+def _runtime_message(exc: Exception) -> str:
+    """The solve's own one-line reason inside a JAX or Equinox run-time error's long text."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    for line in lines:
+        if "EquinoxRuntimeError: " in line:
+            return line.split("EquinoxRuntimeError: ", 1)[1][:300]
+    return (lines[0] if lines else type(exc).__name__)[:300]
+
+
+def _judge(result: LearnedHamiltonian, method: AbstractLearnMethod) -> LearnedHamiltonian:
+    """The trust rules, each a reason not to believe the learned H: a training that stopped early
+    or never had a finite loss, a loss far above the noise's own, a held-out loss far above the
+    training loss. The notes that are not reasons (nothing held out, more weights than data) follow."""
+    reasons = []
+    if result.stopped is not None:
+        reasons.append(f"training stopped early ({result.stopped}); the best H before it is kept: train again, with "
+                       "a smaller rate or a smaller solver tolerance, before trusting it")
+    if not math.isfinite(result.loss):
+        reasons.append("no step gave a finite loss: nothing was learned; check the model's scale against the data's")
+    floor = None if result.noise is None or result.noise == 0 else method.noise_loss(result.noise)
+    if floor is not None and result.loss > NOISE_FACTOR * floor:
+        reasons.append(f"the training loss {result.loss:.2g} is {result.loss / floor:.1f}× the noise's own "
+                       f"({floor:.2g}): the model or its training falls short; more steps, a larger network, or "
+                       "another rate")
+    others = list(result.notes)
+    if result.held_out_loss is not None and result.held_out_loss > HELD_OUT_FACTOR * max(result.loss, floor or 0.0):
+        ratio = result.held_out_loss / max(result.loss, floor or 0.0)
+        reasons.append(f"the held-out loss {result.held_out_loss:.2g} is {ratio:.1f}× the training loss: H_θ does not "
+                       "generalise to the held-out part; more or longer trajectories, a smaller network or fewer steps")
+    return dataclasses.replace(result, notes=reasons + others, trusted=not reasons)

@@ -1,0 +1,128 @@
+"""The data of a learned Hamiltonian: observed trajectories checked, cut into the pieces each
+learning method fits (segments of a few observations ahead, or central-difference rates), and
+split in time into a training part and a held-out part.
+
+Every refusal is one :class:`~atlasnn.errors.ConfigError` line naming the trajectory, the field,
+the value and the limit, raised before anything is trained.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from atlasnn.errors import ConfigError
+
+__all__ = ["Trajectory", "check_trajectories", "Segments", "segments", "rates", "split_point"]
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """One observed trajectory: times t (M,), strictly increasing, and full states z (M, 2d)."""
+
+    t: np.ndarray
+    z: np.ndarray
+
+
+def _trajectory(k: int, item: Any, dim: int | None) -> Trajectory:
+    where = f"trajectory {k}"
+    try:
+        t, z = item
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where} must be a pair (times, states), got {type(item).__name__}") from None
+    try:
+        t, z = np.asarray(t, np.float64), np.asarray(z, np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where} must hold numbers (times, states)") from None
+    if t.ndim != 1 or t.size < 2:
+        raise ConfigError(f"{where}: times must be one row of at least 2 numbers, got shape {t.shape}")
+    if z.ndim != 2 or z.shape[0] != t.size or z.shape[1] % 2 or z.shape[1] == 0:
+        raise ConfigError(f"{where}: states must have shape ({t.size}, 2d) (q then p, one row a time), "
+                          f"got {z.shape}")
+    if dim is not None and z.shape[1] != dim:
+        raise ConfigError(f"{where}: states have {z.shape[1]} components, the model's system {dim}")
+    if not np.all(np.isfinite(t)) or not np.all(np.isfinite(z)):
+        raise ConfigError(f"{where}: times and states must be finite (a NaN or inf is in the data)")
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        i = int(np.argmax(steps <= 0))
+        raise ConfigError(f"{where}: times must increase strictly, but t[{i + 1}] = {t[i + 1]:.6g} follows "
+                          f"t[{i}] = {t[i]:.6g}")
+    return Trajectory(t, z)
+
+
+def check_trajectories(trajectories: Any, dim: int | None = None) -> list[Trajectory]:
+    """The trajectories as checked :class:`Trajectory` records, all with ``dim`` components (or
+    the first one's), or a one-line refusal."""
+    if isinstance(trajectories, (str, bytes)) or not hasattr(trajectories, "__iter__"):
+        raise ConfigError(f"trajectories must be a list of (times, states) pairs, got {type(trajectories).__name__}")
+    out: list[Trajectory] = []
+    for k, item in enumerate(trajectories):
+        out.append(_trajectory(k, item, dim if dim is not None or not out else out[0].z.shape[1]))
+    if not out:
+        raise ConfigError("trajectories is empty: give at least one (times, states) pair")
+    return out
+
+
+def split_point(trajectory: Trajectory, held_out: float) -> int:
+    """The index from which a trajectory's observations are held out (the last ``held_out``
+    fraction of them, by count)."""
+    return trajectory.t.size - int(np.floor(held_out * trajectory.t.size))
+
+
+@dataclass(frozen=True, eq=False)
+class Segments:
+    """Pieces of trajectories: from ``starts`` (N, 2d) at ``t0`` (N,), the states ``targets``
+    (N, A, 2d) at the times ``times`` (N, A)."""
+
+    t0: np.ndarray
+    starts: np.ndarray
+    times: np.ndarray
+    targets: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return int(self.t0.size)
+
+
+def segments(trajectories: list[Trajectory], ahead: int, held_out: float) -> tuple[Segments, Segments | None]:
+    """(training, held-out) segments: from every observed state, the next ``ahead`` observations
+    of the same trajectory; a segment is held out when it starts in the held-out part, and trained
+    on when it ends before it. Refuses data with no training segment."""
+    train, test = [], []
+    for traj in trajectories:
+        cut = split_point(traj, held_out)
+        for i in range(traj.t.size - ahead):
+            piece = (traj.t[i], traj.z[i], traj.t[i + 1:i + ahead + 1], traj.z[i + 1:i + ahead + 1])
+            if i + ahead < cut:
+                train.append(piece)
+            elif i >= cut:
+                test.append(piece)
+    if not train:
+        longest = max(traj.t.size for traj in trajectories)
+        raise ConfigError(f"no training segment: the longest trajectory has {longest} observations, and each segment "
+                          f"needs {ahead + 1} before the held-out part ({held_out:g} of them); give longer "
+                          "trajectories, a smaller ahead or a smaller held_out")
+    return _stack(train), (_stack(test) if test else None)
+
+
+def _stack(pieces: list) -> Segments:
+    return Segments(*(np.stack([p[j] for p in pieces]) for j in range(4)))
+
+
+def rates(trajectories: list[Trajectory], held_out: float) -> tuple[tuple[np.ndarray, np.ndarray],
+                                                                    tuple[np.ndarray, np.ndarray] | None]:
+    """(training, held-out) pairs (states, rates): central differences (z_{i+1} − z_{i−1}) /
+    (t_{i+1} − t_{i−1}) at the interior observations, split as :func:`segments` splits."""
+    train, test = [], []
+    for traj in trajectories:
+        cut = split_point(traj, held_out)
+        for i in range(1, traj.t.size - 1):
+            pair = (traj.z[i], (traj.z[i + 1] - traj.z[i - 1]) / (traj.t[i + 1] - traj.t[i - 1]))
+            (train if i + 1 < cut else test if i - 1 >= cut else []).append(pair)
+    if not train:
+        raise ConfigError("no training rate: each trajectory needs 3 observations before its held-out part")
+    stack = lambda ps: (np.stack([p[0] for p in ps]), np.stack([p[1] for p in ps]))  # noqa: E731
+    return stack(train), (stack(test) if test else None)

@@ -1,0 +1,148 @@
+"""atlasnn.learn_hamiltonian: H_θ learned from trajectories through the solver and as an HNN —
+a known form's parameters recovered, the trust rules (noise, held-out data, an early stop),
+Ctrl-C keeping the best H, and bad input refused in one line before any training."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import atlasnn
+from atlasnn import HNN, ThroughSolver, learn_hamiltonian
+from atlasnn.errors import ConfigError
+
+pytestmark = pytest.mark.usefixtures("x64")  # float64 (tests/conftest.py)
+
+TIMES = np.arange(0.0, 3.01, 0.1)
+
+
+class Quadratic(eqx.Module):
+    """H = a·p²/2 + b·q²/2: a known form with two unknown parameters."""
+
+    a: jax.Array
+    b: jax.Array
+
+    def __call__(self, q, p):
+        return self.a * p[0] ** 2 / 2 + self.b * q[0] ** 2 / 2
+
+
+def _guess():
+    return Quadratic(jnp.array(0.7), jnp.array(1.0))
+
+
+def _trajectories(b=2.0, noise=0.0, starts=([1.0, 0.0], [0.0, 1.0])):
+    """Oscillator orbits (a = 1) with Gaussian noise, observed every 0.1 over [0, 3]."""
+    truth = atlasnn.HamiltonianSystem(lambda q, p: p[0] ** 2 / 2 + b * q[0] ** 2 / 2, 1)
+    rng = np.random.default_rng(0)
+    return [(TIMES, atlasnn.solve(truth, z, (0.0, 3.0))(TIMES) + noise * rng.standard_normal((TIMES.size, 2)))
+            for z in starts]
+
+
+def test_through_the_solver_recovers_a_known_form_and_flags_a_noise_claimed_too_small():
+    """Noisy orbits of a = 1, b = 2: the parameters within 3 %; claiming a tenth of the true noise
+    makes the loss far above the claimed noise's own, which the result says."""
+    result = learn_hamiltonian(_guess(), _trajectories(noise=0.01), ThroughSolver(steps=150, rate=0.05), noise=0.001)
+    assert abs(float(result.model.a) - 1.0) < 0.03 and abs(float(result.model.b) - 2.0) < 0.06
+    assert result.held_out_loss is not None and result.steps == 150 and result.stopped is None
+    assert not result.trusted and "the noise's own" in result.notes[0]
+    z = atlasnn.solve(result.system, [1.0, 0.0], (0.0, 2.0))(2.0)  # the learned H is an ordinary system
+    assert np.all(np.isfinite(z))
+
+
+def test_hnn_recovers_a_known_form_and_is_trusted():
+    result = learn_hamiltonian(_guess(), _trajectories(), HNN(steps=400, rate=0.05), noise=0.0)
+    assert abs(float(result.model.a) - 1.0) < 0.01 and abs(float(result.model.b) - 2.0) < 0.02
+    assert result.trusted, result.notes
+    assert result.curve[-1] < result.curve[0] / 100
+
+
+def test_a_held_out_part_from_other_dynamics_is_not_generalised_to():
+    """The last fifth of every trajectory follows b = 8, the rest b = 2: the held-out loss is far
+    above the training loss, and the result says it does not generalise."""
+    mixed = []
+    for (t, z), (_, other) in zip(_trajectories(), _trajectories(b=8.0)):
+        cut = TIMES.size - TIMES.size // 5
+        mixed.append((t, np.concatenate([z[:cut], other[cut:]])))
+    result = learn_hamiltonian(_guess(), mixed, HNN(steps=200, rate=0.05))
+    assert not result.trusted and any("does not generalise" in n for n in result.notes)
+
+
+def test_ctrl_c_keeps_the_best_model_so_far():
+    def interrupt(step, loss):
+        if step > 8:
+            raise KeyboardInterrupt
+
+    result = learn_hamiltonian(_guess(), _trajectories(), HNN(steps=1000, rate=0.05), progress=interrupt)
+    assert result.stopped.startswith("interrupted after") and result.steps < 1000
+    assert not result.trusted and "stopped early" in result.notes[0]
+    assert np.isfinite(float(result.model.a)) and result.loss <= result.curve[0]
+
+
+class Exploding(eqx.Module):
+    c: jax.Array
+
+    def __call__(self, q, p):
+        return p[0] ** 2 / 2 + jnp.exp(self.c * q[0] ** 2)
+
+
+def test_a_model_that_blows_up_stops_the_training_and_says_so():
+    result = learn_hamiltonian(Exploding(jnp.array(900.0)), _trajectories(), HNN(steps=20))
+    assert result.stopped is not None and "not finite" in result.stopped and not result.trusted
+
+
+class Quartic(eqx.Module):
+    c: jax.Array
+
+    def __call__(self, q, p):
+        return p[0] ** 2 / 2 - self.c * q[0] ** 4
+
+
+def test_a_solve_that_fails_inside_training_stops_it_with_the_solves_reason():
+    """H = p²/2 − 50 q⁴ from q = 1 escapes to infinity within a segment: the traced solve spends
+    its window budget, and the result carries that reason in one line."""
+    result = learn_hamiltonian(Quartic(jnp.array(50.0)), _trajectories()[:1], ThroughSolver(steps=3, ahead=2))
+    assert result.stopped.startswith("the solve failed at step 1: solve (traced core): the window budget")
+    assert "\n" not in result.stopped and not result.trusted
+
+
+class Affine(eqx.Module):
+    w: jax.Array
+
+    def __call__(self, q, p):
+        return jnp.dot(self.w, jnp.concatenate([q, p]))
+
+
+def _data_with(k, **change):
+    t, z = TIMES.copy(), _trajectories()[0][1].copy()
+    if "t_swap" in change:
+        t[[4, 5]] = t[[5, 4]]
+    if "nan" in change:
+        z[3, 1] = np.nan
+    return [(t, z)] if "shape" not in change else [(t, z[:, :1])]
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: learn_hamiltonian(_guess(), _data_with(0, t_swap=1)), r"trajectory 0: times must increase strictly, but t\[5\]"),
+    (lambda: learn_hamiltonian(_guess(), _data_with(0, nan=1)), "trajectory 0: times and states must be finite"),
+    (lambda: learn_hamiltonian(_guess(), _data_with(0, shape=1)), r"states must have shape \(31, 2d\)"),
+    (lambda: learn_hamiltonian(_guess(), []), "trajectories is empty"),
+    (lambda: learn_hamiltonian(_guess(), "data.csv"), "trajectories must be a list"),
+    (lambda: learn_hamiltonian(_guess(), _trajectories(), dof=2), "dof = 2 needs states of 4 components"),
+    (lambda: learn_hamiltonian(_guess(), [(TIMES[:4], np.zeros((4, 2)))], ThroughSolver(ahead=5)),
+     "no training segment: the longest trajectory has 4 observations"),
+    (lambda: learn_hamiltonian(lambda q, p: p[0] ** 2, _trajectories()), "no floating-point arrays to train"),
+    (lambda: learn_hamiltonian(Affine(jnp.ones(2)), _trajectories()), r"H_θ is affine in \(q, p\)"),
+    (lambda: learn_hamiltonian(_guess(), _trajectories(), held_out=1.0), r"held_out must be a fraction in \[0, 1\)"),
+    (lambda: learn_hamiltonian(_guess(), _trajectories(), noise=-1.0), "noise must be a finite number >= 0"),
+    (lambda: learn_hamiltonian(_guess(), _trajectories(), method="hnn"), "method must be ThroughSolver"),
+    (lambda: ThroughSolver(ahead=0), "ThroughSolver ahead must be an integer >= 1"),
+    (lambda: HNN(rate=-1.0), "HNN rate must be a finite number > 0"),
+], ids=["times-out-of-order", "nan", "shape", "empty", "a-path", "dof", "too-short", "no-weights", "affine",
+        "held-out", "noise", "method", "ahead", "rate"])
+def test_bad_input_is_refused_in_one_line_before_training(call, message):
+    with pytest.raises(ConfigError, match=message) as err:
+        call()
+    assert "\n" not in str(err.value)
