@@ -60,6 +60,7 @@ def test_only_the_named_scheme_runs_and_its_column_is_measured(done):
     assert recs[0]["edges"] == recs[1]["edges"]
 
 
+@pytest.mark.slow  # 15 s; the collocation solver is deprecated (its seeds: tests/solver/test_collocation_solver.py)
 def test_the_collocation_method_draws_features_per_seed(tmp_path):
     text = CONFIG.replace("[solve]\nrtol = 1e-11", '[solve]\nmethod = "collocation"\nrtol = 1e-10')
     cfg = parse_config(tomllib.loads(text), source="s.toml")

@@ -70,6 +70,7 @@ def test_circular_kepler_orbit_to_1e12():
     assert np.max(np.abs(sol(t) - exact)) < 1e-12
 
 
+@pytest.mark.slow  # 20 s; Collocation is deprecated (the other tests here keep its contract in CI)
 def test_error_falls_as_features_grow(ho):
     """Fixed window (no control: one window of the whole interval, tolerance wide open): the
     error of the basis itself falls by orders of magnitude from 6 to 18 features."""

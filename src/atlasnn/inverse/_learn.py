@@ -64,8 +64,10 @@ class AbstractLearnMethod(abc.ABC):
         _positive(type(self).__name__, "rate", self.rate)
 
     @abc.abstractmethod
-    def losses(self, trajectories: list, held_out: float, dof: int) -> tuple[Callable, Callable | None]:
-        """(training loss, held-out loss or None), each a function of the model."""
+    def losses(self, trajectories: list, held_out: float, dof: int) -> tuple[Callable, Callable | None, jax.Array]:
+        """(training loss, held-out loss or None, the unknown start values' first guess): each loss
+        a function of (the model, the unknown start values: the components of the training
+        segments' starts that were not observed, trained with it)."""
 
     def noise_loss(self, sigma: float) -> float | None:
         """The loss that noise of σ alone gives (None: this method has no such rule)."""
@@ -75,7 +77,9 @@ class AbstractLearnMethod(abc.ABC):
 @dataclasses.dataclass(frozen=True)
 class ThroughSolver(AbstractLearnMethod):
     """H_θ trained through the solver: from every observed state, the next ``ahead`` observations
-    of its trajectory predicted by ``atlasnn.solve`` with H_θ, their mean squared error minimised.
+    of its trajectory predicted by ``atlasnn.solve`` with H_θ, their mean squared error minimised
+    (over the components observed: with partial observations, the start's missing components are
+    unknowns trained with θ).
 
     Attributes:
         ahead: observations predicted from each observed state (short segments keep the loss smooth
@@ -101,20 +105,27 @@ class ThroughSolver(AbstractLearnMethod):
 
     def losses(self, trajectories, held_out, dof):
         train, test = segments(trajectories, self.ahead, held_out)
-        return self._loss(train, dof), (None if test is None else self._loss(test, dof))
+        missing = np.nonzero(np.isnan(train.starts))
+        return (self._loss(train, dof, missing), None if test is None else self._loss(test, dof, None),
+                jnp.asarray(train.guess[missing]))
 
-    def _loss(self, pieces, dof: int) -> Callable:
-        data = tuple(jnp.asarray(a) for a in (pieces.t0, pieces.starts, pieces.times, pieces.targets))
-        solver = self.solver
+    def _loss(self, pieces, dof: int, missing) -> Callable:
+        """The masked mean squared error of the segments' predictions; the starts' missing values
+        (at the indices ``missing``) are the loss's second argument."""
+        seen = ~np.isnan(pieces.targets)
+        t0, times = jnp.asarray(pieces.t0), jnp.asarray(pieces.times)
+        targets, weight = jnp.asarray(np.where(seen, pieces.targets, 0.0)), jnp.asarray(seen / seen.sum())
+        starts, solver = jnp.asarray(pieces.guess), self.solver
 
-        def loss(model):
+        def loss(model, unknown):
             system = HamiltonianSystem(model, dof, name="learned")
+            z0 = starts if missing is None or not missing[0].size else starts.at[missing].set(unknown)
 
             def predict(piece):
-                t0, z0, times, _ = piece
-                return solve(system, z0, (t0, times[-1]), solver=solver)(times)
+                a, z, ts = piece
+                return solve(system, z, (a, ts[-1]), solver=solver)(ts)
 
-            return jnp.mean((jax.lax.map(predict, data) - data[3]) ** 2)
+            return jnp.sum(weight * (jax.lax.map(predict, (t0, z0, times)) - targets) ** 2)
 
         return loss
 
@@ -139,13 +150,13 @@ class HNN(AbstractLearnMethod):
 
     def losses(self, trajectories, held_out, dof):
         train, test = rates(trajectories, held_out)
-        return self._loss(train, dof), (None if test is None else self._loss(test, dof))
+        return self._loss(train, dof), (None if test is None else self._loss(test, dof)), jnp.zeros(0)
 
     @staticmethod
     def _loss(pairs, dof: int) -> Callable:
         states, slopes = (jnp.asarray(a) for a in pairs)
 
-        def loss(model):
+        def loss(model, _unknown):
             return jnp.mean((HamiltonianSystem(model, dof, name="learned").vector_field(states) - slopes) ** 2)
 
         return loss
@@ -198,7 +209,9 @@ def learn_hamiltonian(model: Any, trajectories: Any, method: AbstractLearnMethod
     Args:
         model: H_θ: an Equinox module (or any JAX-traceable callable pytree) taking (q, p), each
             (d,), to a scalar; its floating-point arrays are θ (cast to float64).
-        trajectories: (times, states) pairs: times (M,) strictly increasing, states (M, 2d), q then p.
+        trajectories: (times, states) pairs: times (M,) strictly increasing, states (M, 2d), q then p;
+            a component not observed at a time is NaN (``ThroughSolver`` only: the missing values of
+            each segment's start are then trained with θ, from values interpolated in time).
         method: [`ThroughSolver`][atlasnn.inverse.ThroughSolver] (default) or
             [`HNN`][atlasnn.inverse.HNN], holding the training's settings.
         dof: d (default: half the states' width).
@@ -226,10 +239,11 @@ def learn_hamiltonian(model: Any, trajectories: Any, method: AbstractLearnMethod
             raise ConfigError(f"dof = {dof} needs states of {2 * dof} components, the trajectories have {width}")
         model = jax.tree_util.tree_map(lambda x: x.astype(jnp.float64) if eqx.is_inexact_array(x) else x, model)
         notes = _check_model(model, dof, data)
-        train_loss, test_loss = method.losses(data, float(held_out), dof)
+        train_loss, test_loss, unknown = method.losses(data, float(held_out), dof)
         if test_loss is None:
-            notes.append("nothing was held out: whether H_θ generalises is not checked")
-        record = _train(model, method, train_loss, test_loss, progress)
+            notes.append("nothing was held out (or no held-out segment starts from a state observed whole): whether "
+                         "H_θ generalises is not checked")
+        record = _train(model, unknown, method, train_loss, test_loss, progress)
     return _judge(LearnedHamiltonian(dof=dof, method=method.name, noise=noise, notes=notes, trusted=True, **record),
                   method)
 
@@ -240,8 +254,8 @@ def _check_model(model: Any, dof: int, data: list) -> list[str]:
     params, static = eqx.partition(model, eqx.is_inexact_array)
     count = sum(int(np.size(x)) for x in jax.tree_util.tree_leaves(params))
     if count == 0:
-        raise ConfigError("the model has no floating-point arrays to train (θ is empty): H_θ must hold its weights "
-                          "or parameters as JAX or NumPy float arrays")
+        raise ConfigError("the model has no floating-point arrays to train (θ is empty): give H_θ as a pytree that "
+                          "holds its weights as float arrays (an Equinox module), not a function closing over them")
     HamiltonianSystem(model, dof, name="learned")  # refuses an H that is not a scalar function of (q, p)
     z = jnp.asarray(data[0].z[0])
     nudged = jax.tree_util.tree_map(lambda x: x + 0.1 * (1 + jnp.abs(x)), params)
@@ -260,20 +274,22 @@ def _check_model(model: Any, dof: int, data: list) -> list[str]:
     return []
 
 
-def _train(model: Any, method: AbstractLearnMethod, train_loss: Callable, test_loss: Callable | None,
-           progress: Callable[[int, float], None] | None) -> dict:
-    """Adam on ``train_loss``; the model of least held-out loss (checked about 50 times) or of least
-    training loss is kept. A Ctrl-C, a non-finite loss or a failing solve ends the training early."""
-    params, static = eqx.partition(model, eqx.is_inexact_array)
+def _train(model: Any, unknown: jax.Array, method: AbstractLearnMethod, train_loss: Callable,
+           test_loss: Callable | None, progress: Callable[[int, float], None] | None) -> dict:
+    """Adam on ``train_loss`` over θ and the unknown start values together; the model of least
+    held-out loss (checked about 50 times) or of least training loss is kept. A Ctrl-C, a
+    non-finite loss or a failing solve ends the training early."""
+    weights, static = eqx.partition(model, eqx.is_inexact_array)
+    params = (weights, unknown)
     opt = optax.adam(method.rate)
 
     @eqx.filter_jit  # (Equinox's jit shows the solve's own message when it fails at run time)
     def step(params, state):
-        value, grads = jax.value_and_grad(lambda p: train_loss(eqx.combine(p, static)))(params)
+        value, grads = jax.value_and_grad(lambda p: train_loss(eqx.combine(p[0], static), p[1]))(params)
         updates, state = opt.update(grads, state, params)
         return optax.apply_updates(params, updates), state, value
 
-    held = None if test_loss is None else eqx.filter_jit(lambda p: test_loss(eqx.combine(p, static)))
+    held = None if test_loss is None else eqx.filter_jit(lambda p: test_loss(eqx.combine(p[0], static), None))
     every = max(1, method.steps // 50)
     state, curve, stopped = opt.init(params), [], None
     best = (math.inf, params, math.inf, None)  # (score, θ, its training loss, its held-out loss)
@@ -302,7 +318,7 @@ def _train(model: Any, method: AbstractLearnMethod, train_loss: Callable, test_l
             stopped = f"the solve failed at step {k + 1}: {_runtime_message(exc)}"
             break
     _, kept, loss, held_loss = best
-    return {"model": eqx.combine(kept, static), "loss": loss, "held_out_loss": held_loss, "steps": len(curve),
+    return {"model": eqx.combine(kept[0], static), "loss": loss, "held_out_loss": held_loss, "steps": len(curve),
             "curve": curve, "seconds": time.perf_counter() - started, "stopped": stopped}
 
 

@@ -20,10 +20,24 @@ __all__ = ["Trajectory", "check_trajectories", "Segments", "segments", "rates", 
 
 @dataclass(frozen=True, eq=False)
 class Trajectory:
-    """One observed trajectory: times t (M,), strictly increasing, and full states z (M, 2d)."""
+    """One observed trajectory: times t (M,), strictly increasing, and states z (M, 2d), a
+    component not observed at a time NaN."""
 
     t: np.ndarray
     z: np.ndarray
+
+    @property
+    def partial(self) -> bool:
+        return bool(np.any(np.isnan(self.z)))
+
+    def filled(self) -> np.ndarray:
+        """z with each missing value interpolated in time from the component's observed values (0
+        where the component is never observed): the starting guess of a missing start."""
+        out = self.z.copy()
+        for j in range(out.shape[1]):
+            seen = ~np.isnan(out[:, j])
+            out[:, j] = np.interp(self.t, self.t[seen], out[seen, j]) if seen.any() else 0.0
+        return out
 
 
 def _trajectory(k: int, item: Any, dim: int | None) -> Trajectory:
@@ -43,8 +57,11 @@ def _trajectory(k: int, item: Any, dim: int | None) -> Trajectory:
                           f"got {z.shape}")
     if dim is not None and z.shape[1] != dim:
         raise ConfigError(f"{where}: states have {z.shape[1]} components, the model's system {dim}")
-    if not np.all(np.isfinite(t)) or not np.all(np.isfinite(z)):
-        raise ConfigError(f"{where}: times and states must be finite (a NaN or inf is in the data)")
+    if not np.all(np.isfinite(t)) or np.any(np.isinf(z)):
+        raise ConfigError(f"{where}: times and states must be finite (an inf is in the data; NaN marks a component "
+                          "not observed)")
+    if np.all(np.isnan(z)):
+        raise ConfigError(f"{where}: every state component is NaN (not observed): nothing to learn from")
     steps = np.diff(t)
     if np.any(steps <= 0):
         i = int(np.argmax(steps <= 0))
@@ -75,12 +92,14 @@ def split_point(trajectory: Trajectory, held_out: float) -> int:
 @dataclass(frozen=True, eq=False)
 class Segments:
     """Pieces of trajectories: from ``starts`` (N, 2d) at ``t0`` (N,), the states ``targets``
-    (N, A, 2d) at the times ``times`` (N, A)."""
+    (N, A, 2d) at the times ``times`` (N, A); ``guess`` is ``starts`` with its missing (NaN)
+    values filled (:meth:`Trajectory.filled`)."""
 
     t0: np.ndarray
     starts: np.ndarray
     times: np.ndarray
     targets: np.ndarray
+    guess: np.ndarray
 
     @property
     def count(self) -> int:
@@ -93,12 +112,12 @@ def segments(trajectories: list[Trajectory], ahead: int, held_out: float) -> tup
     on when it ends before it. Refuses data with no training segment."""
     train, test = [], []
     for traj in trajectories:
-        cut = split_point(traj, held_out)
+        cut, filled = split_point(traj, held_out), traj.filled()
         for i in range(traj.t.size - ahead):
-            piece = (traj.t[i], traj.z[i], traj.t[i + 1:i + ahead + 1], traj.z[i + 1:i + ahead + 1])
+            piece = (traj.t[i], traj.z[i], traj.t[i + 1:i + ahead + 1], traj.z[i + 1:i + ahead + 1], filled[i])
             if i + ahead < cut:
                 train.append(piece)
-            elif i >= cut:
+            elif i >= cut and not np.any(np.isnan(traj.z[i])):  # held out: from a state observed whole
                 test.append(piece)
     if not train:
         longest = max(traj.t.size for traj in trajectories)
@@ -109,7 +128,7 @@ def segments(trajectories: list[Trajectory], ahead: int, held_out: float) -> tup
 
 
 def _stack(pieces: list) -> Segments:
-    return Segments(*(np.stack([p[j] for p in pieces]) for j in range(4)))
+    return Segments(*(np.stack([p[j] for p in pieces]) for j in range(5)))
 
 
 def rates(trajectories: list[Trajectory], held_out: float) -> tuple[tuple[np.ndarray, np.ndarray],
@@ -117,7 +136,10 @@ def rates(trajectories: list[Trajectory], held_out: float) -> tuple[tuple[np.nda
     """(training, held-out) pairs (states, rates): central differences (z_{i+1} − z_{i−1}) /
     (t_{i+1} − t_{i−1}) at the interior observations, split as :func:`segments` splits."""
     train, test = [], []
-    for traj in trajectories:
+    for k, traj in enumerate(trajectories):
+        if traj.partial:
+            raise ConfigError(f"trajectory {k} has components not observed (NaN): the HNN's central differences need "
+                              "every component; learn through the solver (ThroughSolver()) instead")
         cut = split_point(traj, held_out)
         for i in range(1, traj.t.size - 1):
             pair = (traj.z[i], (traj.z[i + 1] - traj.z[i - 1]) / (traj.t[i + 1] - traj.t[i - 1]))
