@@ -45,6 +45,25 @@ def outer_solar_system():
                              params=params, z0=z0, separable=True, name="outer-solar-system")
 
 
+def outer_solar_arrays():
+    """The same system with H written in Python with array operations (the pair distances as one
+    array) rather than as an expression of 15 pair terms: what compiles faster, and runs faster."""
+    import jax.numpy as jnp
+
+    from atlasnn import HamiltonianSystem
+
+    n = len(MASSES)
+    m, (i, j) = np.asarray(MASSES), np.triu_indices(n, 1)
+
+    def hamiltonian(q, p):
+        q, p = q.reshape(n, 3), p.reshape(n, 3)
+        d = q[i] - q[j]
+        return jnp.sum(jnp.sum(p * p, axis=1) / (2 * m)) - G * jnp.sum(m[i] * m[j] / jnp.sqrt(jnp.sum(d * d, axis=1)))
+
+    z0 = [x for r in POSITIONS for x in r] + [mm * v for mm, r in zip(MASSES, VELOCITIES) for v in r]
+    return HamiltonianSystem(hamiltonian, 3 * n, name="outer-solar-system-arrays", z0=np.asarray(z0), separable=True)
+
+
 def angular_momentum(z: np.ndarray) -> np.ndarray:
     n = len(MASSES)
     q, p = z[..., :3 * n].reshape(*z.shape[:-1], n, 3), z[..., 3 * n:].reshape(*z.shape[:-1], n, 3)

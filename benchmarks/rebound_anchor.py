@@ -4,7 +4,9 @@ HLW's outer solar system (benchmarks/outer_solar.py: the Sun with the inner plan
 giants and Pluto; 36 state components) over 10⁶ days, with the state at 200 equally spaced times:
 
 * ``atlasnn``: ``atlasnn.solve`` at its defaults and at looser tolerances (compiled; best of 3
-  after a first call), the evaluation at the 200 times included;
+  after a first call), the evaluation at the 200 times included; ``atlasnn, H with arrays``: the
+  same at the defaults with H written with array operations (``outer_solar_arrays``) rather than as
+  an expression of 15 pair terms;
 * ``ias15``: REBOUND's IAS15 (adaptive, 15th order) at its default ε = 1e-9 and at 1e-7;
 * ``whfast``: REBOUND's WHFast (Wisdom–Holman, symplectic, second order in the planets' masses)
   in democratic-heliocentric coordinates at steps of 1, 5 and 20 days.
@@ -29,7 +31,7 @@ from atlasnn import solve
 from atlasnn.solver import GaussCollocation
 
 from benchmarks.common import machine_info, write_result
-from benchmarks.outer_solar import G, MASSES, outer_solar_system
+from benchmarks.outer_solar import G, MASSES, outer_solar_arrays, outer_solar_system
 from benchmarks.problems import timed
 
 T = 1e6
@@ -117,6 +119,15 @@ def main(argv=None) -> None:
         first = time.perf_counter() - tic
         (sol, z), best, _ = timed(lambda: (lambda s: (s, s(ts)))(solve(system, z0, (0.0, T), solver=solver)))
         rows.append(row("atlasnn", tol, best, z, ref, first, windows=sol.n_windows, stages=sol.info["stages"]))
+        print(rows[-1], flush=True)
+    if not args.rebound_only:
+        arrays = outer_solar_arrays()
+        tic = time.perf_counter()
+        solve(arrays, z0, (0.0, T))
+        first = time.perf_counter() - tic
+        (sol, z), best, _ = timed(lambda: (lambda s: (s, s(ts)))(solve(arrays, z0, (0.0, T))))
+        rows.append(row("atlasnn, H with arrays", TOLS[0], best, z, ref, first, windows=sol.n_windows,
+                        stages=sol.info["stages"]))
         print(rows[-1], flush=True)
     try:
         import rebound  # noqa: F401

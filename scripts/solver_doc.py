@@ -272,11 +272,13 @@ def time_transform(record: dict) -> str:
 
 
 def rebound(record: dict) -> str:
-    names = {"atlasnn": "atlasnn.solve, rtol", "ias15": "REBOUND IAS15, ε", "whfast": "REBOUND WHFast, dt (days)"}
+    names = {"atlasnn": "atlasnn.solve, rtol", "atlasnn, H with arrays": "atlasnn.solve, H with arrays, rtol",
+             "ias15": "REBOUND IAS15, ε", "whfast": "REBOUND WHFast, dt (days)"}
     rows = ["| method | setting | time | largest position error (AU) | largest \\|H/H0 − 1\\| along the output |",
             "|---|---|---|---|---|"]
     for r in record["rows"]:
-        extra = f" (s = {r['stages']}, {r['windows']} windows)" if r["method"] == "atlasnn" else ""
+        extra = (f" (s = {r['stages']}, {r['windows']} windows; first call {_ms(r['first_call_seconds'])})"
+                 if r["method"].startswith("atlasnn") else "")
         rows.append(f"| {names[r['method']]} | {r['setting']:g}{extra} | {_ms(r['seconds'])} | "
                     f"{r['position_error_au']:.1e} | {r['energy_error']:.1e} |")
     gap = record.get("reference_gap_to_ias15_au")

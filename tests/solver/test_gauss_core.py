@@ -151,3 +151,26 @@ def test_a_system_built_from_traced_values_says_so():
 
     jax.grad(f)(1.0)
     assert seen == [True] and not oscillator(1.0).traced
+
+
+def test_a_traced_interval_that_is_empty_or_not_finite_raises_and_times_outside_give_nan():
+    """No silent NaN from a march that never started: T ≤ t0 or a NaN end raises when the program
+    runs; a time outside [t0, T] gives NaN (no warning can be raised in a trace), inside the exact value."""
+    system = oscillator(1.0)
+    run = jax.jit(lambda T: solve(system, jnp.array([1.0, 0.0]), (0.0, T)))
+    sol = run(3.0)
+    assert abs(float(sol(3.0)[0]) - np.cos(3.0)) < 1e-12
+    assert np.all(np.isnan(np.asarray(sol(jnp.array([-0.5, 3.5])))))
+    for T in (-1.0, 0.0, float("nan")):
+        with pytest.raises(Exception, match=r"interval's ends finite with T > t0"):  # JAX wraps Equinox's error
+            jax.block_until_ready(run(T).z)
+
+
+def test_traced_inputs_that_cannot_be_one_solve_are_refused_in_one_line():
+    from atlasnn.solver import solve_batch
+
+    system = oscillator(1.0)
+    with pytest.raises(ConfigError, match="T must be a number, got shape \\(2,\\)"):
+        jax.jit(lambda T: solve(system, jnp.array([1.0, 0.0]), (0.0, T))(1.0))(jnp.array([1.0, 2.0]))
+    with pytest.raises(ConfigError, match="solve_batch runs on numbers.*jax.vmap or jax.lax.map of atlasnn.solve"):
+        jax.grad(lambda k: solve_batch(oscillator(k), np.array([[1.0, 0.0]]), (0.0, 1.0))[0](1.0)[0])(1.0)

@@ -104,3 +104,21 @@ def test_a_field_that_is_not_finite_at_z0_is_one_line_before_any_window():
     assert msg.startswith("the Gauss march cannot start: the vector field J∇H is not finite at z0 = [1.0, 0.0]")
     assert "\n" not in msg and "did not converge" not in msg and ".partial" not in msg
     assert info.value.partial is None
+
+
+@pytest.mark.parametrize("expression, cause, when", [
+    ("p**2/2 - q**4/4", "the field grew", 1.8541),  # q'' = q³ from (1, 0) blows up at t = 1.85407
+    ("p**2/2 + sqrt(2 - q)", "not finite just ahead along the flow", None),  # H is NaN past q = 2
+], ids=["blow-up", "nan-ahead"])
+def test_a_field_that_blows_up_or_turns_nan_on_the_way_is_named_not_round_off(expression, cause, when):
+    """The march stops where the field fails, and says so rather than blaming the rounding of t;
+    what was reached is kept."""
+    system = expression_system(expression, ["q"], ["p"])
+    with pytest.raises(AtlasError) as info:
+        solve(system, [1.0, 0.0], (0.0, 3.0))
+    msg = str(info.value)
+    assert cause in msg and "float64 numbers" not in msg and "\n" not in msg
+    part = info.value.partial
+    assert part is not None and part.edges[-1] < 3.0
+    if when is not None:
+        assert abs(part.edges[-1] - when) < 1e-3

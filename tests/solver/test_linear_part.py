@@ -11,7 +11,7 @@ import pytest
 import atlasnn
 from atlasnn.errors import SystemError_
 from atlasnn.solver import GaussCollocation
-from atlasnn.systems import (DenseLinearPart, FourierLinearPart, HamiltonianSystem, fourier_wavenumbers, nls,
+from atlasnn.systems import (DenseLinearPart, FourierLinearPart, HamiltonianSystem, fourier_wavenumbers, fput, nls,
                              nls_mass, nls_soliton, sine_gordon, sine_gordon_breather)
 
 
@@ -101,6 +101,12 @@ def test_a_linear_part_that_does_not_fit_is_refused_in_one_line():
         nls(points="many")
     with pytest.raises(SystemError_, match="length must be a positive number"):
         nls_soliton(0.0, 64, 0.0)
+    for settings, message in ((dict(particles=float("inf")), "particles must be an integer"),
+                              (dict(particles="8"), "particles must be an integer"),
+                              (dict(alpha="x"), "alpha must be a finite number"),
+                              (dict(beta=float("nan")), "beta must be a finite number")):
+        with pytest.raises(SystemError_, match=message):
+            fput(**settings)
 
 
 def test_a_stiff_pair_solved_with_a_dense_linear_part_and_differentiated():

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from atlasnn.errors import AtlasError
+from atlasnn.errors import AtlasError, SystemError_
 from atlasnn.systems import HamiltonianSystem, henon_heiles
 
 
@@ -42,3 +42,13 @@ def test_good_hamiltonians_are_built_as_before():
     HamiltonianSystem(lambda q, p: p[1] ** 2 + q[0] * q[1] + p[0] ** 2, 2, z0=[1.0, 0.0, 0.0, 1.0])
     hh = henon_heiles()
     HamiltonianSystem(hh.hamiltonian, 2, params=hh.params, parametric=hh.parametric)
+
+
+@pytest.mark.parametrize("hamiltonian, got", [
+    (lambda q, p: jnp.stack([q[0], p[0]]), "shape (2,)"),
+    (lambda q, p: q[0] + 1j * p[0], "complex"),
+], ids=["vector", "complex"])
+def test_an_h_that_is_not_one_real_number_is_refused_in_one_line(hamiltonian, got):
+    with pytest.raises(SystemError_, match=r"H\(q, p\) must return one real number, got ") as info:
+        HamiltonianSystem(hamiltonian, 1)
+    assert got in str(info.value) and "\n" not in str(info.value)

@@ -69,9 +69,9 @@ class AbstractLearnMethod(abc.ABC):
         a function of (the model, the unknown start values: the components of the training
         segments' starts that were not observed, trained with it)."""
 
-    def noise_loss(self, sigma: float) -> float | None:
-        """The loss that noise of σ alone gives (None: this method has no such rule)."""
-        return None
+    @abc.abstractmethod
+    def noise_loss(self, sigma: float, trajectories: list) -> float:
+        """The loss that noise of σ on every observed value gives alone (for the trust rule)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -129,7 +129,7 @@ class ThroughSolver(AbstractLearnMethod):
 
         return loss
 
-    def noise_loss(self, sigma):
+    def noise_loss(self, sigma, trajectories):
         # the target's noise and the start's, carried forward (about σ² each for short segments)
         return 2.0 * sigma ** 2
 
@@ -151,6 +151,11 @@ class HNN(AbstractLearnMethod):
     def losses(self, trajectories, held_out, dof):
         train, test = rates(trajectories, held_out)
         return self._loss(train, dof), (None if test is None else self._loss(test, dof)), jnp.zeros(0)
+
+    def noise_loss(self, sigma, trajectories):
+        # a central difference (z_{i+1} − z_{i−1}) / Δ carries noise of variance 2σ²/Δ²
+        gaps = np.concatenate([traj.t[2:] - traj.t[:-2] for traj in trajectories])
+        return float(np.mean(2.0 * sigma ** 2 / gaps ** 2))
 
     @staticmethod
     def _loss(pairs, dof: int) -> Callable:
@@ -243,9 +248,12 @@ def learn_hamiltonian(model: Any, trajectories: Any, method: AbstractLearnMethod
         if test_loss is None:
             notes.append("nothing was held out (or no held-out segment starts from a state observed whole): whether "
                          "H_θ generalises is not checked")
+        if noise is None:
+            notes.append("no noise was given: whether the loss is at the noise is not judged (give noise=σ)")
         record = _train(model, unknown, method, train_loss, test_loss, progress)
+        floor = None if not noise else method.noise_loss(noise, data)
     return _judge(LearnedHamiltonian(dof=dof, method=method.name, noise=noise, notes=notes, trusted=True, **record),
-                  method)
+                  floor)
 
 
 def _check_model(model: Any, dof: int, data: list) -> list[str]:
@@ -312,7 +320,7 @@ def _train(model: Any, unknown: jax.Array, method: AbstractLearnMethod, train_lo
             if progress is not None and (k % every == 0 or k == method.steps - 1):
                 progress(k + 1, value)
         except KeyboardInterrupt:  # anywhere in the step: the best model so far is kept
-            stopped = f"interrupted after {k} of {method.steps} steps"
+            stopped = f"interrupted after {len(curve)} of {method.steps} steps"
             break
         except (jax.errors.JaxRuntimeError, eqx.EquinoxRuntimeError) as exc:
             stopped = f"the solve failed at step {k + 1}: {_runtime_message(exc)}"
@@ -331,24 +339,28 @@ def _runtime_message(exc: Exception) -> str:
     return (lines[0] if lines else type(exc).__name__)[:300]
 
 
-def _judge(result: LearnedHamiltonian, method: AbstractLearnMethod) -> LearnedHamiltonian:
+def _judge(result: LearnedHamiltonian, floor: float | None) -> LearnedHamiltonian:
     """The trust rules, each a reason not to believe the learned H: a training that stopped early
-    or never had a finite loss, a loss far above the noise's own, a held-out loss far above the
-    training loss. The notes that are not reasons (nothing held out, more weights than data) follow."""
+    or never had a finite loss, a loss far above the noise's own (``floor``, when the noise is
+    given), a held-out loss far above the training loss. The notes that are not reasons (nothing
+    held out, no noise given, more weights than data) follow."""
     reasons = []
+    interrupted = (result.stopped or "").startswith("interrupted")
     if result.stopped is not None:
-        reasons.append(f"training stopped early ({result.stopped}); the best H before it is kept: train again, with "
-                       "a smaller rate or a smaller solver tolerance, before trusting it")
+        remedy = ("train again for the whole budget" if interrupted else
+                  "train again with a smaller rate or a smaller solver tolerance")
+        reasons.append(f"training stopped early ({result.stopped}); the best H before it is kept: {remedy} before "
+                       "trusting it")
+    if not result.curve:
+        return dataclasses.replace(result, notes=reasons + list(result.notes), trusted=False)
     if not math.isfinite(result.loss):
         reasons.append("no step gave a finite loss: nothing was learned; check the model's scale against the data's")
-    floor = None if result.noise is None or result.noise == 0 else method.noise_loss(result.noise)
-    if floor is not None and result.loss > NOISE_FACTOR * floor:
+    elif floor is not None and result.loss > NOISE_FACTOR * floor:
         reasons.append(f"the training loss {result.loss:.2g} is {result.loss / floor:.1f}× the noise's own "
                        f"({floor:.2g}): the model or its training falls short; more steps, a larger network, or "
                        "another rate")
-    others = list(result.notes)
     if result.held_out_loss is not None and result.held_out_loss > HELD_OUT_FACTOR * max(result.loss, floor or 0.0):
         ratio = result.held_out_loss / max(result.loss, floor or 0.0)
         reasons.append(f"the held-out loss {result.held_out_loss:.2g} is {ratio:.1f}× the training loss: H_θ does not "
                        "generalise to the held-out part; more or longer trajectories, a smaller network or fewer steps")
-    return dataclasses.replace(result, notes=reasons + others, trusted=not reasons)
+    return dataclasses.replace(result, notes=reasons + list(result.notes), trusted=not reasons)

@@ -13,6 +13,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from atlasnn.solutions._base import INTERVAL_SLACK
 from atlasnn.solutions._tableau import gauss_tableau, shifted_legendre
 
 __all__ = ["TracedSolution"]
@@ -20,7 +21,8 @@ __all__ = ["TracedSolution"]
 
 class TracedSolution(eqx.Module):
     """A Gauss collocation solution over [t0, T] as a pytree of arrays, callable at any times
-    inside it (a time outside is served by the nearest window's polynomial, extrapolated).
+    inside it; a time outside (beyond the relative slack ``INTERVAL_SLACK`` of the host
+    solutions) gives NaN, as no warning can be raised inside a trace.
 
     Attributes:
         t0: the start of the interval.
@@ -69,6 +71,9 @@ class TracedSolution(eqx.Module):
         L = self.L[row]  # (m, s, 2d)
         z = self.z[row] + (self.e[row] + jnp.einsum("ms,msn->mn", value, L))
         dz = jnp.einsum("ms,msn->mn", rate, L) / self.lengths[row][:, None]
+        slack = INTERVAL_SLACK * (self.T - self.t0)
+        outside = ((flat < self.t0 - slack) | (flat > self.T + slack))[:, None]
+        z, dz = jnp.where(outside, jnp.nan, z), jnp.where(outside, jnp.nan, dz)
         shape = t.shape + (self.z.shape[-1],)
         return z.reshape(shape), dz.reshape(shape)
 

@@ -71,6 +71,27 @@ def _integer(name: str, value: Any, low: int = 1) -> int:
     return int(value)
 
 
+def _diverging(system: HamiltonianSystem, z0: np.ndarray, z: np.ndarray) -> str | None:
+    """Whether the field is what stopped a march at the state z it reached: not finite there or a
+    little way along the flow from it (where the next window's stages went), or grown a million-fold
+    over its size at z0 (a singularity, or a solution that blows up in finite time); else None."""
+    with jax.enable_x64(True):
+        f = lambda x: np.asarray(system.vector_field(np.atleast_2d(x)))  # noqa: E731
+        f_end = f(z)
+        if not np.all(np.isfinite(f_end)):
+            return "the vector field J∇H is not finite at the state reached"
+        scale = np.max(np.abs(z)) + 1e-300
+        steps = np.geomspace(1e-8, 1e-1, 8) * scale / (np.max(np.abs(f_end)) + 1e-300)
+        ahead = f(z[None, :] + steps[:, None] * f_end[0][None, :])
+        if not np.all(np.isfinite(ahead)):
+            return "the vector field J∇H is not finite just ahead along the flow (a NaN or an infinity in H there)"
+        grown = np.max(np.abs(f_end)) / (np.max(np.abs(f(z0))) + 1e-300)
+        if grown > 1e6:
+            return (f"the field grew {grown:.1e}-fold from z0 to the state reached (a singularity of H, or a solution "
+                    "that blows up in finite time)")
+    return None
+
+
 def _times(*values: float) -> list[str]:
     """The times with 6 significant digits, or as many more as tell the different ones apart (an
     interval [1e12, 1e12 + 10] is not "[1e+12, 1e+12]")."""
@@ -273,7 +294,8 @@ class GaussCollocation(AbstractSolver):
                     "solve_time": wall, "first_call_time": first_call, "batch": b}
             if failed or start.size == 0 or end < T:
                 problem = problem or self._stopped_line(m, b, end, t0, T, stopped, failed, z0s[m],
-                                                        system.linear_part is not None)
+                                                        system.linear_part is not None,
+                                                        _diverging(system, z0s[m], np.asarray(state.z[m])))
                 # what was computed up to the stop is kept: the error's .partial
                 out.append(self._solution(system, np.append(start, state.t[m]), z, e, L, ratio, info)
                            if start.size else None)
@@ -290,13 +312,17 @@ class GaussCollocation(AbstractSolver):
         return out
 
     def _stopped_line(self, m: int, b: int, end: float, t0: float, T: float, stopped: str | None, failed: int,
-                      z0: np.ndarray, linear: bool = False) -> str:
+                      z0: np.ndarray, linear: bool = False, diverging: str | None = None) -> str:
         """Why member m stopped (``stopped``: the host's reason, else the program's code ``failed``),
-        and the remedy for that reason (``linear``: the system declares a linear part)."""
+        and the remedy for that reason (``linear``: the system declares a linear part;
+        ``diverging``: what :func:`_diverging` found of the field just past the stop)."""
         who = "the Gauss march" + ("" if b == 1 else f" of member {m}")
         if failed == 4:
             return (f"{who} cannot start: the vector field J∇H is not finite at z0 = {np.asarray(z0).tolist()} "
                     "(a NaN or an infinity in H or its gradient there); check H and z0")
+        if diverging is not None and stopped is None and failed in (1, 3):
+            at, start, stop = _times(end, t0, T)
+            return f"{who} stopped at t = {at} of [{start}, {stop}]: {diverging}; check H there"
         why = stopped or FAILURES.get(failed, "the march stopped")
         default_iterations = type(self).__dataclass_fields__["max_iterations"].default
         if stopped is not None:

@@ -26,6 +26,7 @@ import equinox as eqx
 import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 
 from atlasnn.errors import ConfigError
@@ -65,7 +66,19 @@ def _traced_inputs(system: HamiltonianSystem, z0: Any, t0: Any, T: Any) -> tuple
     if z0.shape != (system.state_dim,):
         raise ConfigError(f"z0 must have {system.state_dim} components {list(system.state_names)}, got shape "
                           f"{tuple(z0.shape)}")
-    return z0, jnp.asarray(t0, jnp.float64), jnp.asarray(T, jnp.float64)
+    t0, T = jnp.asarray(t0, jnp.float64), jnp.asarray(T, jnp.float64)
+    for name, value in (("t0", t0), ("T", T)):
+        if value.shape != ():
+            raise ConfigError(f"solve inside jit/grad/vmap takes one interval: {name} must be a number, got shape "
+                              f"{tuple(value.shape)} (jax.vmap over the intervals for several)")
+    known = not any(isinstance(x, jax.core.Tracer) for x in (z0, t0, T))
+    if known and not (np.all(np.isfinite(z0)) and np.isfinite(t0) and np.isfinite(T) and T > t0):
+        raise ConfigError(f"solve needs a finite z0 and an interval with finite ends and T > t0, got t0 = {float(t0)}, "
+                          f"T = {float(T)}, z0 {'finite' if np.all(np.isfinite(z0)) else 'not finite'}")
+    if not known:  # checked when the program runs (a march that never started would give NaN)
+        bad = ~(jnp.all(jnp.isfinite(z0)) & jnp.isfinite(t0) & jnp.isfinite(T) & (T > t0))
+        T = eqx.error_if(T, bad, "solve (traced core): z0 must be finite and the interval's ends finite with T > t0")
+    return z0, t0, T
 
 
 class _Field:

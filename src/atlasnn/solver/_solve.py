@@ -127,6 +127,9 @@ def solve_batch(system: HamiltonianSystem, z0s: Any, interval: tuple[float, floa
 
     Returns a list of B solutions, in the order of ``z0s``, each the same kind as ``solve`` returns.
     """
+    if isinstance(system, HamiltonianSystem) and _traced(system, z0s, interval):
+        raise ConfigError("solve_batch runs on numbers, not inside jit/grad/vmap (its inputs, or what H closes over, "
+                          "are traced there): use jax.vmap or jax.lax.map of atlasnn.solve instead")
     t0, T = _interval(system, interval)
     try:
         rows = [system.check_state(z, f"z0s[{i}]") for i, z in enumerate(list(z0s))]

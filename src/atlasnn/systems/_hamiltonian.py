@@ -258,6 +258,10 @@ class HamiltonianSystem:
         }
 
 
+class _NotAScalar(Exception):
+    """The probe's finding that H does not return one real number (raised as a SystemError_)."""
+
+
 def _probe(system: HamiltonianSystem) -> bool:
     """Refuse, in one line, a user's H that JAX cannot trace (it turns q or p into a NumPy array or
     a Python number) or that indexes past the d components of q or p (JAX would clamp ``q[1]`` to
@@ -286,6 +290,10 @@ def _probe(system: HamiltonianSystem) -> bool:
         fn = lambda *a, _fn=user_fn: _fn(*a)  # noqa: E731
         try:
             closed = jax.make_jaxpr(fn)(*args)  # what JAX cannot trace raises here
+            out = closed.out_avals
+            if len(out) != 1 or int(np.prod(out[0].shape)) != 1 or not jnp.issubdtype(out[0].dtype, jnp.floating):
+                got = ", ".join(f"shape {tuple(a.shape)} {a.dtype}" for a in out) or "nothing"
+                raise _NotAScalar(f"system {system.name!r}: {what} must return one real number, got {got}")
             traced = traced or any(isinstance(c, jax.core.Tracer) for c in closed.consts)
             program, problem = str(closed), None
             if "gather" in program or "dynamic_slice" in program:  # indexing by a number: checked, op by op
@@ -297,6 +305,8 @@ def _probe(system: HamiltonianSystem) -> bool:
                                "turns q, p or theta into a NumPy array or a Python number, e.g. np.asarray, float(), "
                                "math.*, or a Python if on them); write it with jax.numpy (jnp.asarray, jnp.cos, "
                                "jnp.where, ...)") from None
+        except _NotAScalar as exc:
+            raise SystemError_(str(exc)) from None
         except Exception:  # noqa: BLE001 - not this probe's to judge: the computation that meets it says
             continue
         if problem:

@@ -10,7 +10,7 @@ then contracts at the rate of the nonlinear part N, whatever k_max, and each of 
 solves (I − c·JS) x = r is cheap — diagonal in Fourier space, or one small dense LU.
 
 H stays the truth: the residual of every iteration is H's own vector field, so S only steers the
-iteration. A poor S costs iterations, never accuracy.
+iteration. A poor S costs work (slower iterations, shorter windows), never accuracy.
 
 Kinds: :class:`FourierLinearPart` (S = diag(K_q, K_p) with K_q, K_p circulant on one periodic grid,
 given by their real, even symbols) and :class:`DenseLinearPart` (S any symmetric matrix, for

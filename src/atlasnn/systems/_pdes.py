@@ -191,6 +191,17 @@ def fput_modes(z, particles: int) -> np.ndarray:
     return 0.5 * (P * P + (omega * Q) ** 2)
 
 
+def _finite(name: str, value) -> float:
+    """``value`` as a finite float, or a one-line refusal naming ``name``."""
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        out = float("nan")
+    if isinstance(value, (bool, str)) or not np.isfinite(out):
+        raise SystemError_(f"{name} must be a finite number, got {value!r}")
+    return out
+
+
 def fput(particles: int = 32, alpha: float = 0.25, beta: float = 0.0, amplitude: float = 1.0) -> HamiltonianSystem:
     """The Fermi–Pasta–Ulam–Tsingou chain: unit masses and springs between fixed ends.
 
@@ -202,12 +213,13 @@ def fput(particles: int = 32, alpha: float = 0.25, beta: float = 0.0, amplitude:
             q_j = amplitude·sin(jπ/(N+1)), p = 0."""
     try:
         n = int(particles)
-        ok = not isinstance(particles, bool) and float(particles) == n and n >= 2
-    except (TypeError, ValueError):
+        ok = not isinstance(particles, (bool, str)) and float(particles) == n and n >= 2
+    except (TypeError, ValueError, OverflowError):
         ok = False
     if not ok:
         raise SystemError_(f"particles must be an integer of at least 2, got {particles!r}")
-    alpha, beta = float(alpha), float(beta)
+    alpha, beta, amplitude = (_finite(name, v) for name, v in (("alpha", alpha), ("beta", beta),
+                                                               ("amplitude", amplitude)))
     z0 = np.concatenate([float(amplitude) * np.sin(np.pi * np.arange(1, n + 1) / (n + 1)), np.zeros(n)])
     return HamiltonianSystem(
         lambda q, p: _fput_h(q, p, alpha, beta), n, name="fput", z0=z0, separable=True,
