@@ -209,7 +209,7 @@ def figure(rows: list[dict], path: str) -> None:
     systems = list(dict.fromkeys(r["system"] for r in rows))
     sigmas = sorted({r["sigma"] for r in rows})
     methods = list(dict.fromkeys(r["method"] for r in rows))
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
     for ax, key, label in zip(axes, ("state_error", "energy_error"), ("held-out state error", "held-out energy error")):
         for m, method in enumerate(methods):
             for s, sigma in enumerate(sigmas):
@@ -224,9 +224,9 @@ def figure(rows: list[dict], path: str) -> None:
         ax.set_xticks(range(len(systems)), systems, rotation=15)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3, axis="y")
-    axes[0].legend(fontsize=7, ncol=len(methods))
+    fig.legend(fontsize=7, ncol=len(methods), loc="lower center")
     fig.suptitle(f"Learned H on held-out states over [0, {HORIZON:g}] (trained on [0, {SPAN:g}])")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.14, 1, 1))
     fig.savefig(path, dpi=110)
 
 

@@ -277,8 +277,7 @@ def rebound(record: dict) -> str:
     rows = ["| method | setting | time | largest position error (AU) | largest \\|H/H0 − 1\\| along the output |",
             "|---|---|---|---|---|"]
     for r in record["rows"]:
-        extra = (f" (s = {r['stages']}, {r['windows']} windows; first call {_ms(r['first_call_seconds'])})"
-                 if r["method"].startswith("atlasnn") else "")
+        extra = f" (s = {r['stages']}, {r['windows']} windows)" if r["method"].startswith("atlasnn") else ""
         rows.append(f"| {names[r['method']]} | {r['setting']:g}{extra} | {_ms(r['seconds'])} | "
                     f"{r['position_error_au']:.1e} | {r['energy_error']:.1e} |")
     gap = record.get("reference_gap_to_ias15_au")
