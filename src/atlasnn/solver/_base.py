@@ -24,7 +24,7 @@ from atlasnn.solutions import AbstractSolution
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["AbstractSolver", "SOLVERS", "register_solver", "solver_from_name", "check_tolerance",
-           "refuse_unknown_settings"]
+           "refuse_unknown_settings", "solve_one"]
 
 
 def check_tolerance(owner: str, name: str, value: Any, tightest: float, *, zero: bool = False) -> float:
@@ -71,6 +71,18 @@ class AbstractSolver(abc.ABC):
 
 #: solver name -> class
 SOLVERS: dict[str, type[AbstractSolver]] = {}
+
+
+def solve_one(solve_batch: Callable, system: HamiltonianSystem, z0: np.ndarray, t0: float, T: float,
+              progress: Callable[[float], None] | None) -> AbstractSolution:
+    """One trajectory by a solver's ``solve_batch`` of one member; a stop's ``.partial`` (the list
+    of the batch) becomes that member's part up to the stop, or None."""
+    try:
+        return solve_batch(system, np.asarray(z0)[None], t0, T, progress=progress)[0]
+    except ConfigError as exc:
+        if isinstance(getattr(exc, "partial", None), list):
+            exc.partial = exc.partial[0]
+        raise
 
 
 def refuse_unknown_settings(cls: type) -> type:

@@ -22,7 +22,7 @@ import numpy as np
 from atlasnn.errors import ConfigError
 from atlasnn.nn import inverse_softplus, make_model
 from atlasnn.solutions import PiecewiseSolution, WindowRecord
-from atlasnn.solver._base import AbstractSolver, register_solver
+from atlasnn.solver._base import AbstractSolver, register_solver, solve_one
 from atlasnn.solver._features import RandomFeatures, check_grid, collocation_nodes, window_scaling
 from atlasnn.solver._program import MarchState, compiled_march
 from atlasnn.systems import HamiltonianSystem, require_float64_field
@@ -155,12 +155,7 @@ class Collocation(AbstractSolver):
     # ------------------------------------------------------------------ solving
     def solve(self, system: HamiltonianSystem, z0: np.ndarray, t0: float, T: float, *,
               progress: Callable[[float], None] | None = None) -> PiecewiseSolution:
-        try:
-            return self.solve_batch(system, np.asarray(z0)[None], t0, T, progress=progress)[0]
-        except ConfigError as exc:
-            if isinstance(getattr(exc, "partial", None), list):
-                exc.partial = exc.partial[0]  # one solution: the part up to the stop, or None
-            raise
+        return solve_one(self.solve_batch, system, z0, t0, T, progress)
 
     def solve_batch(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float, *, seeds: Any = None,
                     progress: Callable[[float], None] | None = None) -> list[PiecewiseSolution]:

@@ -22,7 +22,7 @@ import numpy as np
 from atlasnn.errors import ConfigError
 from atlasnn.limits import available_memory
 from atlasnn.solutions import PolynomialSolution, TimeTransformedSolution, TracedSolution, bucket_size, gauss_tableau
-from atlasnn.solver._base import AbstractSolver, register_solver
+from atlasnn.solver._base import AbstractSolver, register_solver, solve_one
 from atlasnn.solver._collocation import require_float64
 from atlasnn.solver._gauss_core import LOOPS, gauss_core
 from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, ReplayState, clock, compiled_gauss_march,
@@ -213,12 +213,7 @@ class GaussCollocation(AbstractSolver):
     # ------------------------------------------------------------------ solving
     def solve(self, system: HamiltonianSystem, z0: np.ndarray, t0: float, T: float, *,
               progress: Callable[[float], None] | None = None) -> PolynomialSolution | TimeTransformedSolution:
-        try:
-            return self.solve_batch(system, np.asarray(z0)[None], t0, T, progress=progress)[0]
-        except ConfigError as exc:
-            if isinstance(getattr(exc, "partial", None), list):
-                exc.partial = exc.partial[0]  # one solution: the part up to the stop, or None
-            raise
+        return solve_one(self.solve_batch, system, z0, t0, T, progress)
 
     def solve_traced(self, system: HamiltonianSystem, z0: Any, t0: Any, T: Any) -> TracedSolution:
         """The solution as JAX values, by the traceable core (``solver/_gauss_core.py``): what
