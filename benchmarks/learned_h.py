@@ -38,7 +38,8 @@ import numpy as np
 import optax
 
 import atlasnn
-from atlasnn import HNN, ThroughSolver, learn_hamiltonian
+from atlasnn import learn_hamiltonian
+from atlasnn.inverse import HNN, ThroughSolver
 
 from benchmarks.common import machine_info, write_result
 

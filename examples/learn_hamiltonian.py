@@ -20,7 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import atlasnn
-from atlasnn import HNN, ThroughSolver, learn_hamiltonian
+from atlasnn import learn_hamiltonian
+from atlasnn.inverse import HNN, ThroughSolver
 
 jax.config.update("jax_enable_x64", True)
 

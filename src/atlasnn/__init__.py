@@ -4,13 +4,13 @@ collocation of its trial solution (JAX).
 The face: one door per question, each taking method objects that hold their settings.
 
 * a trajectory: :func:`solve` (and :func:`solve_batch`) with :class:`GaussCollocation` (default),
-  :class:`Collocation`, :class:`AdamMarch` or :class:`Transfer`;
+  :class:`AdamMarch` or :class:`Transfer` (the deprecated ``Collocation``: ``atlasnn.solver``);
 * a bundle (every initial state and parameter of a :class:`BundleBox`): :func:`solve_bundle` with
   :class:`FlowMap` (default) or :class:`NetworkBundle`;
 * parameters from observations: :func:`fit` with :class:`Shooting` (default), :class:`CollocationFit`,
   :class:`Joint` or :class:`BundleFit`, returning a :class:`FitResult`;
-* a Hamiltonian from trajectories: :func:`learn_hamiltonian` with :class:`ThroughSolver` (default)
-  or :class:`HNN`;
+* a Hamiltonian from trajectories: :func:`learn_hamiltonian` with ``ThroughSolver`` (default) or
+  ``HNN`` (``atlasnn.inverse``);
 * the paper's experiments: :func:`load_config`, :func:`run_experiment` (and ``atlasnn reproduce``);
 * any solution: :func:`save`, :func:`load`.
 
@@ -39,12 +39,11 @@ apply_matmul_precision()  # full float32 products on a GPU too (atlasnn.precisio
 # name -> the subpackage that defines it
 _FACE = {
     "systems": ("HamiltonianSystem", "builtin_system", "expression_system", "BundleBox"),
-    "solver": ("solve", "solve_batch", "GaussCollocation", "Collocation", "AdamMarch", "Transfer", "solve_bundle",
-               "FlowMap", "NetworkBundle"),
+    "solver": ("solve", "solve_batch", "GaussCollocation", "AdamMarch", "Transfer", "solve_bundle", "FlowMap",
+               "NetworkBundle"),
     "checkpoint": ("save", "load"),
     "evaluation": ("reference_solution", "integrate"),
-    "inverse": ("fit", "Shooting", "CollocationFit", "Joint", "BundleFit", "FitResult", "learn_hamiltonian",
-                "ThroughSolver", "HNN"),
+    "inverse": ("fit", "Shooting", "CollocationFit", "Joint", "BundleFit", "FitResult", "learn_hamiltonian"),
     "observations": ("Observations", "Unknown", "load_observations"),
     "experiments": ("run_experiment", "load_config"),
 }

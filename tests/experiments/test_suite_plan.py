@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from atlasnn.experiments import _suite
 from atlasnn.experiments._suite import SUITE_PROFILES, run_suite, suite_members
 
 
+@pytest.mark.slow  # 36 s; test_overwrite_runs_finished_members_again runs the suite in CI
 def test_every_member_runs_in_both_profiles_and_finished_runs_are_kept(tmp_path, monkeypatch):
     started, resumed = [], []
 

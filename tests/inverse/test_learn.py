@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 import atlasnn
-from atlasnn import HNN, ThroughSolver, learn_hamiltonian
+from atlasnn import learn_hamiltonian
+from atlasnn.inverse import HNN, ThroughSolver
 from atlasnn.errors import ConfigError
 
 pytestmark = pytest.mark.usefixtures("x64")  # float64 (tests/conftest.py)

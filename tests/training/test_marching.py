@@ -174,6 +174,7 @@ def test_first_layer_scale_multiplies_the_initial_first_layer_only():
             make_model((1.0, 0.0), width=16, depth=2, first_layer_scale=bad)
 
 
+@pytest.mark.slow  # 40 s; tests/training/test_train_batch.py checks each seed of a batch against its lone run
 def test_seeds_marched_together_are_their_lone_marches(ho):
     from atlasnn.training import march_batch
 
