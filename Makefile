@@ -14,7 +14,7 @@ $(BIN)/atlasnn: pyproject.toml
 quick: $(BIN)/atlasnn
 	$(BIN)/atlasnn reproduce oscillator-short --quick --overwrite
 
-# two workers (pytest-xdist), a test file per worker at a time: 24.4 min on the 2-core machine
+# two workers (pytest-xdist), a test file per worker at a time: 24–30 min on the 2-core machine
 # from a fresh clone (CONTRIBUTING.md); TEST_WORKERS=0 runs them in this process
 TEST_WORKERS ?= 2
 PYTEST = $(BIN)/python -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile)

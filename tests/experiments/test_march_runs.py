@@ -13,6 +13,10 @@ from atlasnn.experiments.config import parse_config
 from atlasnn.experiments import RunInterrupted, resume_experiment, run_experiment
 from atlasnn.report import write_report
 
+# a minute of training for the module's run; slow (make test-slow): CI's marches are checked by
+# test_march_resume, test_march_window_keys and test_marching
+pytestmark = pytest.mark.slow
+
 from support import TRANSFER
 
 MARCH = TRANSFER.replace('name = "resume-transfer"', 'name = "march-run"').replace("seeds = [0]", "seeds = [0, 1]") + """
