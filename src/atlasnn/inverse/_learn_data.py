@@ -56,7 +56,7 @@ def _trajectory(k: int, item: Any, dim: int | None) -> Trajectory:
         raise ConfigError(f"{where}: states must have shape ({t.size}, 2d) (q then p, one row a time), "
                           f"got {z.shape}")
     if dim is not None and z.shape[1] != dim:
-        raise ConfigError(f"{where}: states have {z.shape[1]} components, the model's system {dim}")
+        raise ConfigError(f"{where}: states have {z.shape[1]} components, the first trajectory's {dim}")
     if not np.all(np.isfinite(t)) or np.any(np.isinf(z)):
         raise ConfigError(f"{where}: times and states must be finite (an inf is in the data; NaN marks a component "
                           "not observed)")
@@ -70,14 +70,14 @@ def _trajectory(k: int, item: Any, dim: int | None) -> Trajectory:
     return Trajectory(t, z)
 
 
-def check_trajectories(trajectories: Any, dim: int | None = None) -> list[Trajectory]:
-    """The trajectories as checked :class:`Trajectory` records, all with ``dim`` components (or
-    the first one's), or a one-line refusal."""
+def check_trajectories(trajectories: Any) -> list[Trajectory]:
+    """The trajectories as checked :class:`Trajectory` records, all with the first one's number of
+    components, or a one-line refusal."""
     if isinstance(trajectories, (str, bytes)) or not hasattr(trajectories, "__iter__"):
         raise ConfigError(f"trajectories must be a list of (times, states) pairs, got {type(trajectories).__name__}")
     out: list[Trajectory] = []
     for k, item in enumerate(trajectories):
-        out.append(_trajectory(k, item, dim if dim is not None or not out else out[0].z.shape[1]))
+        out.append(_trajectory(k, item, out[0].z.shape[1] if out else None))
     if not out:
         raise ConfigError("trajectories is empty: give at least one (times, states) pair")
     return out
@@ -100,10 +100,6 @@ class Segments:
     times: np.ndarray
     targets: np.ndarray
     guess: np.ndarray
-
-    @property
-    def count(self) -> int:
-        return int(self.t0.size)
 
 
 def segments(trajectories: list[Trajectory], ahead: int, held_out: float) -> tuple[Segments, Segments | None]:
