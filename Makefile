@@ -1,9 +1,9 @@
-# Set-up and the two main jobs. `make quick` runs a quick reproduction; `make test` runs the tests.
+# Set-up and the two main jobs. `make quick` runs a quick reproduction; `make test test-long` runs the tests.
 PY ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: quick test test-slow test-isa docs reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc solve-runs bench clean-venv
+.PHONY: quick test test-long test-slow test-isa docs reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc solve-runs bench clean-venv
 
 $(BIN)/atlasnn: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -14,12 +14,17 @@ $(BIN)/atlasnn: pyproject.toml
 quick: $(BIN)/atlasnn
 	$(BIN)/atlasnn reproduce oscillator-short --quick --overwrite
 
-# two workers (pytest-xdist), a test file per worker at a time: 24–30 min on the 2-core machine
-# from a fresh clone (CONTRIBUTING.md); TEST_WORKERS=0 runs them in this process
+# Two tiers, each in two workers (pytest-xdist, a test file per worker at a time; TEST_WORKERS=0
+# runs them in this process). `make test` is the quick tier, everything but the tests marked long
+# or slow; `make test-long` the tests marked long (5 s or more each here). CI runs both
+# (`make test test-long`); the times are in CONTRIBUTING.md.
 TEST_WORKERS ?= 2
 PYTEST = $(BIN)/python -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile)
 test: $(BIN)/atlasnn
-	$(PYTEST)
+	$(PYTEST) -m "not slow and not long"
+
+test-long: $(BIN)/atlasnn
+	$(PYTEST) -m "long and not slow"
 
 # the tests marked slow (half a minute or more each; CI leaves them out to stay under 30 minutes)
 test-slow: $(BIN)/atlasnn
@@ -87,9 +92,12 @@ solve-runs: $(BIN)/atlasnn
 
 # The documentation site (mkdocs.yml): docs/ and the API reference from the docstrings, into site/;
 # --strict makes every warning (a broken link or anchor, a docstring that does not render) an error.
+# the site into site/, then the docs test's site check (a strict build with no Sphinx role shown as
+# text), which `make test` skips where mkdocs is not installed
 docs: $(BIN)/atlasnn
 	$(BIN)/pip install -q -e '.[docs]'
 	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict
+	$(BIN)/python -m pytest -q tests/test_docs.py::test_the_site_builds_strict
 
 # Every benchmark record the docs cite, rerun, and the docs' generated tables rewritten from them
 # (benchmarks/README.md: the instruments, their questions and records). Hours on the 2-core machine;

@@ -9,6 +9,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 SCRIPT = ("import atlasnn, jax, jax.numpy as jnp\n"
           "def isa_probe(x):\n    return jnp.sin(x) * 2.0 + jnp.cos(x)\n"
           "jax.jit(isa_probe)(jnp.arange(7.0)).block_until_ready()\n")
@@ -21,6 +23,7 @@ def _compile(cache, flags):
     return sorted(p.name for p in cache.glob("jit_isa_probe-*-cache"))
 
 
+@pytest.mark.long
 def test_a_program_is_kept_per_instruction_set(tmp_path):
     avx2 = _compile(tmp_path, "--xla_cpu_max_isa=AVX2")
     assert len(avx2) == 1

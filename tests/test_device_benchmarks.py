@@ -15,6 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 GPU = ROOT / "docs" / "benchmarks" / "gpu"
 
 
+@pytest.mark.long
 def test_device_accuracy_judges_every_seed_against_the_reference(tmp_path, capsys):
     out = tmp_path / "acc.json"
     assert device_accuracy.main(["--seeds", "2", "--epochs", "30", "--out", str(out)]) == 0

@@ -26,6 +26,9 @@ Markers (an HTML comment on the line(s) just before the fence, invisible on the 
 * ``<!-- docs-test: slow (reason) -->`` — the block runs only with ``-m slow`` (``make
   test-slow``), not in CI: a command of minutes that another test covers; it must be the last
   block of its page, or no later block may need what it writes;
+* ``<!-- docs-test: long (reason) -->`` — the block, and every later block of its page, run in
+  the long tier (``make test-long``, which CI runs too), not in ``make test``: a page whose
+  blocks take half a minute or more;
 * ``<!-- docs-test: needs MODULE -->`` — the block runs where MODULE (an optional extra, such as
   ``diffrax``) is installed and is reported as skipped, with that reason, where it is not (its
   Python is still compiled).
@@ -74,7 +77,7 @@ SHELL_LANGS = {"bash", "sh", "shell", "console"}
 KNOWN_LANGS = SHELL_LANGS | {"python", "toml", "json", "text"}
 
 _FENCE = re.compile(r"^(?P<indent>\s*)(?P<fence>`{3,}|~{3,})(?P<lang>[\w+-]*)\s*$")
-_MARKER = re.compile(r"^\s*<!--\s*docs-test:\s*(?P<kind>skip|file|needs|slow)\s*(?P<arg>.*?)\s*-->\s*$")
+_MARKER = re.compile(r"^\s*<!--\s*docs-test:\s*(?P<kind>skip|file|needs|slow|long)\s*(?P<arg>.*?)\s*-->\s*$")
 
 
 @dataclass
@@ -87,6 +90,7 @@ class Block:
     file: str | None = None  # the file name, when marked file
     needs: str | None = None  # the optional module it needs, when marked needs
     slow: str | None = None  # the reason, when marked slow (run with -m slow, not in CI)
+    long: str | None = None  # the reason, when marked long (this block and the page's later ones: the long tier)
 
     @property
     def id(self) -> str:
@@ -116,7 +120,7 @@ def extract_blocks(text: str, page: str = "page.md") -> list[Block]:
             mk = _MARKER.match(lines[k])
             if mk:
                 arg = mk.group("arg")
-                if mk.group("kind") in ("skip", "slow"):
+                if mk.group("kind") in ("skip", "slow", "long"):
                     reason = re.fullmatch(r"\((.+)\)", arg)
                     if not reason:
                         raise AssertionError(f"{page}:{k + 1}: a {mk.group('kind')} marker needs a reason: "
@@ -312,6 +316,17 @@ ALL_BLOCKS = [b for page in PAGES for b in extract_blocks(page.read_text(encodin
 CODE_BLOCKS = [b for b in ALL_BLOCKS if b.lang != "text"]
 
 
+def _tier_marks(blocks: list[Block]) -> list[list]:
+    """The pytest marks of each block: slow where marked; long from a long marker to its page's end
+    (a later block may need what a long one writes, so none of them runs in the quick tier)."""
+    marks, long_pages = [], set()
+    for b in blocks:
+        if b.long is not None:
+            long_pages.add(b.page)
+        marks.append([pytest.mark.slow] if b.slow else [pytest.mark.long] if b.page in long_pages else [])
+    return marks
+
+
 @pytest.fixture(scope="module")
 def workspaces(tmp_path_factory):
     """One directory per page, created on first use, with copies of examples/ and scripts/."""
@@ -334,7 +349,7 @@ def test_every_block_has_a_known_language():
     assert not unknown, f"fence languages must be one of {sorted(KNOWN_LANGS)} (text for output samples): {unknown}"
 
 
-@pytest.mark.parametrize("block", [pytest.param(b, marks=pytest.mark.slow) if b.slow else b for b in CODE_BLOCKS],
+@pytest.mark.parametrize("block", [pytest.param(b, marks=m) for b, m in zip(CODE_BLOCKS, _tier_marks(CODE_BLOCKS))],
                          ids=[b.id for b in CODE_BLOCKS])
 def test_block(block: Block, workspaces, epoch_cap, monkeypatch):
     if block.lang not in KNOWN_LANGS:
@@ -366,6 +381,15 @@ def test_the_readme_is_a_front_page():
     manual is the docs site."""
     lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
     assert len(lines) <= README_MAX_LINES, f"README.md has {len(lines)} lines, more than {README_MAX_LINES}"
+
+
+def test_ci_runs_the_readmes_test_command():
+    """The README's first block gives two commands, the second the tests; .ci/run runs exactly it."""
+    first = next(b for b in ALL_BLOCKS if b.page == "README.md" and b.lang in SHELL_LANGS)
+    commands = [c.split("#")[0].strip() for c in shell_commands(first)]
+    assert len(commands) == 2 and commands[1].startswith("make test"), commands
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8").splitlines()
+    assert commands[1] in ci, f".ci/run does not run the README's test command `{commands[1]}`"
 
 
 def test_every_page_is_in_the_site_nav():
@@ -459,6 +483,17 @@ def test_a_needs_marker_names_a_module():
     assert blocks[0].needs == "diffrax" and blocks[0].skip is None
     with pytest.raises(AssertionError, match="bad module name"):
         extract_blocks("<!-- docs-test: needs pip install x -->\n```python\nprint(1)\n```\n")
+
+
+def test_a_long_marker_puts_its_block_and_the_pages_later_blocks_in_the_long_tier():
+    page = ("```python\nprint(0)\n```\n\n<!-- docs-test: long (a minute of training) -->\n"
+            "```python\nprint(1)\n```\n\n```bash\natlasnn systems\n```\n")
+    blocks = extract_blocks(page, "a.md") + extract_blocks("```python\nprint(2)\n```\n", "b.md")
+    assert blocks[1].long == "a minute of training"
+    names = [[m.name for m in marks] for marks in _tier_marks(blocks)]
+    assert names == [[], ["long"], ["long"], []]
+    with pytest.raises(AssertionError, match="needs a reason"):
+        extract_blocks("<!-- docs-test: long -->\n```python\nprint(1)\n```\n")
 
 
 def test_extractor_refuses_markers_without_reason_and_open_fences():

@@ -69,6 +69,7 @@ _X64_SCRIPT = textwrap.dedent(
 )
 
 
+@pytest.mark.long
 def test_env_switch_trains_in_float64():
     env = dict(os.environ, ATLASNN_X64="1", JAX_PLATFORMS="cpu")
     proc = subprocess.run(
@@ -96,6 +97,7 @@ def _matmul_setting(**env_vars):
                           timeout=120)
 
 
+@pytest.mark.long
 def test_full_float32_products_by_default_and_the_switches():
     assert _matmul_setting().stdout.strip() == "highest"
     assert _matmul_setting(ATLASNN_MATMUL_PRECISION="default").stdout.strip() == "None"  # JAX's own
@@ -113,6 +115,7 @@ def test_a_bad_matmul_precision_is_one_line():
         "bfloat16"]
 
 
+@pytest.mark.long
 def test_a_program_traced_under_another_matmul_precision_is_compiled_again():
     from atlasnn.systems import builtin_system
     from atlasnn.training import TrainConfig, train
@@ -129,6 +132,7 @@ def test_a_program_traced_under_another_matmul_precision_is_compiled_again():
     np.testing.assert_array_equal(first.history.loss, again.history.loss)
 
 
+@pytest.mark.long
 def test_a_levenberg_marquardt_phase_traced_under_another_matmul_precision_is_compiled_again():
     from atlasnn.systems import builtin_system
     from atlasnn.training import LMConfig, levenberg_marquardt

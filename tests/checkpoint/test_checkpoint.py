@@ -72,6 +72,7 @@ def _meta_bytes(meta) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ round trips
+@pytest.mark.long
 @pytest.mark.parametrize("x64", [False, True], ids=["float32", "float64"])
 @pytest.mark.parametrize("scaling", ["exp_decay", "tanh", "rational_exp"])
 def test_round_trip_predicts_bit_identically(tmp_path, scaling, x64):

@@ -159,6 +159,7 @@ def report_error(run, capsys) -> str:
     return err.strip()
 
 
+@pytest.mark.long
 def test_report_refuses_a_model_of_another_system(tiny_run, tmp_path, capsys):
     run = tmp_path / "run"
     shutil.copytree(tiny_run, run)

@@ -115,6 +115,7 @@ def undisturbed(tmp_path_factory):
     return json.loads((out / "results.json").read_text())
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("case", range(4))
 def test_a_write_failing_mid_run_keeps_finished_work_and_resume_completes(case, tmp_path, capsys, monkeypatch,
                                                                         undisturbed):

@@ -187,6 +187,7 @@ def train_and_judge(system, lr, betas, epochs, sigma):
                           returned_loss=returned, interval=(0.0, T), lr=lr, epochs_budget=epochs)
 
 
+@pytest.mark.long
 def test_double_well_that_jumps_the_separatrix_is_judged_failed(double_well):
     # release betas, lr 5e-3, 1 500 epochs: the network settles outside the separatrix
     # (calibration: loss 2.5e-2, drift ~100 %, max error 1.3 against the reference)
@@ -197,6 +198,7 @@ def test_double_well_that_jumps_the_separatrix_is_judged_failed(double_well):
     assert "lower train.lr (now 0.005" in v.advice.lower()
 
 
+@pytest.mark.long
 def test_double_well_trained_well_is_judged_ok(double_well):
     # Adam's default betas, lr 1e-3, 5 000 epochs (calibration: loss 3.5e-6, drift 0.43 %)
     v = train_and_judge(double_well, 1e-3, (0.9, 0.999), 5000, 0.4)

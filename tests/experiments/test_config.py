@@ -29,6 +29,7 @@ SUITE = ["figure-eight", "fpu-stiff", "henon-heiles-chaotic", "kepler-e06", "kep
          "toda-3"]
 
 
+@pytest.mark.long
 def test_the_four_paper_experiments_the_two_long_ones_and_the_hard_suite_ship():
     assert builtin_experiments() == sorted(PAPER + LONG + SUITE)
     assert [n for n in builtin_experiments() if load_config(builtin_config_path(n)).suite == "hard"] == SUITE

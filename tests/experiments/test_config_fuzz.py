@@ -245,6 +245,7 @@ def _check(d: dict) -> None:
 
 @settings(max_examples=MAX_EXAMPLES, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@pytest.mark.long
 @given(base=st.sampled_from(BASES), n=st.integers(0, 3), data=st.data())
 def test_fuzzed_configs_parse_and_train_or_fail_with_one_line(base, n, data):
     d = base

@@ -88,6 +88,7 @@ def _watch(condition, action, timeout=120.0) -> threading.Thread:
 
 
 # ------------------------------------------------------------------------------ (a)
+@pytest.mark.long
 def test_a_run_on_the_cluster_equals_a_local_run(tmp_path, cluster, reference):
     address, client = cluster
     out = tmp_path / "run"
@@ -111,6 +112,7 @@ def python_sigint():
     signal.signal(signal.SIGINT, old)
 
 
+@pytest.mark.long
 def test_sigint_stops_the_workers_and_the_run_resumes_on_the_cluster(tmp_path, capsys, cluster, reference,
                                                                        python_sigint):
     address, client = cluster
@@ -140,6 +142,7 @@ def test_sigint_stops_the_workers_and_the_run_resumes_on_the_cluster(tmp_path, c
 
 
 # ------------------------------------------------------------------------------ (c)
+@pytest.mark.long
 def test_a_worker_killed_mid_run_and_dask_finishes_the_run(tmp_path, cluster, reference):
     address, client = cluster
     out = tmp_path / "run"

@@ -76,6 +76,7 @@ def test_every_key_is_commented_with_its_meaning(tmp_path, capsys, transfer):
     tomllib.loads(text)
 
 
+@pytest.mark.long
 def test_quick_single_interval_template_runs_as_written(tmp_path, capsys):
     _, path, _ = init(tmp_path, capsys, "pendulum.toml")
     out = tmp_path / "run"
@@ -89,6 +90,7 @@ def test_quick_single_interval_template_runs_as_written(tmp_path, capsys):
     assert (out / "tables.md").is_file() and (out / "figures" / "trajectories.png").is_file()
 
 
+@pytest.mark.long
 def test_a_long_template_is_time_marched_and_solved_and_runs_as_written(tmp_path, capsys):
     rc, path, _ = init(tmp_path, capsys, "long.toml", "--T", "12", "--march", "--solve")
     assert rc == 0

@@ -39,6 +39,7 @@ def done(tmp_path_factory):
     return out, _run(out)
 
 
+@pytest.mark.long
 def test_the_march_column_is_measured_like_the_others(done):
     out, res = done
     assert res["columns"] == ["se", "atlas_exp_transfer", "atlas_exp_march"]
@@ -56,6 +57,7 @@ def test_the_march_column_is_measured_like_the_others(done):
     assert all(by[("atlas_exp_march", s)] < by[("atlas_exp_transfer", s)] for s in (0, 1))
 
 
+@pytest.mark.long
 def test_work_precision_is_in_results_and_figures_and_report_redraws_it(done):
     out, res = done
     wp = res["work_precision"]
@@ -73,6 +75,7 @@ def test_work_precision_is_in_results_and_figures_and_report_redraws_it(done):
     assert "ATLAS-NN (exp, time-marching)" in (out / "tables.md").read_text()
 
 
+@pytest.mark.long
 def test_a_march_interrupted_starts_again_on_resume_with_the_same_results(done, tmp_path, monkeypatch):
     import atlasnn.experiments._schemes as marching  # where the march scheme looks up march_batch
 

@@ -26,6 +26,7 @@ def _load(tmp_path, lines: str):
     return load_config(path)
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("key, count", [("window = 0.5", 4), ("n_windows = 3", 3)])
 def test_a_march_fixed_by_window_or_by_n_windows_loads_and_runs(tmp_path, key, count):
     """``n_windows = 3`` with no window was refused ("give window or n_windows, not both"): window's

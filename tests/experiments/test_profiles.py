@@ -27,6 +27,7 @@ target = { train = { epochs = 150 } }
 """
 
 
+@pytest.mark.long
 def test_every_paper_experiment_has_a_release_profile_that_changes_something():
     paper_short = [n for n in builtin_experiments()
                    if not n.endswith("-long") and not load_config(builtin_config_path(n)).suite]
@@ -69,6 +70,7 @@ def test_profiles_merge_before_quick_and_unknown_ones_are_refused():
         parse_config({**data, "profiles": {"release": {"profiles": {}}}})
 
 
+@pytest.mark.long
 def test_target_trains_at_the_sources_lr_with_the_release_profile(tmp_path):
     toml = tmp_path / "p.toml"
     toml.write_text(PROFILED)
@@ -88,6 +90,7 @@ def test_target_trains_at_the_sources_lr_with_the_release_profile(tmp_path):
     assert res["profile"] == "paper" and {r["role"]: r["lr"] for r in res["runs"]}["target"] == 5e-3
 
 
+@pytest.mark.long
 def test_the_default_run_directory_names_a_chosen_profile(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     toml = tmp_path / "p.toml"
@@ -97,6 +100,7 @@ def test_the_default_run_directory_names_a_chosen_profile(tmp_path, monkeypatch)
     assert main(["run", str(toml), "--profile", "nope", "--quick"]) == 2
 
 
+@pytest.mark.long
 def test_a_profile_run_resumes_with_its_profile(tmp_path, monkeypatch):
     from atlasnn.experiments import _schemes as schemes
     from atlasnn.experiments import RunInterrupted, resume_experiment, run_experiment

@@ -56,6 +56,7 @@ TOY_CONFIG = {
 }
 
 
+@pytest.mark.long
 def test_a_scaling_is_one_class_and_one_entry(toy_model, tmp_path):
     model = make_model([1.0, 0.0], scaling="atlas_alg", width=16, depth=1, gamma={"a": 2.0})
     assert float(model.scaling.gamma()["a"]) == pytest.approx(2.0, rel=1e-6)

@@ -13,6 +13,9 @@ from atlasnn.cli import main
 from atlasnn.experiments.config import _config as config_module
 from atlasnn.experiments.config import builtin_config_path
 
+# the module's fixture trains for a quarter to half a minute: the long tier
+pytestmark = pytest.mark.long
+
 
 CI_QUICK = "[quick]\ntrain = { epochs = 3000, chunk = 1000 }\nevaluation = { eval_points = 2000 }\n"
 

@@ -155,6 +155,7 @@ def _states(out: Path) -> dict[str, int]:
 MESSAGE = re.compile(r"^atlasnn: interrupted: (\d) of 3 trainings finished; resume with: (.*)$", re.M)
 
 
+@pytest.mark.long
 def test_sigint_and_sigterm_in_a_real_process_then_resume(tmp_path):
     toml = tmp_path / "long.toml"
     toml.write_text(LONG)

@@ -79,6 +79,7 @@ def _assert_same_marches(a: Path, b: Path) -> None:
             assert np.array_equal(za[k], zb[k]), k
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("text", [FIXED, ADAPTIVE], ids=["fixed", "adaptive"])
 def test_a_march_interrupted_in_window_k_resumes_at_window_k(tmp_path, monkeypatch, text):
     reference = tmp_path / "reference"

@@ -120,6 +120,7 @@ def test_out_on_a_read_only_file_system(tmp_path, config, capsys):
         assert os.listdir(ro) == []
 
 
+@pytest.mark.long
 def test_a_full_disk_mid_run_for_real(tmp_path, config, capsys):
     # 40 KiB hold the config, meta.json and the first model's files, not the second model
     with tmpfs(tmp_path / "small", "size=40k") as small:

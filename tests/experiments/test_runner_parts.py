@@ -67,6 +67,7 @@ def test_auto_on_a_gpu_puts_every_seed_of_a_column_in_one_program():
 
 
 # --------------------------------------------------------------- batch interrupted
+@pytest.mark.long
 def test_a_batch_interrupted_mid_way_resumes_bit_identically(tmp_path, monkeypatch):
     ref = tmp_path / "ref"
     _run(ref, seed_batch=2)
@@ -105,6 +106,7 @@ def test_a_second_writer_is_refused_while_the_first_holds_the_directory(tmp_path
     assert not (out / "meta.json").exists()  # the refused run wrote nothing
 
 
+@pytest.mark.long
 def test_the_lock_is_released_after_a_run_and_after_a_failure(tmp_path, monkeypatch):
     out = tmp_path / "run"
     _run(out, seed_batch=1)
@@ -149,6 +151,7 @@ fine_factor = 2
 """
 
 
+@pytest.mark.long
 def test_a_training_that_failed_is_flagged_in_results_tables_and_output(tmp_path, capsys):
     """The issue's double well: too short a budget leaves ẑ across the separatrix (energy drift
     about 100 %): exit status 0 (results were written), but the verdict says failed, with advice."""
@@ -187,6 +190,7 @@ QUICK_FAILING = SHORT.replace("seeds = [0, 1]", "seeds = [0]").replace("epochs =
     + "\n[quick]\ntrain.epochs = 20\n"
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("quick", [True, False])
 def test_a_quick_runs_failed_trainings_are_not_told_to_raise_the_capped_budget(tmp_path, capsys, quick):
     cfg = tmp_path / "q.toml"

@@ -84,6 +84,7 @@ def _check_stopped(proc, output: str, took: float) -> None:
     ("training", "[1/2]", 60000),            # one training done, the other mid-way
     ("render", "trainings done", 300),       # every training done, figures being drawn
 ])
+@pytest.mark.long
 def test_one_signal_stops_a_run_at_every_stage(tmp_path, stage, marker, epochs):
     config = tmp_path / "stages.toml"
     config.write_text(CONFIG.replace("{epochs}", str(epochs)))
@@ -100,6 +101,7 @@ def test_one_signal_stops_a_run_at_every_stage(tmp_path, stage, marker, epochs):
         assert "resume with" in output
 
 
+@pytest.mark.long
 def test_one_signal_stops_a_sweep_between_points(tmp_path):
     config = tmp_path / "stages.toml"
     config.write_text(CONFIG.replace("{epochs}", "300").replace("seeds = [0, 1]", "seeds = [0]"))

@@ -17,6 +17,9 @@ from atlasnn.experiments.config import builtin_config_path, load_config, parse_c
 from atlasnn.experiments.config._schema import SCHEME_NAMES
 from atlasnn.experiments._suite import suite_members
 
+# the module's fixture trains for a quarter to half a minute: the long tier
+pytestmark = pytest.mark.long
+
 CONFIG = """
 name = "solve-run"
 models = ["atlas_exp"]

@@ -37,6 +37,7 @@ def test_every_member_runs_in_both_profiles_and_finished_runs_are_kept(tmp_path,
     assert started == [] and resumed == [members[0]]
 
 
+@pytest.mark.long
 def test_profiles_pick_a_subset_and_an_unknown_one_is_refused(tmp_path, monkeypatch):
     import pytest
 
@@ -58,6 +59,7 @@ def test_profiles_pick_a_subset_and_an_unknown_one_is_refused(tmp_path, monkeypa
         run_suite("hard", tmp_path, profiles=["adaptive"], log=lambda *a: None)
 
 
+@pytest.mark.long
 def test_overwrite_runs_finished_members_again(tmp_path, monkeypatch):
     started = []
 

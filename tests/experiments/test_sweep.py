@@ -45,6 +45,7 @@ def swept(tmp_path_factory, config) -> Path:
     return out
 
 
+@pytest.mark.long
 def test_a_sweep_writes_complete_points_a_table_and_a_figure(swept, capsys):
     spec = json.loads((swept / "sweep.json").read_text())
     assert [p["dir"] for p in spec["points"]] == POINTS
@@ -74,6 +75,7 @@ def test_a_sweep_writes_complete_points_a_table_and_a_figure(swept, capsys):
     assert float(rows[0]["atlas_exp_median"]) != float(rows[1]["atlas_exp_median"])
 
 
+@pytest.mark.long
 def test_an_interrupted_sweep_resumes_where_it_stopped(tmp_path, config, swept, monkeypatch, capsys):
     out = tmp_path / "grid"
     first = out / POINTS[0] / "results.json"
@@ -166,6 +168,7 @@ def test_a_bad_scheduler_or_metric_is_refused_before_anything_is_written(tmp_pat
         parse_sets(["train.lr=1e-3", "train.lr=2e-3"])
 
 
+@pytest.mark.long
 def test_a_sweep_of_a_profile_puts_the_overrides_over_the_profile(tmp_path, capsys):
     from test_profiles import PROFILED  # same folder (tests/experiments)
 

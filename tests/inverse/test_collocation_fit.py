@@ -27,6 +27,7 @@ def _global(system, obs, unknowns):
     return fit_shooting(system, obs, unknowns)
 
 
+@pytest.mark.long
 def test_from_a_start_where_single_shooting_is_trapped_it_reaches_the_global_minimum():
     bad = [Unknown("lam", 1.35, 0.2, 1.5)]
     assert abs(fit_shooting(HH, OBS, bad).value("lam") - 0.8) > 0.3  # single shooting: a false minimum
@@ -39,6 +40,7 @@ def test_from_a_start_where_single_shooting_is_trapped_it_reaches_the_global_min
     assert fit.search["windows"] >= 2 and len(fit.search["lm_steps"]) == len(CollocationFit().penalties)
 
 
+@pytest.mark.long
 def test_a_chaotic_record_where_shooting_cannot_integrate_from_the_start():
     hh = henon_heiles(lam=1.0)
     hh = expression_system("(px**2 + py**2)/2 + (x**2 + y**2)/2 + lam*(x**2*y - y**3/3)", ["x", "y"], ["px", "py"],
@@ -53,6 +55,7 @@ def test_a_chaotic_record_where_shooting_cannot_integrate_from_the_start():
     assert abs(fit.value("lam") - best.value("lam")) <= 0.5 * best.std[0] and fit.trusted
 
 
+@pytest.mark.long
 def test_a_parameter_and_an_initial_momentum_together():
     unknowns = [Unknown("lam", 1.24, 0.2, 1.5), Unknown("z0.px", 0.12, 0.0, 0.6)]
     best = _global(HH, OBS, [Unknown("lam", 0.8, 0.2, 1.5), Unknown("z0.px", 0.3, 0.0, 0.6)])
@@ -61,6 +64,7 @@ def test_a_parameter_and_an_initial_momentum_together():
     assert fit.names == ("lam", "z0.px")
 
 
+@pytest.mark.long
 def test_without_the_polish_its_own_sigma_agrees_with_shootings():
     pend = expression_system("p**2/2 - g*cos(x)", ["x"], ["p"], params={"g": 1.0}, z0=[1.0, 0.0], name="pendulum")
     times = np.sort(np.random.default_rng(7).uniform(0.0, 8.0, 40))
@@ -97,6 +101,7 @@ def _family(tmp_path, fit_table: str) -> str:
     return str(cfg)
 
 
+@pytest.mark.long
 def test_a_family_run_fits_by_collocation_and_records_it(tmp_path, capsys):
     cfg = _family(tmp_path, '[fit]\nmethods = ["collocation", "shooting"]\nstarts = 3\ncollocation_features = 12\n')
     assert main(["family", cfg, "--out", str(tmp_path / "out")]) == 0
@@ -111,6 +116,7 @@ def test_the_fit_table_checks_the_collocation_keys(tmp_path):
         load_family(_family(tmp_path, '[fit]\nmethods = ["collocation"]\ncollocation_windows = 0\n'))
 
 
+@pytest.mark.long
 def test_data_that_start_long_after_t0_anchor_the_start_at_the_initial_value():
     quartic = expression_system("p**2/2 + a*x**4/4", ["x"], ["p"], params={"a": 1.0}, z0=[1.0, 0.0], name="quartic")
     times = np.sort(np.random.default_rng(0).uniform(5.0, 15.0, 30))  # nothing observed on [0, 5)

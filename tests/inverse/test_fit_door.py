@@ -23,6 +23,7 @@ OBS = synthetic_observations(HH, HH.initial_state(), np.linspace(0.5, 10.0, 30),
 LAM = [Unknown("lam", 0.9, 0.2, 1.5)]
 
 
+@pytest.mark.long
 def test_shooting_through_the_door_is_fit_shooting():
     direct = fit_shooting(HH, OBS, LAM)
     door = fit(HH, OBS, LAM, method=Shooting(starts=1))
@@ -34,6 +35,7 @@ def test_the_default_method_is_the_multistart():
     assert result.search["starts"] == 13 and "13 starts" in result.method
 
 
+@pytest.mark.long
 def test_the_collocation_method_object_takes_the_doors_seed():
     a = fit(HH, OBS, LAM, method=CollocationFit(features=12), seed=3)
     assert a.method == "collocation" and abs(a.value("lam") - fit_shooting(HH, OBS, LAM).value("lam")) < 0.5 * a.std[0]
@@ -80,6 +82,7 @@ class _GuessOnly(AbstractFitMethod):
         return "shooting from the guess alone"
 
 
+@pytest.mark.long
 def test_a_new_method_is_one_class_and_one_entry_and_a_config_can_name_it(tmp_path, capsys):
     register_fit_method(_GuessOnly)
     try:
@@ -155,6 +158,7 @@ def test_an_interrupted_family_run_resumes_from_the_seeds_it_finished(tmp_path, 
     assert "the run is complete (results.json is written)" in capsys.readouterr().err
 
 
+@pytest.mark.long
 def test_family_seeds_run_in_worker_processes_with_jobs(tmp_path, capsys):
     """`family --jobs 2`: the seeds are tasks of the local executor (two processes), the same
     estimates as in this process; before, --jobs did not exist for family runs."""

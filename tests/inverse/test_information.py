@@ -46,6 +46,7 @@ def test_the_initial_value_informs_when_it_is_an_unknown():
     assert fixed_values(obs, G, -1.0).tolist() == [[False], [False]]  # a fit from an earlier t0
 
 
+@pytest.mark.long
 def test_a_known_start_row_changes_neither_the_estimate_nor_its_sigma():
     """Before, the row at t0 (residual 0) added a degree of freedom: σ shrank by √(4/3) here."""
     obs = _noisy([1.0, 2.0, 3.0, 4.5])

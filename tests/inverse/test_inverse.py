@@ -43,6 +43,7 @@ def test_joint_fit_agrees_with_shooting_under_noise():
     assert np.all(np.abs(shoot.estimate - [1.0, 0.0]) < 3 * shoot.std)
 
 
+@pytest.mark.long
 def test_bundle_fit_recovers_g():
     obs = synthetic_observations(PEND, PEND.z0, TIMES[TIMES <= 3.0], ["x"], 0.0, 0, t0=0.0)
     unknowns = [Unknown("g", 0.7, 0.5, 1.5)]

@@ -42,6 +42,7 @@ def _trajectories(b=2.0, noise=0.0, starts=([1.0, 0.0], [0.0, 1.0])):
             for z in starts]
 
 
+@pytest.mark.long
 def test_through_the_solver_recovers_a_known_form_and_flags_a_noise_claimed_too_small():
     """Noisy orbits of a = 1, b = 2: the parameters within 3 %; claiming a tenth of the true noise
     makes the loss far above the claimed noise's own, which the result says."""
@@ -62,6 +63,7 @@ class Stiffness(eqx.Module):
         return p[0] ** 2 / 2 + self.b * q[0] ** 2 / 2
 
 
+@pytest.mark.long
 def test_positions_alone_suffice_through_the_solver_and_the_hnn_refuses_them():
     """Only q observed (p NaN): the segments' unknown starting momenta are trained with b, and b = 2
     is recovered from the positions; the HNN, which needs every component, refuses in one line."""
@@ -73,6 +75,7 @@ def test_positions_alone_suffice_through_the_solver_and_the_hnn_refuses_them():
         learn_hamiltonian(Stiffness(jnp.array(1.2)), partial, HNN())
 
 
+@pytest.mark.long
 def test_hnn_recovers_a_known_form_and_is_trusted():
     result = learn_hamiltonian(_guess(), _trajectories(), HNN(steps=400, rate=0.05), noise=0.0)
     assert abs(float(result.model.a) - 1.0) < 0.01 and abs(float(result.model.b) - 2.0) < 0.02
@@ -131,6 +134,7 @@ class Quartic(eqx.Module):
         return p[0] ** 2 / 2 - self.c * q[0] ** 4
 
 
+@pytest.mark.long
 def test_a_solve_that_fails_inside_training_stops_it_with_the_solves_reason():
     """H = p²/2 − 50 q⁴ from q = 1 escapes to infinity within a segment: the traced solve spends
     its window budget, and the result carries that reason in one line."""
@@ -173,6 +177,7 @@ def _data_with(k, **change):
     (lambda: HNN(rate=-1.0), "HNN rate must be a finite number > 0"),
 ], ids=["times-out-of-order", "inf", "shape", "empty", "a-path", "dof", "too-short", "no-weights", "affine",
         "held-out", "noise", "method", "ahead", "rate"])
+@pytest.mark.long
 def test_bad_input_is_refused_in_one_line_before_training(call, message):
     with pytest.raises(ConfigError, match=message) as err:
         call()

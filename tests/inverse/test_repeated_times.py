@@ -22,6 +22,7 @@ def _replicated() -> Observations:
                                     ["x", "y"])
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("method", [CollocationFit(), CollocationFit(polish=False)], ids=["polished", "own"])
 def test_the_collocation_fit_takes_repeated_observation_times(method):
     """Before, the collocation fit's starting spline raised SciPy's "`x` must be strictly increasing"."""

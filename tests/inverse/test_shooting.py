@@ -68,6 +68,7 @@ def test_synthetic_observations_errors(osc):
 
 
 # ------------------------------------------------------------------------- single shooting
+@pytest.mark.long
 def test_noise_free_oscillator_recovers_lam(osc):
     obs = synthetic_observations(osc, None, np.linspace(0.0, 4 * np.pi, 20), ["x"], 0.0, 0)
     fit = fit_shooting(osc, obs, [LAM])
@@ -93,6 +94,7 @@ def test_noise_free_oscillator_recovers_lam(osc):
     assert abs(again.value("lam") - other.value("lam")) < 1e-6 * other.std[0] and again.value("lam") > 2.5
 
 
+@pytest.mark.long
 def test_one_percent_noise_is_within_three_standard_errors(osc):
     t = np.linspace(0.0, 4 * np.pi, 30)
     rms = np.sqrt(np.mean(reference_solution(osc, None, t)[:, 0] ** 2))
@@ -104,6 +106,7 @@ def test_one_percent_noise_is_within_three_standard_errors(osc):
         assert 0.5 < fit.noise_estimate / (0.01 * rms) < 2.0  # s estimates the noise sd
 
 
+@pytest.mark.long
 def test_pendulum_g_from_positions_only():
     pend = expression_system("p**2/2 - g*cos(x)", ["x"], ["p"], {"g": 1.0}, z0=[1.0, 0.0])
     obs = synthetic_observations(pend, None, np.linspace(0.0, 10.0, 25), ["x"], 0.0, 0)
@@ -111,6 +114,7 @@ def test_pendulum_g_from_positions_only():
     assert abs(fit.value("g") - 1.0) < 1e-6
 
 
+@pytest.mark.long
 def test_henon_heiles_lam_from_positions(hh):
     obs = synthetic_observations(hh, None, np.linspace(0.0, 20.0, 50), ["x", "y"], 0.01, 3)
     fit = fit_shooting(hh, obs, [LAM])
@@ -118,6 +122,7 @@ def test_henon_heiles_lam_from_positions(hh):
     assert abs(fit.estimate[0] - 1.0) <= 3 * fit.std[0] and fit.std[0] < 0.01
 
 
+@pytest.mark.long
 def test_unknown_initial_momentum_with_the_parameter(osc):
     obs = synthetic_observations(osc, None, np.linspace(0.0, 4 * np.pi, 20), ["x"], 0.0, 0)
     fit = fit_shooting(osc, obs, [LAM, Unknown("z0.p", 0.3, -2.0, 2.0)], z0=[1.3, 0.0])
@@ -128,6 +133,7 @@ def test_unknown_initial_momentum_with_the_parameter(osc):
 
 
 # ----------------------------------------------------------------------- multiple shooting
+@pytest.mark.long
 def test_multiple_shooting_where_single_shooting_is_trapped(hh):
     obs = synthetic_observations(hh, None, np.linspace(0.0, 60.0, 120), ["x", "y"], 0.01, 0)
     multi = fit_shooting(hh, obs, [LAM], segments=4)
@@ -146,6 +152,7 @@ def test_more_unknowns_than_data(osc):
     assert "more unknowns than the data" in _msg(ei) and "2 unknowns" in _msg(ei) and "got 2" in _msg(ei)
 
 
+@pytest.mark.long
 def test_unidentifiable_unknowns_get_infinite_std():
     # a and b enter only as the product a·b: only the product is determined
     prod = expression_system("p**2/2 + a*b*x**2/2", ["x"], ["p"], {"a": 1.0, "b": 2.0}, z0=[1.0, 0.0])
@@ -164,6 +171,7 @@ def test_unidentifiable_unknowns_get_infinite_std():
 
 
 # ---------------------------------------------------------------------------------- errors
+@pytest.mark.long
 def test_fit_errors_are_one_line(osc):
     obs = synthetic_observations(osc, None, np.linspace(0.0, 4.0, 10), ["x"], 0.0, 0)
     plain = HamiltonianSystem(lambda q, p: p[0] ** 2 / 2 + q[0] ** 2 / 2, 1, name="plain")
@@ -197,6 +205,7 @@ def test_fit_errors_are_one_line(osc):
     assert "before the fit's t0" in _msg(ei)
 
 
+@pytest.mark.long
 def test_a_fit_that_does_not_explain_the_data_is_flagged():
     """A Toda pair's coupling from a guess of 0.5 lands in a wrong valley (c ≈ 0.34, truth 0.8) with a
     small σ; its residual gives it away and the result says so. From 0.7 the fit is right and clean."""
@@ -224,6 +233,7 @@ def test_synthetic_data_starts_where_the_fits_start():
     assert abs(fit.value("g") - 1.0) < 4 * fit.std[0]
 
 
+@pytest.mark.long
 def test_auto_segments_start_from_the_data_where_the_orbit_from_the_guess_escapes():
     from atlasnn.inverse import auto_segments
 

@@ -23,6 +23,7 @@ TIMES = np.sort(np.random.default_rng(7).uniform(0.0, 20.0, 50))
 OBS = synthetic_observations(HH, HH.initial_state(), TIMES, ["x", "y"], 0.01, 0)
 
 
+@pytest.mark.long
 def test_single_shooting_from_a_bad_guess_is_wrong_and_marked_the_multistart_is_right():
     bad = [Unknown("lam", 1.35, 0.2, 1.5)]
     single = fit_shooting(HH, OBS, bad)

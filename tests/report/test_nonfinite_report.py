@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from atlasnn.cli import main
 from atlasnn.evaluation import blow_up_index
@@ -45,6 +46,7 @@ def test_blow_up_index_finds_the_first_bad_sample():
     assert blow_up_index(z, ref) == 40
 
 
+@pytest.mark.long
 def test_an_overflowing_baseline_is_marked_and_the_run_and_report_exit_zero(tmp_path, capsys):
     cfg = tmp_path / "stiff.toml"
     cfg.write_text(STIFF, encoding="utf-8")

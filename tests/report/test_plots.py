@@ -345,6 +345,7 @@ def test_plot_seed_spread(tmp_path):
     _check_outputs(plot_seed_spread(tmp_path / "spread_nopaper", values, "MSE(x)"))
 
 
+@pytest.mark.long
 def test_large_states_draw_the_components_with_the_largest_errors(tmp_path):
     """A 20-component state gets 8 panels in the trajectory and error figures: those with the
     largest errors, in index order, and the figure says that the rest are in tables.md."""

@@ -112,6 +112,7 @@ def oscillator():
     return system, Solution(res.model, system, (0.0, 4 * math.pi))
 
 
+@pytest.mark.long
 def test_a_trained_solution_s_estimate_is_its_true_error(oscillator):
     system, sol = oscillator
     est = sol.estimate()
@@ -126,6 +127,7 @@ def test_a_trained_solution_s_estimate_is_its_true_error(oscillator):
     assert bound.max() >= np.linalg.norm(true, axis=1).max() * 0.999  # the bound is far above: a bound
 
 
+@pytest.mark.long
 def test_a_march_s_estimate_crosses_the_window_edges():
     system = builtin_system("harmonic_oscillator")
     cfg = MarchConfig(n_windows=3, train=DEFAULT_WINDOW_TRAIN.replace(epochs=600, n_points=40, chunk=600,

@@ -50,6 +50,7 @@ def test_harmonic_oscillator_to_round_off(ho):
     assert np.max(np.abs(sol.derivative(t) - dexact)) < 1e-11
 
 
+@pytest.mark.long
 def test_linear_non_separable_system_matches_the_matrix_exponential():
     from scipy.linalg import expm
 
@@ -61,6 +62,7 @@ def test_linear_non_separable_system_matches_the_matrix_exponential():
     assert np.max(np.abs(sol(t) - exact)) < 1e-12
 
 
+@pytest.mark.long
 def test_circular_kepler_orbit_to_1e12():
     system = _kepler_circular()
     T = 4 * np.pi
@@ -94,6 +96,7 @@ def _henon_heiles(T: float, points: int):
     return system, z0, t, ref, np.ptp(ref, axis=0).max()
 
 
+@pytest.mark.long
 def test_tolerance_controls_the_error_and_the_estimate_tracks_it():
     T = 6 * np.pi
     system, z0, t, ref, scale = _henon_heiles(T, 600)
@@ -113,6 +116,7 @@ def test_tolerance_controls_the_error_and_the_estimate_tracks_it():
     assert errs[1] < 1e-2 * errs[0]
 
 
+@pytest.mark.long
 def test_every_seed_meets_the_target_on_henon_heiles():
     T = 24 * np.pi
     system, z0, t, ref, scale = _henon_heiles(T, 2000)
@@ -121,6 +125,7 @@ def test_every_seed_meets_the_target_on_henon_heiles():
         assert np.max(np.abs(sol(t) - ref)) < 1e-9 * scale, seed
 
 
+@pytest.mark.long
 def test_scalings_tanh_and_rational_exp_solve_too(ho):
     t = np.linspace(0.0, 8.0, 200)
     exact = np.stack([np.cos(t), -np.sin(t)], axis=1)
@@ -224,6 +229,7 @@ def test_cli_solve_prints_the_estimate_and_the_true_error(tmp_path, capsys):
     assert "does not exist" in err.err and "estimated max error" not in err.out
 
 
+@pytest.mark.long
 def test_a_batch_of_initial_states_and_seeds_in_one_program(ho):
     """Members march with windows of their own; each equals the exact orbit of its own z0."""
     from atlasnn import solve_batch

@@ -75,6 +75,7 @@ def accepted(sol):
 
 
 # ------------------------------------------------------------------ one step, two doors
+@pytest.mark.long
 def test_same_numbers_as_atlasnn_solve():
     """h = 2⁻⁴ (every time k·h exact in float64): diffeqsolve's step times are atlasnn.solve's window
     edges bit for bit; the states at them and the dense outputs agree to round-off (on a CPU the
@@ -95,6 +96,7 @@ def test_same_numbers_as_atlasnn_solve():
     assert np.abs(np.asarray(dense.ys) - ref(t)).max() <= 1e-13 * np.abs(ref(t)).max()
 
 
+@pytest.mark.long
 def test_same_numbers_for_any_step_sequence():
     """h = 0.05: Diffrax's times are rounded (t_{k+1} − t_k differs from h by ulps of t), so the
     march is given the very lengths Diffrax stepped; the two are then identical."""
@@ -112,6 +114,7 @@ def test_same_numbers_for_any_step_sequence():
 
 
 # ------------------------------------------------------------------ the method's properties
+@pytest.mark.long
 def test_order_2s_at_the_step_ends():
     solver = GaussLegendre(stages=3)
     term = diffrax.ODETerm(kepler_field)
@@ -124,6 +127,7 @@ def test_order_2s_at_the_step_ends():
     assert np.all(np.abs(slopes - 6) < 0.6), (ends, slopes)
 
 
+@pytest.mark.long
 def test_the_dense_output_is_of_order_s_plus_1():
     """Between the step ends the polynomial is of order s + 1 (harmonic oscillator, s = 4)."""
     term = diffrax.ODETerm(lambda t, y, args: jnp.stack([y[1], -y[0]]))
@@ -138,6 +142,7 @@ def test_the_dense_output_is_of_order_s_plus_1():
     assert np.all(np.abs(slopes - 5) < 0.7), (errors, slopes)
 
 
+@pytest.mark.long
 def test_constant_steps_keep_the_energy_bounded_and_angular_momentum_exact():
     """Kepler e = 0.6 over 300 periods at 24 steps a period, s = 4 (an energy error well above
     round-off): that of the last hundred periods is that of the first hundred (no drift);
@@ -155,6 +160,7 @@ def test_constant_steps_keep_the_energy_bounded_and_angular_momentum_exact():
     assert np.abs(momentum - momentum[0]).max() < 1e-13
 
 
+@pytest.mark.long
 def test_time_dependent_fields_are_evaluated_at_the_nodes_times():
     """y' = (t⁵, cos t): the Gauss quadrature of 3 nodes is exact for t⁵, so the first component is
     exact at every step end whatever h; the second is of order 6."""
@@ -182,6 +188,7 @@ def test_steps_across_a_jump_of_the_field():
     np.testing.assert_allclose(np.asarray(sol.ys)[:, 0], [y1, y2], rtol=1e-11)
 
 
+@pytest.mark.long
 def test_a_pytree_state_gives_the_flat_states_numbers():
     def split(t, y, lam):
         dz = henon_heiles(t, jnp.concatenate([y["q"], y["p"]]), lam)
@@ -194,6 +201,7 @@ def test_a_pytree_state_gives_the_flat_states_numbers():
 
 
 # ------------------------------------------------------------------ adaptive steps
+@pytest.mark.long
 def test_pid_controller_meets_its_tolerance_on_an_eccentric_orbit():
     term, t = diffrax.ODETerm(kepler_field), np.linspace(0.0, 4 * PERIOD, 200)
     errors, steps = [], []
@@ -209,6 +217,7 @@ def test_pid_controller_meets_its_tolerance_on_an_eccentric_orbit():
     assert steps[1].max() > 3 * steps[1].min()  # short steps at pericentre, long ones at apocentre
 
 
+@pytest.mark.long
 def test_rejected_tries_leave_no_trace():
     """A PID run with rejected tries gives the numbers of the accepted steps alone (replayed with
     StepTo), so nothing of a rejected try (stages, compensation) reaches the next step."""
@@ -224,6 +233,7 @@ def test_rejected_tries_leave_no_trace():
     assert np.abs(accepted(replay)[1] - ys).max() < 1e-14
 
 
+@pytest.mark.long
 def test_a_compensation_is_used_only_for_the_state_it_was_made_for():
     term, solver = diffrax.ODETerm(kepler_field), GaussLegendre(stages=4)
     y0 = kepler_z0()
@@ -239,6 +249,7 @@ def test_a_compensation_is_used_only_for_the_state_it_was_made_for():
     assert np.abs(np.asarray(mine - shifted)).max() < 1e-15
 
 
+@pytest.mark.long
 def test_unsolved_stage_equations_fail_a_constant_step_and_shrink_an_adaptive_one():
     """ω = 100 with h = 1 and no Newton: the fixed-point iteration cannot contract."""
     term, y0 = diffrax.ODETerm(lambda t, y, w: jnp.stack([y[1], -w * w * y[0]])), jnp.array([1.0, 0.0])
@@ -253,6 +264,7 @@ def test_unsolved_stage_equations_fail_a_constant_step_and_shrink_an_adaptive_on
 
 
 # ------------------------------------------------------------------ dense output, events, vmap
+@pytest.mark.long
 def test_dense_output_meets_the_equations_at_the_gauss_nodes():
     sol = constant(diffrax.ODETerm(kepler_field), GaussLegendre(stages=6), 3.0, 0.25, kepler_z0(), args=1.0,
                    saveat=diffrax.SaveAt(dense=True, t1=True))
@@ -267,6 +279,7 @@ def test_dense_output_meets_the_equations_at_the_gauss_nodes():
     assert np.abs(np.asarray(sol.evaluate(3.0) - sol.ys[-1])).max() < 1e-15
 
 
+@pytest.mark.long
 def test_an_event_is_located_on_the_polynomial():
     """x = 0 first crossed where cos E = e (Kepler's equation gives its time)."""
     event = diffrax.Event(lambda t, y, args, **kw: y[0], root_finder=optx.Newton(rtol=1e-13, atol=1e-13))
@@ -277,6 +290,7 @@ def test_an_event_is_located_on_the_polynomial():
     assert abs(float(sol.ys[0, 0])) < 1e-12
 
 
+@pytest.mark.long
 def test_vmap_over_initial_states():
     @jax.jit
     def end(z0):
@@ -309,6 +323,7 @@ def test_gradients_match_finite_differences():
     assert float(jnp.abs(jz - fz).max()) < 1e-12 and float(jnp.abs(jl - fl).max()) < 1e-12
 
 
+@pytest.mark.long
 def test_gradient_with_respect_to_keplers_mu():
     def end(mu):
         return constant(diffrax.ODETerm(kepler_field), GaussLegendre(stages=8), PERIOD, PERIOD / 32, kepler_z0(),

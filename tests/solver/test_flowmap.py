@@ -31,6 +31,7 @@ def held_out():
     return t, z, lam, reference_members(OSC, BOX, z, lam, t)
 
 
+@pytest.mark.long
 def test_held_out_members_match_dop853(small, held_out):
     """Measured 6.5e-5 median, 2.6e-4 worst with these small degrees (the built-in run's degrees
     reach 1e-6 / 4e-5 on the full oscillator bundle: docs/FAMILIES.md)."""
@@ -40,6 +41,7 @@ def test_held_out_members_match_dop853(small, held_out):
     assert small.info["region_contains_the_members"] and small.info["held_out_residual_rms"] < 5e-3
 
 
+@pytest.mark.long
 def test_more_degrees_and_windows_are_more_accurate(held_out):
     t, z, lam, ref = held_out
     coarse = solve_bundle(OSC, BOX, FlowMap(windows=4, time_degree=3, state_degree=4, param_degree=1), seed=0)
@@ -65,6 +67,7 @@ def test_save_and_load_predict_bit_identically(small, held_out, tmp_path):
     assert np.array_equal(back(t, z, lam), small(t, z, lam)) and back.windows == small.windows
 
 
+@pytest.mark.long
 def test_an_untuned_system_is_solved_too():
     """The pendulum over g, not used to choose any setting (measured worst 2.6e-7 at the defaults)."""
     pend = expression_system("p**2/2 - g*cos(q)", ["q"], ["p"], params={"g": 1.0}, z0=[1.0, 0.0], name="pend")
@@ -89,6 +92,7 @@ def test_too_many_unknowns_and_times_outside_are_refused(small):
         small(np.asarray([BOX.T + 1.0]), np.asarray([[1.3, 1.0]]), np.asarray([[1.0]]))
 
 
+@pytest.mark.long
 def test_a_config_with_method_flowmap_runs_as_a_family(tmp_path):
     from atlasnn.cli import main
 

@@ -23,6 +23,7 @@ def test_settings_given_as_numpy_numbers_are_shown_as_numbers(kw, shown):
     assert FlowMap(oversampling=np.float32(1.5)).oversampling == 1.5  # a NumPy float is a number too
 
 
+@pytest.mark.long
 def test_a_member_outside_the_region_is_refused_with_plain_numbers():
     box = BundleBox.around(OSC.z0, 0.1, {"lam": (0.9, 1.1)}, T=1.0)
     bundle = solve_bundle(OSC, box, SMALL)
@@ -32,6 +33,7 @@ def test_a_member_outside_the_region_is_refused_with_plain_numbers():
     assert "lies outside the region" in msg and "np.float64" not in msg and "z0 = [10, 0]" in msg
 
 
+@pytest.mark.long
 def test_a_box_too_large_for_the_windows_names_the_cause_and_the_remedy():
     box = BundleBox.around(OSC.z0, 3.0, {"lam": (0.5, 1.5)}, T=4 * np.pi)
     with pytest.raises(ConfigError) as ei:

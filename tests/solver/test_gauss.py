@@ -39,6 +39,7 @@ def ho_exact(t):
     return np.stack([np.cos(t), -np.sin(t)], axis=-1)
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("stages", [2, 3])
 def test_order_2s_at_the_window_ends(stages):
     """Fixed steps on Kepler e = 0.3 over one period: halving h divides the end error by ~2^(2s)."""
@@ -65,6 +66,7 @@ def test_dense_output_is_of_order_s_plus_1():
     assert np.all(np.abs(slopes - (s + 1)) < 0.7), (errors, slopes)
 
 
+@pytest.mark.long
 def test_the_polynomial_meets_the_equations_at_the_gauss_nodes():
     system = henon_heiles()
     sol = solve(system, None, (0.0, 6.0), solver=GaussCollocation(stages=5))
@@ -108,6 +110,7 @@ def test_angular_momentum_is_kept_to_round_off():
     assert np.abs(energy - energy[0]).max() < 1e-10
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("rtol", [1e-6, 1e-9])
 def test_the_estimate_tracks_the_true_error_on_kepler(rtol):
     """Against the exact orbit (e = 0.9: pericentre passages; tolerances it was not tuned on)."""
@@ -130,6 +133,7 @@ def test_the_tolerance_controls_the_error():
     assert errors[2] < 1e-11
 
 
+@pytest.mark.long
 def test_constant_steps_keep_one_length_and_adaptive_ones_follow_the_orbit():
     system = kepler(0.9)
     T = 4 * np.pi
@@ -144,6 +148,7 @@ def test_constant_steps_keep_one_length_and_adaptive_ones_follow_the_orbit():
         assert np.abs(sol(t) - kepler_exact(t, 0.9)).max() < 1e-9
 
 
+@pytest.mark.long
 def test_newton_takes_over_where_the_fixed_point_iteration_diverges():
     """A stiff oscillator (ω = 50) with h = 0.2 (hω = 10): the fixed-point iteration cannot contract,
     the simplified Newton iteration solves the (linear) window; the energy, quadratic, is exact."""
@@ -201,6 +206,7 @@ def test_a_solution_without_its_polynomials_solves_windows_again():
     ({"h": -1.0}, "h must be a finite number > 0"),
     ({"rtol": float("nan")}, "rtol must be a finite number > 0"),
     ({"rtol": 1e-20}, "below what it can reach"),
+    ({"rtol": 10.0}, "larger than the solution itself; give a relative tolerance of at most 1"),
     ({"growth": 1.0}, "growth must be > 1"),
     ({"keep": "yes"}, "keep must be true or false"),
 ])

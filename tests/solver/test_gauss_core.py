@@ -30,6 +30,7 @@ def oscillator(k):
     return HamiltonianSystem(lambda q, p: p[0] ** 2 / 2 + k * q[0] ** 2 / 2, 1, name="oscillator-core")
 
 
+@pytest.mark.long
 def test_jit_gives_the_host_numbers():
     """Given windows (h): the same windows and, to round-off, the same polynomials; with the control:
     the same tolerance met (a length may tip where the check's round-off differs between programs)."""
@@ -52,6 +53,7 @@ def richardson(f, z0, eps):
     return (4 * central(eps / 2) - central(eps)) / 3
 
 
+@pytest.mark.long
 def test_gradients_agree_with_differences_forward_mode_and_diffrax():
     """Kepler e = 0.6 over 200 fixed windows (h = 2⁻⁴, about 2 periods; T a multiple of h, so that
     Diffrax's constant steps, which divide [0, T] evenly, are the same windows): reverse mode,
@@ -78,6 +80,7 @@ def test_gradients_agree_with_differences_forward_mode_and_diffrax():
     assert np.abs(reverse - other).max() <= 1e-10 * size
 
 
+@pytest.mark.long
 def test_adaptive_windows_differentiate_as_the_map_they_take():
     """With the control (lengths from the check, not differentiated): the gradient is that of the
     map over the windows taken, which central differences reproduce only where a nudge of z0 does
@@ -89,6 +92,7 @@ def test_adaptive_windows_differentiate_as_the_map_they_take():
     assert np.abs(g - richardson(end, z0, 1e-4)).max() <= 1e-6 * np.abs(g).max()
 
 
+@pytest.mark.long
 def test_derivatives_in_the_interval_and_in_hs_parameters_match_closed_forms():
     """Harmonic oscillator H = p²/2 + k q²/2 from (1, 0): q(T) = cos(√k T), so ∂q/∂T = −√k sin(√k T)
     and ∂q/∂k = −T sin(√k T)/(2√k); the parameter closed over by a system built inside grad."""
@@ -106,6 +110,7 @@ def test_derivatives_in_the_interval_and_in_hs_parameters_match_closed_forms():
     assert np.abs(np.asarray(sol(t))[:, 0] - np.cos(w * np.asarray(t))).max() <= 1e-10
 
 
+@pytest.mark.long
 def test_vmap_gives_each_members_own_solve_and_gradient():
     system, T = kepler(), PERIOD
     z0s = np.asarray(system.z0) * np.array([[1.0], [1.02], [0.97]])
@@ -119,6 +124,7 @@ def test_vmap_gives_each_members_own_solve_and_gradient():
         assert np.abs(g - np.asarray(grad(jnp.asarray(z)))).max() <= 1e-10 * np.abs(g).max()
 
 
+@pytest.mark.long
 def test_a_march_past_its_budget_raises_naming_it():
     system = kepler()
     run = jax.jit(lambda z: solve(system, z, (0.0, 10 * PERIOD), solver=GaussCollocation(max_windows=5))(1.0))
@@ -126,6 +132,7 @@ def test_a_march_past_its_budget_raises_naming_it():
         jax.block_until_ready(run(jnp.asarray(system.z0)))
 
 
+@pytest.mark.long
 def test_what_the_core_cannot_do_is_refused_in_one_line():
     system = kepler()
     with pytest.raises(ConfigError, match="jax_enable_x64"):
@@ -153,6 +160,7 @@ def test_a_system_built_from_traced_values_says_so():
     assert seen == [True] and not oscillator(1.0).traced
 
 
+@pytest.mark.long
 def test_a_traced_interval_that_is_empty_or_not_finite_raises_and_times_outside_give_nan():
     """No silent NaN from a march that never started: T ≤ t0 or a NaN end raises when the program
     runs; a time outside [t0, T] gives NaN (no warning can be raised in a trace), inside the exact value."""
@@ -164,6 +172,34 @@ def test_a_traced_interval_that_is_empty_or_not_finite_raises_and_times_outside_
     for T in (-1.0, 0.0, float("nan")):
         with pytest.raises(Exception, match=r"interval's ends finite with T > t0"):  # JAX wraps Equinox's error
             jax.block_until_ready(run(T).z)
+
+
+def test_a_float32_h_a_budget_past_memory_and_complex_times_are_refused_when_traced(monkeypatch):
+    """What the traced core cannot do well is refused at trace time in one line: an H computing in
+    float32 (it cannot reach the tolerance), a window budget whose arrays exceed the memory, times
+    that are not real numbers. An H closing over float32 weights computes in float64 and solves."""
+    import atlasnn.solver._gauss as gauss
+    from atlasnn.errors import AtlasError
+
+    z0 = jnp.array([1.0, 0.0])
+    narrow = HamiltonianSystem(lambda q, p: jnp.sum(p.astype(jnp.float32) ** 2 / 2 + q.astype(jnp.float32) ** 2 / 2),
+                               1)
+    with pytest.raises(AtlasError, match="computes in float32") as info:
+        jax.jit(lambda z: solve(narrow, z, (0.0, 1.0)).z)(z0)
+    assert "\n" not in str(info.value)
+    monkeypatch.setattr(gauss, "available_memory", lambda: 2**30)
+    with pytest.raises(ConfigError, match="max_windows = 10000000 keeps about .* GiB .* lower max_windows"):
+        jax.jit(lambda z: solve(oscillator(1.0), z, (0.0, 1.0), solver=GaussCollocation(max_windows=10**7)).z)(z0)
+    monkeypatch.undo()
+    weights = jnp.asarray(np.array([1.0], np.float32))
+    promoted = HamiltonianSystem(lambda q, p: jnp.sum(weights * (p * p + q * q)) / 2, 1)
+    sol = jax.jit(lambda z: solve(promoted, z, (0.0, 2.0), solver=GaussCollocation(max_windows=64)))(z0)
+    assert abs(float(sol(2.0)[0]) - np.cos(2.0)) < 1e-11
+    for t in (1j, "a"):
+        with pytest.raises(ConfigError, match="times must be"):
+            sol(t)
+    with pytest.raises(ConfigError, match="times must be real numbers"):
+        jax.jit(lambda t: sol(t))(jnp.array(1j))
 
 
 def test_traced_inputs_that_cannot_be_one_solve_are_refused_in_one_line():

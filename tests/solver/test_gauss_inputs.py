@@ -12,6 +12,7 @@ from atlasnn.errors import ConfigError
 from atlasnn.solver import GaussCollocation
 
 
+@pytest.mark.long
 def test_a_float64_solution_has_a_float64_residual(ho):
     # the field was evaluated in float32 (jnp.asarray outside x64): a residual of 1e-8 for a
     # solution accurate to 1e-13 told the user it was 1e5 times worse than it is
@@ -28,6 +29,7 @@ def test_times_that_are_not_finite_numbers_are_one_line(ho, t):
     assert "\n" not in str(info.value)
 
 
+@pytest.mark.long
 def test_a_given_length_that_cannot_converge_says_shorten_it_not_newton_when_newton_is_on():
     system = builtin_system("nonlinear_oscillator")
     with pytest.raises(AtlasError, match="try a shorter h") as info:

@@ -20,6 +20,7 @@ def _oscillator_error(sol, K: float, T: float) -> float:
     return float(np.abs(sol(t) - np.stack([np.cos(w * t), -w * np.sin(w * t)], axis=-1)).max())
 
 
+@pytest.mark.long
 def test_a_numpy_constant_that_h_closes_over_stays_float64_with_x64_off():
     """The system is built (and its H tried) with x64 off: the march still sees K in float64."""
     K = np.array([2.3])
@@ -58,6 +59,7 @@ def test_a_float32_copy_kept_from_the_users_own_trace_is_refused_not_used():
     del kept
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("c", [1e6, 1e8])
 def test_an_oscillator_about_a_large_offset_takes_few_windows_and_says_its_round_off(c):
     """H = p²/2 + (q − c)²/2: ṗ = −(q − c) carries an ulp of q (1.2e-10 at c = 1e6, 1.5e-8 at 1e8),

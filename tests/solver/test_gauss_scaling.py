@@ -48,6 +48,7 @@ def dense_newton(field, a, tab, z, hb, L, iterations=60):
     return L
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("stages", [1, 3, 4, 12])
 def test_the_decoupled_newton_iteration_equals_the_dense_one(stages):
     """On a stiff system at a step 100× past the fixed-point iteration's reach, the decoupled
@@ -112,6 +113,7 @@ def copies_of_henon_heiles(m: int) -> HamiltonianSystem:
     return HamiltonianSystem(hamiltonian, 2 * m, name=f"henon-heiles-x{m}", z0=z0, separable=True)
 
 
+@pytest.mark.long
 def test_iterations_per_window_do_not_grow_with_the_dimension():
     """One copy of Hénon–Heiles and 1 024 nearly equal copies side by side (d = 4 … 4 096): the
     windows and the fixed-point iterations per window stay within 1.5× of one copy's — the work of
@@ -147,6 +149,7 @@ def test_the_fixed_point_march_holds_no_n_by_n_array():
     assert f"{n}x{n}" in texts[True]
 
 
+@pytest.mark.long
 def test_the_stage_count_follows_the_tolerance():
     """Without ``stages``, s comes from rtol: never fewer stages for a tighter tolerance, the low
     end at everyday tolerances and 16 near round-off; a given count is kept; the solution records

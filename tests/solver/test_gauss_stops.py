@@ -11,6 +11,7 @@ from atlasnn.solver import GaussCollocation
 from atlasnn.solver import _gauss
 
 
+@pytest.mark.long
 def test_a_march_stopped_by_a_singularity_keeps_the_solution_up_to_the_stop():
     # H = p²/2 − q⁴/4 blows up in finite time (q' = p, p' = q³ from q = 1, p = 1/√2: t* = √2)
     blow = expression_system("p**2/2 - q**4/4", ["q"], ["p"], z0=[1.0, 2 ** -0.5])
@@ -48,6 +49,7 @@ def _kepler(e: float):
                              z0=[1 - e, 0.0, 0.0, ((1 + e) / (1 - e)) ** 0.5])
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("stages", [15, 16])
 def test_a_tolerance_below_round_off_counts_as_round_off_at_every_stage_count(stages):
     """rtol 1e-15, atol 0 on a circular orbit: stopped at t = 0 before ("loosen the tolerance, or the
@@ -60,6 +62,7 @@ def test_a_tolerance_below_round_off_counts_as_round_off_at_every_stage_count(st
     assert sol.n_windows < 100
 
 
+@pytest.mark.long
 def test_an_interval_far_from_zero_is_solved_and_its_time_rounding_is_in_the_estimate():
     """[1e12, 1e12 + 10]: windows shortened after a rejection were stretched back to the whole rest
     of the interval (a slack of 1e-12·|T| = 1) until the march gave up; the times themselves are

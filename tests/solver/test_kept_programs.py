@@ -26,6 +26,7 @@ def cache(tmp_path, monkeypatch):
     return tmp_path / "exported"
 
 
+@pytest.mark.long
 def test_the_exported_program_gives_the_traced_programs_numbers(cache, monkeypatch):
     first = _solve(henon_heiles())
     files = sorted(cache.glob("march-*.bin"))
@@ -38,6 +39,7 @@ def test_the_exported_program_gives_the_traced_programs_numbers(cache, monkeypat
     assert np.array_equal(first, traced) and np.array_equal(again, traced)
 
 
+@pytest.mark.long
 def test_another_computation_gets_its_own_file_and_a_damaged_file_is_replaced(cache):
     _solve(henon_heiles())
     other = _solve(henon_heiles(lam=0.7))

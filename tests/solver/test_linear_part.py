@@ -26,6 +26,7 @@ def _j(n):
     return np.block([[np.zeros((d, d)), np.eye(d)], [-np.eye(d), np.zeros((d, d))]])
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("kind", ["fourier", "dense"])
 def test_the_shifted_solves_match_a_dense_solve(kind):
     rng = np.random.default_rng(3)
@@ -43,6 +44,7 @@ def test_the_shifted_solves_match_a_dense_solve(kind):
     np.testing.assert_allclose(np.asarray(part.field(jnp.asarray(z))), _j(32) @ S @ z, atol=1e-12)
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("points", [32, 31])  # the real FFT's weights differ for odd M
 def test_the_nls_field_is_its_linear_part_plus_the_cubic_term(points):
     system = nls(points=points, length=20.0)
@@ -53,6 +55,7 @@ def test_the_nls_field_is_its_linear_part_plus_the_cubic_term(points):
     np.testing.assert_allclose(field, np.asarray(system.linear_part.field(jnp.asarray(z))) + cubic, atol=1e-12)
 
 
+@pytest.mark.long
 def test_the_nls_soliton_with_its_invariants_and_without_the_linear_part():
     system = nls(points=128, length=40.0)
     T = 1.0
@@ -97,8 +100,13 @@ def test_a_linear_part_that_does_not_fit_is_refused_in_one_line():
         FourierLinearPart(np.ones((2, 4)), np.ones(8))
     with pytest.raises(SystemError_, match="finite numbers"):
         DenseLinearPart(np.zeros((0, 0)))
-    with pytest.raises(SystemError_, match="points must be an integer"):
-        nls(points="many")
+    for bad in ("many", "16"):
+        with pytest.raises(SystemError_, match="points must be an integer"):
+            nls(points=bad)
+    with pytest.raises(SystemError_, match="length = 1e-300 is too short for 512 grid points"):
+        nls(length=1e-300)
+    with pytest.raises(SystemError_, match="length must be a positive number"):
+        nls(length="64")
     with pytest.raises(SystemError_, match="length must be a positive number"):
         nls_soliton(0.0, 64, 0.0)
     for settings, message in ((dict(particles=float("inf")), "particles must be an integer"),
@@ -109,6 +117,7 @@ def test_a_linear_part_that_does_not_fit_is_refused_in_one_line():
             fput(**settings)
 
 
+@pytest.mark.long
 def test_a_stiff_pair_solved_with_a_dense_linear_part_and_differentiated():
     # a fast oscillator (ω = 300) weakly coupled to a slow one: S is H's quadratic part
     omega = 300.0
@@ -138,6 +147,7 @@ def test_a_stiff_pair_solved_with_a_dense_linear_part_and_differentiated():
     assert float(np.asarray(grad) @ direction) == pytest.approx(central, rel=1e-7)
 
 
+@pytest.mark.long
 def test_the_gradient_through_an_nls_grid_by_the_preconditioned_tangent_solve():
     # 128 points, s = 6: 1 536 unknowns a window, above the dense fallback's limit, so the transposed
     # tangent solve must converge preconditioned by the linear part (else the gradient is NaN)

@@ -58,6 +58,7 @@ def test_values_are_the_reference_at_any_times(hh):
     np.testing.assert_array_equal(S, [S0] * 2)
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("name", ["hh", "pendulum"])
 def test_sensitivities_are_the_derivatives_of_the_values(name, request):
     system = request.getfixturevalue(name)
@@ -140,6 +141,7 @@ def test_bad_settings_are_one_line(pendulum, hh):
         assert "finite times from t0 = 0 on" in _msg(ei)
 
 
+@pytest.mark.long
 def test_shooting_estimates_are_the_dop853_paths(hh, pendulum):
     """The built-in Hénon–Heiles inverse problem's data (50 noisy positions on [0, 10], guess 0.6):
     single and multiple shooting by both solves end at the same estimate and σ (to 1e-5 σ), and

@@ -23,6 +23,7 @@ from benchmarks.problems import kepler_exact, kepler_system, pythagorean_system
 TT = GaussCollocation(time_scale="potential")
 
 
+@pytest.mark.long
 def test_one_window_is_a_symplectic_map_of_the_extended_space():
     """M, the Jacobian of one Gauss window of K = g·(H + p_t) (Kepler e = 0.9 at pericentre, g =
     r^(3/2), s = 8, a τ-window three times the march's, which turns the velocity by 39°), satisfies
@@ -47,6 +48,7 @@ def test_one_window_is_a_symplectic_map_of_the_extended_space():
     assert moved[2] > 0.01 and abs(moved[5] - Z0[5]) == 0.0  # t advanced; p_t, a linear invariant, exact
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("e, periods, bound", [(0.9, 3, 1e-10), (0.99, 3, 1e-7)])
 def test_the_physical_time_is_recovered(e, periods, bound):
     """Kepler's orbit at physical times (t(τ) inverted), against Kepler's equation from the float64
@@ -77,6 +79,7 @@ def test_windows_are_few_on_an_eccentric_orbit():
     assert sol.info["time_scale"] == "potential" and sol.info["settings"]["time_scale"] == "potential"
 
 
+@pytest.mark.long
 def test_the_energy_stays_bounded_where_adaptive_windows_drift():
     """Kepler e = 0.9 over 200 periods at rtol 1e-6, the energy at every window end: with windows of
     one τ-length (symplectic) its error is as large in the last quarter as in the first; with
@@ -98,6 +101,7 @@ def test_the_energy_stays_bounded_where_adaptive_windows_drift():
     assert adaptive[3] > 2 * adaptive[0] and adaptive[3] > 10 * max(constant)
 
 
+@pytest.mark.long
 def test_the_pythagorean_problem_is_marched_through_its_near_collisions():
     """Masses 3, 4, 5 from rest to T = 20, past the closest approach (t ≈ 15.83, two bodies ~4e-4
     apart; a march of constant windows in t needs millions of windows for it): a few hundred
@@ -134,6 +138,7 @@ def test_a_scale_not_positive_or_not_finite_at_z0_is_refused_in_one_line(scale, 
     assert "\n" not in str(caught.value)
 
 
+@pytest.mark.long
 def test_a_scale_that_reaches_zero_on_the_way_is_refused_with_what_was_computed():
     """g = q1 + 0.5 on Kepler e = 0.9 (q1 falls from 0.1 to −1.9): the time stops at q1 = −0.5; the
     line says where, and the part before is kept."""
@@ -159,6 +164,7 @@ def test_bad_settings_are_refused_in_one_line():
         solve(kepler, None, (0.0, 1.0), solver=TT)
 
 
+@pytest.mark.long
 def test_an_interval_off_zero_and_windows_solved_again_read_alike():
     """From t0 = 1 (t starts at t0 in the extended state), with every window's polynomial kept and
     with only the window starts kept (solved again when read): the same orbit, the same values."""

@@ -31,6 +31,7 @@ def test_a_built_ins_parametric_function_is_compared_too():
     assert not defined_by_data(dataclasses.replace(hh, parametric=nonlinear_oscillator().parametric))
 
 
+@pytest.mark.long
 def test_a_warm_cache_serves_no_program_of_another_system(tmp_path, monkeypatch):
     monkeypatch.setenv(CACHE_ENV, str(tmp_path))
     t = np.array([3.0])

@@ -9,6 +9,8 @@ from __future__ import annotations
 import csv
 import json
 
+import pytest
+
 from atlasnn.cli import main
 
 CONFIG = """
@@ -49,6 +51,7 @@ def _no_se(run):
     assert "| HNN |" in md and "ATLAS-NN (exp)" in md
 
 
+@pytest.mark.long
 def test_non_separable_run_and_report(tmp_path, capsys):
     config = tmp_path / "nonsep.toml"
     config.write_text(CONFIG, encoding="utf-8")

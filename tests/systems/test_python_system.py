@@ -50,6 +50,7 @@ def chain_file(tmp_path: Path) -> Path:
     return path
 
 
+@pytest.mark.long
 def test_python_system_equals_the_same_expression(chain_file):
     z0 = [0.1, -0.2, 0.3, 0.5, 0.0, -0.4]
     py = python_system(chain_file, "hamiltonian", params={"beta": 0.7}, z0=z0, separable=True)

@@ -22,6 +22,9 @@ from atlasnn.training import (
     train,
 )
 
+# the module's fixture trains for a quarter to half a minute: the long tier
+pytestmark = pytest.mark.long
+
 SMALL = {"scaling": "atlas_exp", "width": 16, "depth": 2, "first_layer_scale": 4.0}
 QUICK = DEFAULT_WINDOW_TRAIN.replace(epochs=300, n_points=40, chunk=300, progress=False)
 

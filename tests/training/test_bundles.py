@@ -12,6 +12,9 @@ from atlasnn.evaluation import reference_members, reference_solution
 from atlasnn.systems import BundleBox, HamiltonianSystem, builtin_system, expression_system, with_params
 from atlasnn.training import BundleTrainConfig, train_bundle
 
+# the module's fixture trains for a quarter to half a minute: the long tier
+pytestmark = pytest.mark.long
+
 OSC = builtin_system("nonlinear_oscillator")
 
 

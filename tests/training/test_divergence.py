@@ -14,6 +14,9 @@ import pytest
 from atlasnn.checkpoint import load_checkpoint
 from atlasnn.cli import main
 
+# the module's fixture trains for a quarter to half a minute: the long tier
+pytestmark = pytest.mark.long
+
 # HNN with an unbounded activation: at lr = 1e3 the loss overflows after the first update
 CONFIG = """\
 name = "diverge"

@@ -45,6 +45,7 @@ def cache(tmp_path, monkeypatch):
     return tmp_path / "exported"
 
 
+@pytest.mark.long
 def test_a_kept_adam_chunk_is_read_back_and_gives_the_traced_numbers(cache, monkeypatch):
     first, loss1 = _adam(henon_heiles())
     files = sorted(cache.glob("adam-*.bin"))
@@ -65,6 +66,7 @@ def test_a_kept_adam_chunk_is_read_back_and_gives_the_traced_numbers(cache, monk
         assert not any(x.committed for x in jax.tree_util.tree_leaves((res.model, res.state.opt_state)))
 
 
+@pytest.mark.long
 def test_other_settings_or_another_network_get_files_of_their_own_and_a_damaged_file_is_made_again(cache):
     _adam(henon_heiles())
     _adam(henon_heiles(), lr_schedule="cosine")  # another compiled epoch (Mode)
@@ -79,6 +81,7 @@ def test_other_settings_or_another_network_get_files_of_their_own_and_a_damaged_
     assert sorted(damaged) == [False, True, True]
 
 
+@pytest.mark.long
 def test_a_kept_file_of_another_program_is_replaced_not_left_to_fail_each_run(cache):
     _, loss9 = _adam(henon_heiles())
     _, loss11 = _adam(henon_heiles(), width=11)
@@ -111,6 +114,7 @@ def test_the_kept_programs_stay_under_their_size_limit_least_recently_read_first
     assert sum((cache / n).stat().st_size for n in left) <= 250_000
 
 
+@pytest.mark.long
 def test_a_write_that_fails_leaves_no_temporary_file_and_the_run_goes_on(cache, monkeypatch):
     import atlasnn.compile_cache as cc
 
@@ -125,6 +129,7 @@ def test_a_write_that_fails_leaves_no_temporary_file_and_the_run_goes_on(cache, 
     assert list(cache.glob("*")) == []
 
 
+@pytest.mark.long
 def test_a_kept_lm_program_is_read_back_and_gives_the_traced_numbers(cache, monkeypatch):
     model = make_model(Z0, width=9, depth=2, seed=5)
     first = _lm(henon_heiles(), model)
@@ -141,6 +146,7 @@ def test_a_kept_lm_program_is_read_back_and_gives_the_traced_numbers(cache, monk
         assert np.array_equal(a, c) and np.array_equal(b, c)
 
 
+@pytest.mark.long
 def test_a_system_given_as_a_python_function_is_never_served_from_disk(cache):
     hh = henon_heiles()
     plain = HamiltonianSystem(hh.hamiltonian, 2, name="mine", q_names=hh.q_names, p_names=hh.p_names,
@@ -179,6 +185,7 @@ def test_only_systems_fixed_by_their_spec_qualify():
         del BUILTIN_SYSTEMS["users_hh_for_export_test"]
 
 
+@pytest.mark.long
 def test_a_change_of_jax_settings_or_a_users_scaling_class_is_never_served_a_kept_program(cache, monkeypatch):
     from atlasnn.nn import Tanh
 

@@ -47,6 +47,7 @@ def _stopped_after(k, run):
     return seen[-1]
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("config", [ADAPTIVE, FIXED], ids=["adaptive", "fixed"])
 def test_a_resumed_march_is_bit_identical(tmp_path, config):
     system = builtin_system("harmonic_oscillator")
@@ -71,6 +72,7 @@ def test_a_resumed_march_is_bit_identical(tmp_path, config):
         assert timeless(resumed.info["attempts"]) == timeless(whole.info["attempts"])
 
 
+@pytest.mark.long
 def test_a_batch_of_seeds_resumes_together():
     system = builtin_system("harmonic_oscillator")
     models = [make_model(system.z0, **SMALL, seed=s) for s in (0, 1)]
@@ -82,6 +84,7 @@ def test_a_batch_of_seeds_resumes_together():
         _same(a, b)
 
 
+@pytest.mark.long
 def test_a_damaged_progress_file_is_one_line(tmp_path):
     system = builtin_system("harmonic_oscillator")
     model = make_model(system.z0, **SMALL, seed=0)

@@ -23,6 +23,9 @@ from atlasnn.solutions import PiecewiseSolution, window_edges
 from atlasnn.systems import harmonic_exact
 from atlasnn.training import DEFAULT_WINDOW, TrainConfig
 
+# the module's fixture trains for a quarter to half a minute: the long tier
+pytestmark = pytest.mark.long
+
 T_END = 4 * math.pi
 N_WIN = 4
 CFG = MarchConfig(

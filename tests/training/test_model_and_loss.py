@@ -32,6 +32,7 @@ def _value_and_rate(model, t):
     "scaling, z0, t0",
     [(name, (0.3, -0.3, 0.3, 0.15), 0.75) for name in SCALING_NAMES] + [("rational_exp", (1.3, 1.0), 0.0)],
 )
+@pytest.mark.long
 def test_initial_condition_is_exact(scaling, z0, t0):
     gamma = {"tanh": {"m": 2.7}, "rational_exp": {"alpha": 0.3, "beta": 4.0}}.get(scaling)
     model = make_model(z0, scaling=scaling, width=16, depth=2, t0=t0, gamma=gamma, seed=3)
@@ -106,6 +107,7 @@ def _hh_energy(z, lam):
         (henon_heiles, _hh_field, _hh_energy, "exp_decay", 0.5),
     ],
 )
+@pytest.mark.long
 def test_loss_equals_hand_computation(make_system, field, energy, scaling, lam_reg):
     lam = 0.7
     with jax.enable_x64(True):

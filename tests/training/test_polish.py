@@ -22,6 +22,9 @@ from atlasnn.training import PolishConfig, polish
 from atlasnn.systems import harmonic_exact
 from atlasnn.training import TrainConfig, train
 
+# the module's fixture trains for a quarter to half a minute: the long tier
+pytestmark = pytest.mark.long
+
 T_END = 2 * math.pi
 PCFG = PolishConfig(steps=300, n_points=120, chunk=50, patience=300)
 

@@ -35,6 +35,7 @@ def reference(ho):
 
 
 # ------------------------------------------------------------------------------ accuracy
+@pytest.mark.long
 def test_converges_on_harmonic_oscillator(reference):
     res = reference
     assert res.stop_reason == "budget" and not res.tolerance_met

@@ -34,6 +34,7 @@ def _same_as_alone(batched, alone):
     _close(batched.model, alone.model)
 
 
+@pytest.mark.long
 def test_each_seed_of_a_batch_is_its_lone_run(ho):
     configs = [CFG.replace(seed=s) for s in range(3)]
     models = [_model(seed=s) for s in range(3)]
@@ -45,6 +46,7 @@ def test_each_seed_of_a_batch_is_its_lone_run(ho):
     assert not np.array_equal(batch[0].history.loss, batch[1].history.loss)
 
 
+@pytest.mark.long
 def test_runs_with_other_initial_states_keep_their_own_energy(ho):
     """H(z0) is computed once per distinct z0 of a batch and Adam's fresh state once per layout:
     runs that share neither must still train as they would alone."""
@@ -61,6 +63,7 @@ def test_runs_with_other_initial_states_keep_their_own_energy(ho):
     assert float(batch[1].opt_state.hyperparams["learning_rate"]) == pytest.approx(2e-3)
 
 
+@pytest.mark.long
 def test_a_seed_that_stops_or_diverges_leaves_the_others_alone(ho):
     base = CFG.replace(freeze_gamma=True)  # so that an absurd lr diverges (see test_train)
     good = base.replace(seed=0)
@@ -90,6 +93,7 @@ def test_a_seed_that_stops_or_diverges_leaves_the_others_alone(ho):
     assert batch[3].epochs_run == 100 and batch[0].epochs_run == CFG.epochs
 
 
+@pytest.mark.long
 def test_a_batch_interrupted_and_resumed_equals_the_uninterrupted_batch(ho):
     configs = [CFG.replace(seed=s) for s in range(2)]
     models = [_model(seed=s) for s in range(2)]
@@ -116,6 +120,7 @@ def test_a_batch_of_one_is_train(ho):
     assert _trees_equal(a.model, b.model) and "batch_size" not in b.info
 
 
+@pytest.mark.long
 def test_runs_with_gamma_frozen_and_learned_share_a_batch(ho):
     """γ frozen is a traced flag of the one program: a batch may mix it, each run as alone, its
     γ bit for bit its initial one when frozen and its saved state in its own layout."""

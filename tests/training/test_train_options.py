@@ -27,6 +27,7 @@ BASE = TrainConfig(epochs=60, lr=5e-3, n_points=100, sigma=0.1, progress=False, 
 
 
 # ------------------------------------------------------------------ release_exact best rule
+@pytest.mark.long
 def test_release_exact_returns_the_post_update_parameters_of_the_best_epoch(ho):
     cfg = BASE.replace(best_rule="release_exact")
     res = train(_model(), ho, T_END, cfg)
@@ -51,6 +52,7 @@ def test_release_exact_window_is_strictly_after_the_fraction(ho):
     assert res.best_epoch == 4
 
 
+@pytest.mark.long
 def test_release_exact_returns_the_initial_parameters_when_no_loss_falls_below_one():
     system = nonlinear_oscillator()
     model = make_model((3.0, 0.0), scaling="rational_exp", width=16, depth=2, seed=0)
@@ -62,6 +64,7 @@ def test_release_exact_returns_the_initial_parameters_when_no_loss_falls_below_o
     assert not _trees_equal(res.final_model, model)
 
 
+@pytest.mark.long
 def test_release_exact_tolerance_is_strict_and_keeps_the_update(ho):
     ref = train(_model(), ho, T_END, BASE.replace(best_rule="last"))
     loss = ref.history.loss
@@ -78,6 +81,7 @@ def test_release_exact_tolerance_is_strict_and_keeps_the_update(ho):
 
 
 # ------------------------------------------------------------------------------ schedules
+@pytest.mark.long
 @pytest.mark.parametrize("kind", ["cosine", "exponential"])
 def test_lr_schedule_follows_optax_and_leaves_epoch_zero_alone(ho, kind):
     cfg = BASE.replace(epochs=40, lr_schedule=kind, lr_final_ratio=0.05)
@@ -109,6 +113,7 @@ def test_causal_weights_are_one_where_every_earlier_loss_is_zero():
     assert np.all(np.diff(w) <= 0)
 
 
+@pytest.mark.long
 def test_causal_loss_with_zero_eps_is_the_physics_loss(ho):
     model = _model()
     t = jnp.sort(jnp.linspace(0.0, T_END, 50))

@@ -49,6 +49,7 @@ def target(ho, source):
     return transfer(source, ho, T_TARGET, TARGET_CFG)
 
 
+@pytest.mark.long
 def test_target_starts_from_source(ho, source):
     # one epoch, release rule: the returned parameters are those of epoch 0, the starting ones
     start = transfer(source, ho, T_TARGET, TARGET_CFG.replace(epochs=1))

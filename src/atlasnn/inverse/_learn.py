@@ -169,7 +169,7 @@ class HNN(AbstractLearnMethod):
 
 @dataclasses.dataclass(eq=False)
 class LearnedHamiltonian:
-    """What :func:`learn_hamiltonian` learned.
+    """What ``learn_hamiltonian`` learned.
 
     Attributes:
         model: the trained H_θ (the one of least held-out loss, or of least training loss where
@@ -202,7 +202,7 @@ class LearnedHamiltonian:
 
     @property
     def system(self) -> HamiltonianSystem:
-        """The learned H as a :class:`HamiltonianSystem`: solve it, save it, check it like any other."""
+        """The learned H as a ``HamiltonianSystem``: solve it, save it, check it like any other."""
         return HamiltonianSystem(self.model, self.dof, name="learned")
 
 

@@ -13,10 +13,21 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from atlasnn.solutions._base import INTERVAL_SLACK
+from atlasnn.errors import ConfigError
+from atlasnn.solutions._base import INTERVAL_SLACK, finite_times
 from atlasnn.solutions._tableau import gauss_tableau, shifted_legendre
 
 __all__ = ["TracedSolution"]
+
+
+def _real_times(t):
+    """``t`` if it is real numbers: traced ones of a real or integer type, or finite host numbers;
+    else a one-line refusal (a complex time would otherwise lose its imaginary part in silence)."""
+    if isinstance(t, jax.core.Tracer):
+        if not (jnp.issubdtype(t.dtype, jnp.floating) or jnp.issubdtype(t.dtype, jnp.integer)):
+            raise ConfigError(f"times must be real numbers, got a traced {t.dtype} array")
+        return t
+    return finite_times(t)
 
 
 class TracedSolution(eqx.Module):
@@ -61,7 +72,7 @@ class TracedSolution(eqx.Module):
         return row, (t - self.starts[k]) / self.lengths[row]
 
     def _values(self, t) -> tuple[jax.Array, jax.Array]:
-        t = jnp.asarray(t, self.z.dtype)
+        t = jnp.asarray(_real_times(t), self.z.dtype)
         flat = t.reshape(-1)
         tab = gauss_tableau(self.stages)
         row, theta = self._window(flat)

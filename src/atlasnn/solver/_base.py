@@ -58,9 +58,14 @@ class AbstractSolver(abc.ABC):
         the march advances."""
 
     def check_tolerances(self) -> None:
-        """Refuse tolerances that are not numbers, or below :attr:`tightest` (call from __post_init__)."""
+        """Refuse tolerances that are not numbers, below :attr:`tightest`, or an rtol above 1 (call
+        from __post_init__)."""
         owner = type(self).__name__
-        object.__setattr__(self, "rtol", check_tolerance(owner, "rtol", self.rtol, self.tightest))
+        rtol = check_tolerance(owner, "rtol", self.rtol, self.tightest)
+        if rtol > 1.0:
+            raise ConfigError(f"{owner} rtol = {rtol:g} allows errors larger than the solution itself; "
+                              "give a relative tolerance of at most 1")
+        object.__setattr__(self, "rtol", rtol)
         object.__setattr__(self, "atol", check_tolerance(owner, "atol", self.atol, 0.0, zero=True))
 
     def with_tolerance(self, rtol: Any = None, atol: Any = None) -> "AbstractSolver":

@@ -73,7 +73,7 @@ class Collocation(AbstractSolver):
     """Windows of ẑ_k(s) = z_k + f(s) W_k φ(s/h), W_k found by float64 Gauss–Newton on collocation
     points, each accepted when its estimated local error meets atol + rtol·|z| (docs/SOLVER.md).
 
-    Deprecated (a ``FutureWarning`` when built): :class:`GaussCollocation` is more accurate and
+    Deprecated (a ``FutureWarning`` when built): ``GaussCollocation`` is more accurate and
     faster on every problem of the work–precision suite.
 
     Attributes:

@@ -28,7 +28,7 @@ from atlasnn.solver._gauss_core import LOOPS, gauss_core
 from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, ReplayState, clock, compiled_gauss_march,
                                          compiled_gauss_replay, compiled_gauss_windows, initial_state)
 from atlasnn.solver._gauss_time import TimeTransform, check_time_scale, describe_time_scale
-from atlasnn.systems import HamiltonianSystem
+from atlasnn.systems import HamiltonianSystem, require_float64_field
 
 __all__ = ["GaussCollocation", "KEEP_BYTES", "NEWTON_AUTO_SIZE", "STAGES_BY_TOLERANCE", "stages_for"]
 
@@ -224,6 +224,13 @@ class GaussCollocation(AbstractSolver):
             raise ConfigError("GaussCollocation time_scale is not available inside jit/grad/vmap: solve without it "
                               "there, or call solve on numbers")
         n = system.state_dim
+        require_float64_field(system, constants=False)
+        need = self.max_windows * (self.stage_count + 3) * n * 8
+        room = available_memory()
+        if room is not None and need > room:
+            raise ConfigError(f"GaussCollocation max_windows = {self.max_windows} keeps about {need / 2**30:.3g} GiB "
+                              f"for one traced solve ((s + 3)·2d·8 bytes a window, 2d = {n}), more than the "
+                              f"{room / 2**30:.3g} GiB available; lower max_windows")
         return gauss_core(system, z0, t0, T, stages=self.stage_count, steps=self.steps, rtol=self.rtol,
                           atol=self.atol, h=self.h, max_windows=self.max_windows,
                           differentiation=self.differentiation, max_iterations=self.max_iterations,

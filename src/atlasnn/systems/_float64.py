@@ -67,10 +67,12 @@ def narrow_floats(closed: Any) -> tuple[list[str], list[str]]:
     return constants, computed
 
 
-def require_float64_field(system: Any) -> None:
+def require_float64_field(system: Any, *, constants: bool = True) -> None:
     """Refuse, in one line, a system whose H (or ``parametric`` H) traced in float64 holds a
     constant narrower than float64 or computes in one (module docstring). Once per system: a
-    system found right is not traced again."""
+    system found right is not traced again. ``constants=False`` judges only what H computes (the
+    traced core: there a float32 array H closes over may be the caller's traced weights, exact once
+    promoted)."""
     if _CHECKED.get(system):
         return
     d = system.dim
@@ -86,11 +88,11 @@ def require_float64_field(system: Any) -> None:
                 closed = jax.make_jaxpr(lambda *a, _fn=user_fn: _fn(*a))(*args)
             except Exception:  # noqa: BLE001 - not this check's to judge: the computation that meets it says
                 continue
-            constants, computed = narrow_floats(closed)
-            if constants:
+            narrow, computed = narrow_floats(closed)
+            if narrow and constants:
                 raise SystemError_(
-                    f"system {system.name!r}: {what} holds a {constants[0].split('[')[0]} constant "
-                    f"({constants[0]}) where the float64 solver needs float64 (a jnp array made while JAX's x64 "
+                    f"system {system.name!r}: {what} holds a {narrow[0].split('[')[0]} constant "
+                    f"({narrow[0]}) where the float64 solver needs float64 (a jnp array made while JAX's x64 "
                     "mode was off, or JAX's float32 copy of a NumPy array kept from a trace of H with x64 off); make "
                     "it a NumPy array, or turn x64 on before making it or tracing H (atlasnn.precision.enable_x64(), "
                     "or ATLASNN_X64=1)")
@@ -98,4 +100,5 @@ def require_float64_field(system: Any) -> None:
                 raise SystemError_(
                     f"system {system.name!r}: {what} computes in {computed[0].split('[')[0]} ({computed[0]}) where "
                     "the float64 solver needs float64; remove the cast to the narrower type")
-    _CHECKED[system] = True
+    if constants:
+        _CHECKED[system] = True

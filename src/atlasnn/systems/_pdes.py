@@ -41,8 +41,8 @@ def periodic_grid(points: int, length: float) -> np.ndarray:
 
 def _points(points) -> int:
     try:
-        ok = not isinstance(points, bool) and float(points) == int(points) and int(points) >= 4
-    except (TypeError, ValueError):
+        ok = not isinstance(points, (bool, str)) and float(points) == int(points) and int(points) >= 4
+    except (TypeError, ValueError, OverflowError):
         ok = False
     if not ok:
         raise SystemError_(f"points must be an integer of at least 4, got {points!r}")
@@ -54,9 +54,18 @@ def _length(length) -> float:
         value = float(length)
     except (TypeError, ValueError):
         value = float("nan")
-    if not (np.isfinite(value) and value > 0):
+    if isinstance(length, (bool, str)) or not (np.isfinite(value) and value > 0):
         raise SystemError_(f"length must be a positive number, got {length!r}")
     return value
+
+
+def _grid(points, length) -> tuple[int, float]:
+    """(points, length) checked, with the grid's largest wavenumber squared a finite float."""
+    points, length = _points(points), _length(length)
+    if np.pi * points / length >= np.sqrt(np.finfo(np.float64).max):
+        raise SystemError_(f"length = {length!r} is too short for {points} grid points: the largest "
+                           "wavenumber squared overflows float64; lengthen the domain")
+    return points, length
 
 
 def _half_spectrum(symbol: np.ndarray) -> np.ndarray:
@@ -114,7 +123,7 @@ def nls(points: int = 512, length: float = 64.0, amplitude: float = 1.0, speed: 
         speed: v of that soliton, rounded to a multiple of 2π/length (its phase must be periodic).
 
     Returns the system, its H summed over the grid (the PDE's energy divided by 2Δx)."""
-    points, length = _points(points), _length(length)
+    points, length = _grid(points, length)
     v = _periodic_speed(speed, length)
     symbol = 0.5 * fourier_wavenumbers(points, length) ** 2
     weights = _half_spectrum(symbol)
@@ -153,7 +162,7 @@ def sine_gordon(points: int = 256, length: float = 80.0, omega: float = 0.5) -> 
         points: grid points M (the state has 2M components: u, then u_t).
         length: the periodic domain's length.
         omega: the frequency of the default z0, the breather at t = 0 (0 < omega < 1)."""
-    points, length = _points(points), _length(length)
+    points, length = _grid(points, length)
     symbol = fourier_wavenumbers(points, length) ** 2
     weights = _half_spectrum(symbol)
 
