@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 
 from atlasnn import solve
 from atlasnn.compile_cache import CACHE_ENV, clear_programs
