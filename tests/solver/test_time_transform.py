@@ -186,3 +186,29 @@ def test_saving_is_refused_in_one_line(tmp_path):
     with pytest.raises(AtlasError, match=r"a time-transformed solution .* cannot be saved yet") as caught:
         save(tmp_path / "tt.atlas", sol)
     assert "\n" not in str(caught.value)
+
+
+def test_the_scale_is_recommended_where_it_suits_the_system(monkeypatch):
+    """``potential_applies`` recognises a negative potential homogeneous of degree −1 (Kepler, three
+    bodies), not a positive, a periodic or a non-separable one; a default march through an eccentric
+    orbit says to use the scale (its g varies 83-fold at e = 0.9, 2.5-fold at e = 0.3: no advice),
+    and a default march stopped by the windows' memory names it as the remedy."""
+    import atlasnn.solver._gauss as gauss
+    from atlasnn.solver._gauss_time import potential_applies
+    from atlasnn.systems import harmonic_oscillator
+
+    assert potential_applies(kepler_system(0.9), kepler_system(0.9).z0)
+    assert potential_applies(pythagorean_system(), pythagorean_system().z0)
+    for system in (harmonic_oscillator(), henon_heiles(),
+                   expression_system("p**2/2 - cos(q)", ["q"], ["p"], z0=[0.5, 0.0], separable=True),
+                   expression_system("(p1**2 + p2**2)/2 - 1/sqrt(q1**2 + q2**2)", ["q1", "q2"], ["p1", "p2"],
+                                     z0=[1.0, 0.0, 0.0, 1.0])):
+        assert not potential_applies(system, system.z0), system.name
+    eccentric = solve(kepler_system(0.9), None, (0.0, 4 * np.pi))
+    assert "time_scale='potential' would take fewer windows" in eccentric.info["advice"]
+    assert "advice" not in solve(kepler_system(0.3), None, (0.0, 4 * np.pi)).info
+    monkeypatch.setattr(gauss, "available_memory", lambda: 2**20)
+    with pytest.raises(AtlasError, match="would need about .* windows .*; a close encounter shortened the windows: "
+                                         "time_scale='potential'") as info:
+        solve(kepler_system(0.99), None, (0.0, 20 * np.pi))
+    assert info.value.partial is not None

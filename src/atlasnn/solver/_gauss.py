@@ -27,7 +27,7 @@ from atlasnn.solver._collocation import require_float64
 from atlasnn.solver._gauss_core import LOOPS, gauss_core
 from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, ReplayState, clock, compiled_gauss_march,
                                          compiled_gauss_replay, compiled_gauss_windows, initial_state)
-from atlasnn.solver._gauss_time import TimeTransform, check_time_scale, describe_time_scale
+from atlasnn.solver._gauss_time import TimeTransform, check_time_scale, describe_time_scale, potential_applies
 from atlasnn.systems import HamiltonianSystem, require_float64_field
 
 __all__ = ["GaussCollocation", "KEEP_BYTES", "NEWTON_AUTO_SIZE", "STAGES_BY_TOLERANCE", "stages_for"]
@@ -297,12 +297,13 @@ class GaussCollocation(AbstractSolver):
             if failed or start.size == 0 or end < T:
                 problem = problem or self._stopped_line(m, b, end, t0, T, stopped, failed, z0s[m],
                                                         system.linear_part is not None,
-                                                        _diverging(system, z0s[m], np.asarray(state.z[m])))
+                                                        _diverging(system, z0s[m], np.asarray(state.z[m])),
+                                                        until is None and potential_applies(system, z0s[m]))
                 # what was computed up to the stop is kept: the error's .partial
                 out.append(self._solution(system, np.append(start, state.t[m]), z, e, L, ratio, info)
                            if start.size else None)
                 continue
-            advice = None if until is not None else self._advice(length)
+            advice = None if until is not None else self._advice(length, system, z)
             out.append(self._solution(system, np.append(start, state.t[m]), z, e, L, ratio,
                                       {**info, **({"advice": advice} if advice else {})}))
         if problem is not None:
@@ -314,10 +315,12 @@ class GaussCollocation(AbstractSolver):
         return out
 
     def _stopped_line(self, m: int, b: int, end: float, t0: float, T: float, stopped: str | None, failed: int,
-                      z0: np.ndarray, linear: bool = False, diverging: str | None = None) -> str:
+                      z0: np.ndarray, linear: bool = False, diverging: str | None = None,
+                      gravitational: bool = False) -> str:
         """Why member m stopped (``stopped``: the host's reason, else the program's code ``failed``),
         and the remedy for that reason (``linear``: the system declares a linear part;
-        ``diverging``: what :func:`_diverging` found of the field just past the stop)."""
+        ``diverging``: what ``_diverging`` found of the field just past the stop; ``gravitational``:
+        ``time_scale="potential"`` suits the system, the remedy for windows a close encounter shrank)."""
         who = "the Gauss march" + ("" if b == 1 else f" of member {m}")
         if failed == 4:
             return (f"{who} cannot start: the vector field J∇H is not finite at z0 = {np.asarray(z0).tolist()} "
@@ -327,7 +330,10 @@ class GaussCollocation(AbstractSolver):
             return f"{who} stopped at t = {at} of [{start}, {stop}]: {diverging}; check H there"
         why = stopped or FAILURES.get(failed, "the march stopped")
         default_iterations = type(self).__dataclass_fields__["max_iterations"].default
-        if stopped is not None:
+        if gravitational and self.time_scale is None and (stopped is not None or failed in (1, 2)):
+            remedy = ("a close encounter shortened the windows: time_scale='potential' marches it on windows short "
+                      "only there, symplectic (docs/SOLVER.md, 'Close encounters')")
+        elif stopped is not None:
             remedy = "shorten the interval, loosen the tolerance or give a longer h"
         elif failed == 1:
             remedy = (f"times near t = {_times(end)[0]} are float64 numbers {np.spacing(abs(end)):.3g} apart, which "
@@ -353,12 +359,24 @@ class GaussCollocation(AbstractSolver):
         return f"{who} stopped at t = {at} of [{start}, {stop}]: {why} (rtol={self.rtol:g}, atol={self.atol:g}, " \
                f"h={self.h}); {remedy}"
 
-    def _advice(self, length: np.ndarray) -> str | None:
-        """A line for a constant-length march whose length had to shrink far after its warm-up (an
-        orbit with several time scales, such as an eccentric Kepler orbit): adaptive lengths take
-        fewer windows there."""
+    def _advice(self, length: np.ndarray, system: HamiltonianSystem, z: np.ndarray) -> str | None:
+        """A line for a march of constant lengths through time scales that differ along the orbit
+        (``z``: the window starts): for a system ``time_scale="potential"`` suits, when the scale g
+        varies 20-fold or more over the windows (an eccentric orbit, a close approach: the constant
+        length is the shortest time scale's throughout); otherwise when the length had to shrink
+        8-fold or more after the warm-up, adaptive lengths."""
+        if self.steps != "constant" or self.h is not None or len(z) < 2:
+            return None
+        if potential_applies(system, z[0]):
+            d = system.dim
+            g = (-system.energy64(np.concatenate([z[:, :d], np.zeros_like(z[:, d:])], axis=1))) ** -1.5
+            if g.min() > 0 and g.max() >= 20 * g.min():
+                return (f"the time scale (−V)^(−3/2) varies {g.max() / g.min():.0f}-fold over the windows: "
+                        "time_scale='potential' would take fewer windows, symplectic (docs/SOLVER.md, "
+                        "'Close encounters')")
+            return None
         kept = length[self.warmup:-1]
-        if self.steps != "constant" or self.h is not None or kept.size < 2 or kept.max() <= 8 * kept.min():
+        if kept.size < 2 or kept.max() <= 8 * kept.min():
             return None
         return (f"the window length shrank {kept.max() / kept.min():.0f}-fold after the warm-up (time scales that "
                 "differ along the orbit): steps='adaptive' would take fewer windows (not symplectic: "

@@ -45,7 +45,8 @@ from atlasnn.errors import ConfigError
 from atlasnn.solutions import PolynomialSolution, TimeTransformedSolution
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["TIME_SCALES", "TimeTransform", "check_time_scale", "describe_time_scale", "poincare_system"]
+__all__ = ["TIME_SCALES", "TimeTransform", "check_time_scale", "describe_time_scale", "poincare_system",
+           "potential_applies"]
 
 #: the scales chosen by name (any other is a function g(q, p))
 TIME_SCALES = ("potential",)
@@ -75,6 +76,24 @@ def _potential_scale(system: HamiltonianSystem) -> Callable:
         return (-system.hamiltonian(q, jnp.zeros_like(p))) ** -1.5
 
     return g
+
+
+def potential_applies(system: HamiltonianSystem, z0: Any) -> bool:
+    """Whether ``time_scale="potential"`` suits ``system`` by the look of it at z0: H declared
+    separable, and V(q) = H(q, 0) negative at q0 and homogeneous of degree −1 there (V(λq0) = V(q0)/λ
+    for λ = 1/2, 2, 10 to 1e-9), as a sum of −m_i m_j/r_ij is — gravitational N bodies and Kepler's
+    problem. It picks the advice a stopped or slow march gives, not the method."""
+    if not system.separable:
+        return False
+    d = system.dim
+    q0 = np.asarray(z0, np.float64)[:d]
+    try:
+        potential = [float(system.energy64(np.concatenate([lam * q0, np.zeros(d)]))) for lam in (1.0, 0.5, 2.0, 10.0)]
+    except Exception:  # noqa: BLE001 - H not evaluable there: no advice, the march's own line stands
+        return False
+    v = potential[0]
+    return bool(np.isfinite(v) and v < 0 and all(abs(vl * lam / v - 1) <= 1e-9 for vl, lam
+                                                 in zip(potential[1:], (0.5, 2.0, 10.0))))
 
 
 @program_cache

@@ -7,9 +7,12 @@ and its parameters, so :func:`system_from_spec` rebuilds it (e.g. from a checkpo
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from atlasnn.errors import SystemError_
@@ -169,10 +172,25 @@ def builtin_system(name: str, **params: float) -> HamiltonianSystem:
         raise SystemError_(f"bad parameters for system {name!r}: {exc}") from None
 
 
+def _at_theta(parametric: Callable, theta: Any, q: Any, p: Any) -> Any:
+    return parametric(q, p, theta)
+
+
 def with_params(system: HamiltonianSystem, **values: float) -> HamiltonianSystem:
     """The same system with some parameter values replaced (``with_params(hh, lam=0.8)``): rebuilt
     from its spec where it has one (so H is the very function a config run uses), else from its
-    parametric H."""
+    parametric H. Inside ``jax.jit``, ``jax.grad`` or ``jax.vmap`` a value may be traced: H is then
+    the parametric H at those values (no spec: nothing compiled for numbers serves it), and
+    ``atlasnn.solve`` differentiates through it."""
+    traced = {k for k, v in values.items() if isinstance(v, jax.core.Tracer)}
+    if traced:
+        system.param_vector(**{k: (0.0 if k in traced else v) for k, v in values.items()})  # names, numbers
+        system.require_parametric("with_params of a traced value")
+        fn = system.parametric
+        th = jnp.stack([jnp.asarray(values.get(k, v), jnp.float64) for k, v in system.params.items()])
+        # a partial, not a lambda of this module: the system's probe skips atlasnn's own functions, and
+        # must see that this H closes over traced values (``traced``)
+        return dataclasses.replace(system, hamiltonian=functools.partial(_at_theta, fn, th), spec=None)
     theta = system.param_vector(**values)
     new = dict(zip(system.param_names, (float(v) for v in theta)))
     if system.spec is not None:

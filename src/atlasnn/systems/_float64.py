@@ -81,7 +81,10 @@ def require_float64_field(system: Any, *, constants: bool = True) -> None:
         calls.append(("parametric(q, p, theta)", system.parametric, 3))
     with jax.enable_x64(True):
         z = np.full(2 * d, 0.5) if system.z0 is None else np.asarray(system.z0, np.float64)
-        theta = np.asarray([float(v) for v in system.params.values()], np.float64)
+        try:
+            theta = np.asarray([float(v) for v in system.params.values()], np.float64)
+        except Exception:  # noqa: BLE001 - a traced parameter value (inside jit/grad): H's types are what count
+            theta = np.full(len(system.params), 0.5)
         for what, user_fn, count in calls:
             args = (jnp.asarray(z[:d]), jnp.asarray(z[d:]), jnp.asarray(theta))[:count]
             try:
