@@ -34,6 +34,7 @@ is a function g(q, p) of the user's (JAX-traceable, > 0 and finite along the orb
 from __future__ import annotations
 
 import functools
+import weakref
 from typing import Any, Callable
 
 import jax
@@ -79,21 +80,29 @@ def _potential_scale(system: HamiltonianSystem) -> Callable:
 
 
 def potential_applies(system: HamiltonianSystem, z0: Any) -> bool:
-    """Whether ``time_scale="potential"`` suits ``system`` by the look of it at z0: H declared
-    separable, and V(q) = H(q, 0) negative at q0 and homogeneous of degree −1 there (V(λq0) = V(q0)/λ
-    for λ = 1/2, 2, 10 to 1e-9), as a sum of −m_i m_j/r_ij is — gravitational N bodies and Kepler's
-    problem. It picks the advice a stopped or slow march gives, not the method."""
+    """Whether ``time_scale="potential"`` suits ``system`` by the look of it at the first z0 it is
+    asked about (kept per system): H declared separable, and V(q) = H(q, 0) negative at q0 and
+    homogeneous of degree −1 there (V(λq0) = V(q0)/λ for λ = 1/2, 2, 10 to 1e-9), as a sum of
+    −m_i m_j/r_ij is — gravitational N bodies and Kepler's problem. It picks the advice a stopped or
+    slow march gives, not the method."""
     if not system.separable:
         return False
-    d = system.dim
-    q0 = np.asarray(z0, np.float64)[:d]
-    try:
-        potential = [float(system.energy64(np.concatenate([lam * q0, np.zeros(d)]))) for lam in (1.0, 0.5, 2.0, 10.0)]
-    except Exception:  # noqa: BLE001 - H not evaluable there: no advice, the march's own line stands
-        return False
-    v = potential[0]
-    return bool(np.isfinite(v) and v < 0 and all(abs(vl * lam / v - 1) <= 1e-9 for vl, lam
-                                                 in zip(potential[1:], (0.5, 2.0, 10.0))))
+    known = _SUITS.get(system)
+    if known is None:
+        d = system.dim
+        lams = np.array([1.0, 0.5, 2.0, 10.0])
+        q0 = np.asarray(z0, np.float64)[:d]
+        try:
+            v = system.energy64(np.concatenate([lams[:, None] * q0, np.zeros((lams.size, d))], axis=1))
+        except Exception:  # noqa: BLE001 - H not evaluable there: no advice, the march's own line stands
+            v = np.full(lams.size, np.nan)
+        known = _SUITS[system] = bool(np.isfinite(v[0]) and v[0] < 0 and np.all(np.abs(v[1:] * lams[1:] / v[0] - 1)
+                                                                                 <= 1e-9))
+    return known
+
+
+#: systems asked about by ``potential_applies``, and its answer
+_SUITS: "weakref.WeakKeyDictionary[HamiltonianSystem, bool]" = weakref.WeakKeyDictionary()
 
 
 @program_cache
