@@ -174,6 +174,7 @@ def test_a_traced_interval_that_is_empty_or_not_finite_raises_and_times_outside_
             jax.block_until_ready(run(T).z)
 
 
+@pytest.mark.long
 def test_a_float32_h_a_budget_past_memory_and_complex_times_are_refused_when_traced(monkeypatch):
     """What the traced core cannot do well is refused at trace time in one line: an H computing in
     float32 (it cannot reach the tolerance), a window budget whose arrays exceed the memory, times

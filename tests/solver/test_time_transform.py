@@ -188,6 +188,7 @@ def test_saving_is_refused_in_one_line(tmp_path):
     assert "\n" not in str(caught.value)
 
 
+@pytest.mark.long
 def test_the_scale_is_recommended_where_it_suits_the_system(monkeypatch):
     """``potential_applies`` recognises a negative potential homogeneous of degree −1 (Kepler, three
     bodies), not a positive, a periodic or a non-separable one; a default march through an eccentric
