@@ -1,9 +1,9 @@
-# Set-up and the two main jobs. `make quick` runs a quick reproduction; `make test test-long` runs the tests.
+# Set-up and the two main jobs. `make quick` runs a quick reproduction; `make test-all` runs the tests.
 PY ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: quick test test-long test-slow test-isa docs reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc solve-runs bench clean-venv
+.PHONY: quick test test-long test-all test-slow test-isa docs reproduce-all reproduce-release reproduce-long long-doc estimate-doc reproduction-doc suite suite-doc solve-runs bench clean-venv
 
 $(BIN)/atlasnn: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -16,8 +16,8 @@ quick: $(BIN)/atlasnn
 
 # Two tiers, each in two workers (pytest-xdist, a test file per worker at a time; TEST_WORKERS=0
 # runs them in this process). `make test` is the quick tier, everything but the tests marked long
-# or slow; `make test-long` the tests marked long (5 s or more each here). CI runs both
-# (`make test test-long`); the times are in CONTRIBUTING.md.
+# or slow; `make test-long` the tests marked long (5 s or more each here). CI runs both in one run
+# (`make test-all`); the times are in CONTRIBUTING.md.
 TEST_WORKERS ?= 2
 PYTEST = $(BIN)/python -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile)
 test: $(BIN)/atlasnn
@@ -25,6 +25,10 @@ test: $(BIN)/atlasnn
 
 test-long: $(BIN)/atlasnn
 	$(PYTEST) -m "long and not slow"
+
+# both tiers in one run (what CI runs: one run balances its files over the workers better than two)
+test-all: $(BIN)/atlasnn
+	$(PYTEST) -m "not slow"
 
 # the tests marked slow (half a minute or more each; CI leaves them out to stay under 30 minutes)
 test-slow: $(BIN)/atlasnn

@@ -26,9 +26,9 @@ Markers (an HTML comment on the line(s) just before the fence, invisible on the 
 * ``<!-- docs-test: slow (reason) -->`` — the block runs only with ``-m slow`` (``make
   test-slow``), not in CI: a command of minutes that another test covers; it must be the last
   block of its page, or no later block may need what it writes;
-* ``<!-- docs-test: long (reason) -->`` — the block, and every later block of its page, run in
-  the long tier (``make test-long``, which CI runs too), not in ``make test``: a page whose
-  blocks take half a minute or more;
+* ``<!-- docs-test: long (reason) -->`` — every block of its page runs in the long tier (``make
+  test-long``, which CI runs too), not in ``make test``: a page whose blocks take half a minute or
+  more (the whole page, as its blocks may use what earlier ones wrote);
 * ``<!-- docs-test: needs MODULE -->`` — the block runs where MODULE (an optional extra, such as
   ``diffrax``) is installed and is reported as skipped, with that reason, where it is not (its
   Python is still compiled).
@@ -90,7 +90,7 @@ class Block:
     file: str | None = None  # the file name, when marked file
     needs: str | None = None  # the optional module it needs, when marked needs
     slow: str | None = None  # the reason, when marked slow (run with -m slow, not in CI)
-    long: str | None = None  # the reason, when marked long (this block and the page's later ones: the long tier)
+    long: str | None = None  # the reason, when marked long (every block of the page: the long tier)
 
     @property
     def id(self) -> str:
@@ -317,14 +317,10 @@ CODE_BLOCKS = [b for b in ALL_BLOCKS if b.lang != "text"]
 
 
 def _tier_marks(blocks: list[Block]) -> list[list]:
-    """The pytest marks of each block: slow where marked; long from a long marker to its page's end
-    (a later block may need what a long one writes, so none of them runs in the quick tier)."""
-    marks, long_pages = [], set()
-    for b in blocks:
-        if b.long is not None:
-            long_pages.add(b.page)
-        marks.append([pytest.mark.slow] if b.slow else [pytest.mark.long] if b.page in long_pages else [])
-    return marks
+    """The pytest marks of each block: slow where marked; long on every block of a page with a long
+    marker (a block may use what an earlier one wrote: a page runs in one tier)."""
+    long_pages = {b.page for b in blocks if b.long is not None}
+    return [[pytest.mark.slow] if b.slow else [pytest.mark.long] if b.page in long_pages else [] for b in blocks]
 
 
 @pytest.fixture(scope="module")
@@ -485,13 +481,13 @@ def test_a_needs_marker_names_a_module():
         extract_blocks("<!-- docs-test: needs pip install x -->\n```python\nprint(1)\n```\n")
 
 
-def test_a_long_marker_puts_its_block_and_the_pages_later_blocks_in_the_long_tier():
+def test_a_long_marker_puts_its_whole_page_in_the_long_tier():
     page = ("```python\nprint(0)\n```\n\n<!-- docs-test: long (a minute of training) -->\n"
             "```python\nprint(1)\n```\n\n```bash\natlasnn systems\n```\n")
     blocks = extract_blocks(page, "a.md") + extract_blocks("```python\nprint(2)\n```\n", "b.md")
     assert blocks[1].long == "a minute of training"
     names = [[m.name for m in marks] for marks in _tier_marks(blocks)]
-    assert names == [[], ["long"], ["long"], []]
+    assert names == [["long"], ["long"], ["long"], []]
     with pytest.raises(AssertionError, match="needs a reason"):
         extract_blocks("<!-- docs-test: long -->\n```python\nprint(1)\n```\n")
 

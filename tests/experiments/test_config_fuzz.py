@@ -29,7 +29,7 @@ from atlasnn.nn import make_model
 from atlasnn.training import train
 from atlasnn.training import transfer
 
-MAX_EXAMPLES = int(os.environ.get("ATLASNN_FUZZ_EXAMPLES", "500"))
+MAX_EXAMPLES = int(os.environ.get("ATLASNN_FUZZ_EXAMPLES", "250"))
 MAX_COMPILES = 6  # distinct compiled training steps the fuzz test may build (a few seconds each)
 
 SHORT = {
@@ -254,6 +254,7 @@ def test_fuzzed_configs_parse_and_train_or_fail_with_one_line(base, n, data):
     _check(d)
 
 
+@pytest.mark.long  # with the fuzz test it counts (same tier, same session)
 def test_fuzz_counts(record_property):
     """Runs after the fuzz test (file order): the numbers for the record."""
     if COUNTS["cases"] == 0:
