@@ -27,7 +27,8 @@ from atlasnn.solver._collocation import require_float64
 from atlasnn.solver._gauss_core import LOOPS, gauss_core
 from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, ReplayState, clock, compiled_gauss_march,
                                          compiled_gauss_replay, compiled_gauss_windows, initial_state)
-from atlasnn.solver._gauss_time import TimeTransform, check_time_scale, describe_time_scale, potential_applies
+from atlasnn.solver._gauss_time import (TimeTransform, check_time_scale, describe_time_scale, potential_applies,
+                                        potential_scale_values)
 from atlasnn.systems import HamiltonianSystem, require_float64_field
 
 __all__ = ["GaussCollocation", "KEEP_BYTES", "NEWTON_AUTO_SIZE", "STAGES_BY_TOLERANCE", "stages_for"]
@@ -368,8 +369,7 @@ class GaussCollocation(AbstractSolver):
         if self.steps != "constant" or self.h is not None or len(z) < 2:
             return None
         if potential_applies(system, z[0]):
-            d = system.dim
-            g = (-system.energy64(np.concatenate([z[:, :d], np.zeros_like(z[:, d:])], axis=1))) ** -1.5
+            g = potential_scale_values(system, z)
             if g.min() > 0 and g.max() >= 20 * g.min():
                 return (f"the time scale (−V)^(−3/2) varies {g.max() / g.min():.0f}-fold over the windows: "
                         "time_scale='potential' would take fewer windows, symplectic (docs/SOLVER.md, "

@@ -47,7 +47,7 @@ from atlasnn.solutions import PolynomialSolution, TimeTransformedSolution
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["TIME_SCALES", "TimeTransform", "check_time_scale", "describe_time_scale", "poincare_system",
-           "potential_applies"]
+           "potential_applies", "potential_scale_values"]
 
 #: the scales chosen by name (any other is a function g(q, p))
 TIME_SCALES = ("potential",)
@@ -89,16 +89,24 @@ def potential_applies(system: HamiltonianSystem, z0: Any) -> bool:
         return False
     known = _SUITS.get(system)
     if known is None:
-        d = system.dim
         lams = np.array([1.0, 0.5, 2.0, 10.0])
-        q0 = np.asarray(z0, np.float64)[:d]
         try:
-            v = system.energy64(np.concatenate([lams[:, None] * q0, np.zeros((lams.size, d))], axis=1))
+            v = _potential(system, lams[:, None] * np.asarray(z0, np.float64)[: system.dim])
         except Exception:  # noqa: BLE001 - H not evaluable there: no advice, the march's own line stands
             v = np.full(lams.size, np.nan)
         known = _SUITS[system] = bool(np.isfinite(v[0]) and v[0] < 0 and np.all(np.abs(v[1:] * lams[1:] / v[0] - 1)
                                                                                  <= 1e-9))
     return known
+
+
+def potential_scale_values(system: HamiltonianSystem, z: np.ndarray) -> np.ndarray:
+    """g = (−V(q))^(−3/2) of ``time_scale="potential"`` at host states z (m, 2d), in float64."""
+    return (-_potential(system, np.asarray(z, np.float64)[:, : system.dim])) ** -1.5
+
+
+def _potential(system: HamiltonianSystem, q: np.ndarray) -> np.ndarray:
+    """V(q) = H(q, 0) at host positions q (m, d), in float64."""
+    return system.energy64(np.concatenate([q, np.zeros_like(q)], axis=1))
 
 
 #: systems asked about by ``potential_applies``, and its answer
