@@ -92,3 +92,29 @@ def test_compile_lowered_passes_xla_options_and_drops_one_this_xla_lacks():
         np.testing.assert_allclose(np.asarray(compile_lowered(lowered, options)(x)), want, rtol=1e-6)
     with pytest.raises(Exception):  # JAX itself refuses the unknown option: compile_lowered catches it
         lowered.compile(compiler_options={"xla_no_such_option_in_any_version": True})
+
+
+def test_a_packed_program_returns_what_the_program_does_array_for_array():
+    """packed_program: arguments and results of several dtypes and shapes (0-d, bool, integers, a
+    large block) cross as one flat array per dtype and come back as the program's own."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from atlasnn.compile_cache import packed_program
+
+    def program(t, z, L, count, flag):
+        out = (z * t, jnp.sum(L, axis=0), count + 1, ~flag, L * 2.0, jnp.asarray(t > 0), count * z.shape[0])
+        return list(out)
+
+    rng = np.random.default_rng(3)
+    with jax.enable_x64(True):
+        args = [np.float64(0.5), rng.normal(size=4), rng.normal(size=(300, 3, 4)), np.int64(7), np.array([True, False])]
+        run = packed_program(program, args)
+        for call in (args, [np.float64(-2.0), rng.normal(size=4), rng.normal(size=(300, 3, 4)), np.int64(-1),
+                            np.array([False, False])]):
+            got, want = run(*call), [np.asarray(x) for x in jax.jit(program)(*call)]
+            assert len(got) == len(want)
+            for g, w in zip(got, want):
+                assert g.shape == w.shape and g.dtype == w.dtype
+                np.testing.assert_array_equal(g, w)

@@ -21,15 +21,18 @@ import contextlib
 import functools
 import hashlib
 import json
+import math
 import os
 import time
 from pathlib import Path
 from typing import Callable
 
 import jax
+import jax.numpy as jnp
+import numpy as np
 
-__all__ = ["cache_dir", "code_digest", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES", "program_cache", "clear_programs",
-           "jax_time", "JaxTime", "compiled_from_disk", "compile_lowered", "EXPORTED_MAX_BYTES"]
+__all__ = ["cache_dir", "code_digest", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES", "program_cache",
+           "clear_programs", "to_host", "jax_time", "JaxTime", "compiled_from_disk", "compile_lowered", "packed_program", "EXPORTED_MAX_BYTES"]
 
 CACHE_ENV = "ATLASNN_CACHE_DIR"
 #: the cache's size limit (least recently used entries go past it); with it, JAX locks the cache
@@ -289,10 +292,16 @@ def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[
         return None
     leaves, treedef = jax.tree_util.tree_flatten(args)
     path = _kept_path(prefix, key, packages, leaves, treedef)
+
+    def build(exp):
+        if host:
+            return packed_program(exp.call, leaves, options, exp.out_avals)
+        return compile_lowered(jax.jit(exp.call).lower(*leaves), options)
+
     program = None
     try:
         exp = jax.export.deserialize(bytearray(path.read_bytes()))
-        program = compile_lowered(jax.jit(exp.call).lower(*leaves), options)
+        program = build(exp)
         _mark_read(path)
     except Exception:  # noqa: BLE001 - none yet, or a damaged or foreign file, or one that does
         exp = _export(fn, leaves, treedef, out_tree, path)  # not fit these arguments: made again
@@ -300,17 +309,70 @@ def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[
         return None
     if program is None:
         try:
-            program = compile_lowered(jax.jit(exp.call).lower(*leaves), options)
+            program = build(exp)
         except Exception:  # noqa: BLE001 - exported, but not compilable: traced as usual
             return None
 
     def run(*call_args):
         out = program(*jax.tree_util.tree_leaves(call_args))
-        if host:
-            return jax.tree_util.tree_unflatten(out_tree, jax.device_get(list(out)))
-        return jax.tree_util.tree_unflatten(out_tree, [_uncommitted(x) for x in out])
+        return jax.tree_util.tree_unflatten(out_tree, out if host else [_uncommitted(x) for x in out])
 
     return run
+
+
+class _Packing:
+    """Where each array of a list sits in a few flat arrays, one per dtype. A compiled call's fixed
+    cost grows with its count of arguments and results (on a CPU, measured: 18 small arguments
+    and 21 small results 250 µs a call, 3 and 3 35 µs), and the Gauss march's chunk has 18 and
+    21: packed, they travel as four."""
+
+    def __init__(self, avals):
+        self.shapes = [tuple(a.shape) for a in avals]
+        dtypes = [np.dtype(a.dtype) for a in avals]
+        self.kinds = sorted(set(dtypes), key=str)
+        ends = dict.fromkeys(self.kinds, 0)
+        self.where = []  # (kind, start, stop) of each array
+        for shape, dtype in zip(self.shapes, dtypes):
+            size = math.prod(shape)
+            self.where.append((self.kinds.index(dtype), ends[dtype], ends[dtype] + size))
+            ends[dtype] += size
+
+    def pack(self, arrays, xp=np) -> list:
+        parts = [[] for _ in self.kinds]
+        for x, (kind, _, _) in zip(arrays, self.where):
+            parts[kind].append(xp.ravel(xp.asarray(x, self.kinds[kind])))
+        return [xp.concatenate(p) for p in parts]
+
+    def unpack(self, flats) -> list:
+        return [flats[kind][a:b].reshape(shape) for (kind, a, b), shape in zip(self.where, self.shapes)]
+
+
+def packed_program(call: Callable, leaves: list, options: dict | None = None, out_avals=None) -> Callable:
+    """``call`` (flat arrays in, a flat list of arrays out) compiled for ``leaves`` so that its
+    arguments and results cross the call as one flat array per dtype (:class:`_Packing`); returns
+    ``run(*leaves) -> list`` of NumPy arrays (views of the packed results). ``out_avals``: the
+    results' shapes and dtypes where known (an exported program's), else read while tracing."""
+    ins, outs = _Packing(leaves), [] if out_avals is None else [_Packing(out_avals)]
+
+    def inner(*flats):
+        out = list(call(*ins.unpack(flats)))
+        if not outs:
+            outs.append(_Packing(out))
+        return tuple(outs[0].pack(out, jnp))
+
+    program = compile_lowered(jax.jit(inner).lower(*ins.pack(leaves)), options)
+
+    def run(*arrays):
+        return outs[0].unpack([np.asarray(x) for x in program(*ins.pack(arrays))])
+
+    return run
+
+
+def to_host(tree):
+    """Every array of ``tree`` as a NumPy array (read-only where it is a view of a device buffer).
+    ``np.asarray`` per leaf rather than ``jax.device_get``: on a CPU the same arrays, about 40 µs
+    less per array (a march's chunk has 21: measured 0.95 → 0.28 ms)."""
+    return jax.tree_util.tree_map(np.asarray, tree)
 
 
 def cpu_loop_options() -> dict | None:

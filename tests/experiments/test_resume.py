@@ -155,7 +155,7 @@ def _states(out: Path) -> dict[str, int]:
 MESSAGE = re.compile(r"^atlasnn: interrupted: (\d) of 3 trainings finished; resume with: (.*)$", re.M)
 
 
-@pytest.mark.long
+@pytest.mark.slow  # 40 s, two real processes; the in-process interrupts above check the resume bit for bit (CI stays under 30 min)
 def test_sigint_and_sigterm_in_a_real_process_then_resume(tmp_path):
     toml = tmp_path / "long.toml"
     toml.write_text(LONG)

@@ -168,7 +168,7 @@ def test_a_bad_scheduler_or_metric_is_refused_before_anything_is_written(tmp_pat
         parse_sets(["train.lr=1e-3", "train.lr=2e-3"])
 
 
-@pytest.mark.long
+@pytest.mark.slow  # 26 s, a second sweep; test_overrides_reach_into_tables_and_win_over_the_quick_table checks the order of overrides (CI stays under 30 min)
 def test_a_sweep_of_a_profile_puts_the_overrides_over_the_profile(tmp_path, capsys):
     from test_profiles import PROFILED  # same folder (tests/experiments)
 

@@ -40,7 +40,7 @@ def test_from_a_start_where_single_shooting_is_trapped_it_reaches_the_global_min
     assert fit.search["windows"] >= 2 and len(fit.search["lm_steps"]) == len(CollocationFit().penalties)
 
 
-@pytest.mark.long
+@pytest.mark.slow  # 40 s; the trapped-start and parameter-with-momentum fits check the collocation fit (CI stays under 30 min)
 def test_a_chaotic_record_where_shooting_cannot_integrate_from_the_start():
     hh = henon_heiles(lam=1.0)
     hh = expression_system("(px**2 + py**2)/2 + (x**2 + y**2)/2 + lam*(x**2*y - y**3/3)", ["x", "y"], ["px", "py"],

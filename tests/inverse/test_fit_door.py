@@ -158,7 +158,7 @@ def test_an_interrupted_family_run_resumes_from_the_seeds_it_finished(tmp_path, 
     assert "the run is complete (results.json is written)" in capsys.readouterr().err
 
 
-@pytest.mark.long
+@pytest.mark.slow  # 26 s, worker processes; the interrupted family run checks the same family records in one process (CI stays under 30 min)
 def test_family_seeds_run_in_worker_processes_with_jobs(tmp_path, capsys):
     """`family --jobs 2`: the seeds are tasks of the local executor (two processes), the same
     estimates as in this process; before, --jobs did not exist for family runs."""

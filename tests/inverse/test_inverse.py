@@ -111,7 +111,7 @@ def test_file_observations_and_too_many_unknowns(tmp_path, capsys):
     assert "more unknowns than the data" in err and len(err.strip().splitlines()) == 1
 
 
-@pytest.mark.slow  # two minutes; the family command's parts run in test_fit_door (worker processes) and test_collocation_fit (a family run)
+@pytest.mark.slow  # two minutes; the family command's parts run in test_fit_door (an interrupted family run) and test_collocation_fit (a family run)
 def test_family_command_end_to_end(tmp_path, capsys):
     out = tmp_path / "run"
     assert main(["family", "pendulum-inverse", "--quick", "--seeds", "1", "--out", str(out)]) == 0

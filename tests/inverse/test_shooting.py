@@ -233,7 +233,7 @@ def test_synthetic_data_starts_where_the_fits_start():
     assert abs(fit.value("g") - 1.0) < 4 * fit.std[0]
 
 
-@pytest.mark.long
+@pytest.mark.slow  # 37 s; test_fit_door's auto-segments config and the multiple-shooting test cover the segments (CI stays under 30 min)
 def test_auto_segments_start_from_the_data_where_the_orbit_from_the_guess_escapes():
     from atlasnn.inverse import auto_segments
 

@@ -46,7 +46,7 @@ def test_blow_up_index_finds_the_first_bad_sample():
     assert blow_up_index(z, ref) == 40
 
 
-@pytest.mark.long
+@pytest.mark.slow  # 50 s, a whole run; test_blow_up_index_finds_the_first_bad_sample checks the marking (CI stays under 30 min)
 def test_an_overflowing_baseline_is_marked_and_the_run_and_report_exit_zero(tmp_path, capsys):
     cfg = tmp_path / "stiff.toml"
     cfg.write_text(STIFF, encoding="utf-8")

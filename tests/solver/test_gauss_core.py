@@ -53,7 +53,7 @@ def richardson(f, z0, eps):
     return (4 * central(eps / 2) - central(eps)) / 3
 
 
-@pytest.mark.long
+@pytest.mark.slow  # 54 s; test_derivatives_in_the_interval_and_in_hs_parameters_match_closed_forms checks the traced gradients exactly (CI stays under 30 min)
 def test_gradients_agree_with_differences_forward_mode_and_diffrax():
     """Kepler e = 0.6 over 200 fixed windows (h = 2⁻⁴, about 2 periods; T a multiple of h, so that
     Diffrax's constant steps, which divide [0, T] evenly, are the same windows): reverse mode,

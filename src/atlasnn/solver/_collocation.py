@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from atlasnn.compile_cache import to_host
 from atlasnn.errors import ConfigError
 from atlasnn.nn import inverse_softplus, make_model
 from atlasnn.solutions import PiecewiseSolution, WindowRecord
@@ -222,7 +223,7 @@ class Collocation(AbstractSolver):
         with jax.enable_x64(True):
             while True:
                 tic = time.perf_counter()
-                out = jax.device_get(program(*args, state, T_, rtol_, atol_))
+                out = to_host(program(*args, state, T_, rtol_, atol_))
                 if not rows:  # the first call compiles (or loads from the cache) and runs
                     first_call = time.perf_counter() - tic
                 state = out.state

@@ -17,7 +17,7 @@ from typing import Any, Callable
 
 import jax
 
-from atlasnn.compile_cache import compile_lowered, compiled_from_disk, program_cache
+from atlasnn.compile_cache import compile_lowered, compiled_from_disk, packed_program, program_cache
 from atlasnn.systems import defined_by_data
 
 __all__ = ["exported_program"]
@@ -34,16 +34,23 @@ class _Exported:
 
     def __call__(self, *args):
         leaves, treedef = jax.tree_util.tree_flatten(args)
-        sig = (treedef, tuple((x.shape, str(x.dtype)) for x in leaves))
+        sig = (treedef, tuple((x.shape, x.dtype) for x in leaves))
         fn = self.loaded.get(sig)
         if fn is None:
             fn = None if not self.disk else compiled_from_disk(
                 self.jitted, args, key=self.key, packages=("solver", "systems"), out_tree=self.out_tree,
                 prefix="march", options=self.options, host=self.host)
+            if fn is None and self.host:
+                run = packed_program(self._flat(treedef), leaves, self.options)
+                fn = lambda *xs: jax.tree_util.tree_unflatten(self.out_tree, run(*jax.tree_util.tree_leaves(xs)))  # noqa: E731
             if fn is None:
                 fn = compile_lowered(self.jitted.lower(*args), self.options) if self.options else self.jitted
             self.loaded[sig] = fn
         return fn(*args)
+
+    def _flat(self, treedef) -> Callable:
+        """The program as a function of its flat arguments returning its flat result."""
+        return lambda *xs: jax.tree_util.tree_leaves(self.jitted(*jax.tree_util.tree_unflatten(treedef, xs)))
 
 
 @program_cache

@@ -358,7 +358,14 @@ def compiled_gauss_march(system: Any, *, stages: int, steps: str, chunk: int, ma
     state's component that runs to T (module docstring; None: the march's own time)."""
     settings = (int(stages), str(steps), int(chunk), int(max_iterations), bool(newton), float(growth), float(safety),
                 int(warmup), int(max_rejects), None if until is None else int(until), trace_settings())
-    members_mode = "alone" if members == 1 else batch_mode()
+    return _served(system, settings, "alone" if members == 1 else batch_mode())
+
+
+@program_cache
+@functools.lru_cache(maxsize=64)
+def _served(system, settings: tuple, members_mode: str):
+    """The program :func:`compiled_gauss_march` returns, kept per system and settings (finding it
+    again writes its disk key anew: a tenth of a millisecond a call)."""
     jitted = _cached(system, *settings)[members_mode]
     return exported_program(jitted, system, {"settings": settings, "members": members_mode, "method": "gauss"},
                             _OUT_TREE, host=True, options=cpu_loop_options())

@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from atlasnn.compile_cache import program_cache
+from atlasnn.compile_cache import program_cache, to_host
 from atlasnn.errors import ConfigError, ParametricSolveFailed
 from atlasnn.precision import trace_settings
 from atlasnn.solutions import gauss_tableau, shifted_legendre
@@ -166,7 +166,7 @@ class ParametricGauss:
         if S0 is None:  # the values alone: no directions
             S0, D = np.zeros((z0.size, 0)), np.zeros((theta.size, 0))
         with jax.enable_x64(True):
-            out = jax.device_get(self._program()(theta, z0, S0, D, np.float64(t0), np.float64(h), times,
+            out = to_host(self._program()(theta, z0, S0, D, np.float64(t0), np.float64(h), times,
                                                  np.float64(self.rtol), np.float64(self.atol)))
         self.evaluations += int(out.evaluations)
         good = bool(out.ok) and np.all(np.isfinite(out.Z)) and np.all(np.isfinite(out.S))
