@@ -111,7 +111,7 @@ BENCH ?= throughput seed_batch device_accuracy time_to_accuracy compile_once col
 	estimate_effectivity window_optimisers bundle_eval bundle_cost flowmap_estimate flowmap_gauss_newton \
 	inverse_starts inverse_collocation_untuned inverse_noise solver_workprecision solver_suite solver_batch \
 	solver_first_run gauss_stages gauss_roundoff outer_solar energy_long step_modes diffrax_gauss shooting_solver \
-	nls_pde fput_recurrence
+	nls_pde fput_recurrence everyday fixed_cost
 BR := docs/benchmarks
 
 bench: $(BIN)/atlasnn
@@ -171,6 +171,8 @@ bench-solver_suite:
 	$(BIN)/python -m benchmarks.solver_suite --out docs/runs/solver/suite.json
 bench-solver_batch bench-solver_first_run bench-step_modes bench-gauss_stages bench-gauss_roundoff bench-shooting_solver: bench-%:
 	$(BIN)/python -m benchmarks.$* --out $(BR)/$*.json
+bench-everyday bench-fixed_cost: bench-%:
+	taskset -c 1 $(BIN)/python -m benchmarks.$* --out $(BR)/$*.json
 bench-outer_solar:
 	ATLASNN_CACHE_DIR=off $(BIN)/python -m benchmarks.outer_solar --out $(BR)/outer_solar.json
 bench-energy_long:

@@ -13,6 +13,7 @@ the pages hold what it makes, so no number on them can drift from its record):
 * ``stages``: docs/benchmarks/gauss_stages.json (``python -m benchmarks.gauss_stages``);
 * ``roundoff``: docs/benchmarks/gauss_roundoff.json (``python -m benchmarks.gauss_roundoff``);
 * ``orders``: docs/benchmarks/gauss_orders.json (``python -m benchmarks.gauss_orders``);
+* ``everyday``: docs/benchmarks/everyday.json (``python -m benchmarks.everyday``);
 * ``scaling``: docs/benchmarks/gauss_scaling.json (``python -m benchmarks.gauss_scaling``);
 * ``time_transform``: docs/benchmarks/time_transform.json (``python -m benchmarks.time_transform``);
 * ``rebound``: docs/benchmarks/rebound_anchor.json (``python -m benchmarks.rebound_anchor``);
@@ -55,6 +56,7 @@ RECORDS = {
     "stages": "docs/benchmarks/gauss_stages.json",
     "roundoff": "docs/benchmarks/gauss_roundoff.json",
     "orders": "docs/benchmarks/gauss_orders.json",
+    "everyday": "docs/benchmarks/everyday.json",
     "scaling": "docs/benchmarks/gauss_scaling.json",
     "time_transform": "docs/benchmarks/time_transform.json",
     "rebound": "docs/benchmarks/rebound_anchor.json",
@@ -225,6 +227,27 @@ def orders(record: dict) -> str:
                               "the fastest at each rtol in bold; — not run (order far below the tolerance's digits).")
 
 
+_ANCHORS = (("diffrax-tsit5", "Diffrax Tsit5"), ("diffrax-dopri8", "Diffrax Dopri8"), ("yoshida4", "Yoshida-4"))
+
+
+def everyday(record: dict) -> str:
+    rows = ["| problem | max error / range ≤ | atlasnn.solve (rtol, s) | " + " | ".join(label for _, label in _ANCHORS)
+            + " | atlasnn / the fastest |", "|---|---|---|" + "---|" * len(_ANCHORS) + "---|"]
+    for name, res in record["results"].items():
+        for level, v in res["levels"].items():
+            g = v["gauss"]
+            gauss = "never" if g is None else f"{_ms(g['seconds'])} ({g['setting']:.0e}, {g['stages']})"
+            ran = {r["method"] for r in res["rows"]}
+            cells = ["—" if m not in ran else "never" if v[m] is None else _ms(v[m]["seconds"]) for m, _ in _ANCHORS]
+            ratio = "—" if v["ratio"] is None else f"{v['ratio']:.2f}"
+            rows.append(f"| {name} | {float(level):.0e} | {gauss} | " + " | ".join(cells) + f" | {ratio} |")
+    return "\n".join(rows) + ("\n\nEach cell: the fastest run whose max error over 200 times, relative to the state's range, is "
+                              "within the level (best of 3 after a first call, the whole call with the values at the 200 "
+                              "times); atlasnn.solve swept over rtol 1e-3 … 1e-12 with the stage count it picks; Diffrax "
+                              "rtol 1e-3 … 1e-14; Yoshida-4 199 … 51 200 steps (separable problems only: — "
+                              "elsewhere); \"never\": none of its runs got there.")
+
+
 def scaling(record: dict) -> str:
     rows = ["| system | d | s | windows | iterations / window | µs / window | of which the field's evaluations | "
             "first call |", "|---|---|---|---|---|---|---|---|"]
@@ -347,7 +370,7 @@ def learned(record: dict) -> str:
 
 MAKERS = {"learned": learned, "gradients": gradients, "suite": suite, "workprecision": workprecision, "energy": energy, "step_modes": step_modes, "batch": batch,
           "first_run": first_run, "stages": stages,
-          "roundoff": roundoff, "orders": orders, "scaling": scaling,
+          "roundoff": roundoff, "orders": orders, "everyday": everyday, "scaling": scaling,
           "rebound": rebound, "time_transform": time_transform, **pde_tables.MAKERS}
 
 

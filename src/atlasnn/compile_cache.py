@@ -320,28 +320,38 @@ def compiled_from_disk(fn: Callable, args: tuple, *, key: dict, packages: tuple[
     return run
 
 
+#: an array of more entries than this crosses a packed call as itself, not copied into a pack
+PACK_MAX_SIZE = 1024
+
+
 class _Packing:
-    """Where each array of a list sits in a few flat arrays, one per dtype. A compiled call's fixed
-    cost grows with its count of arguments and results (on a CPU, measured: 18 small arguments
-    and 21 small results 250 µs a call, 3 and 3 35 µs), and the Gauss march's chunk has 18 and
-    21: packed, they travel as four."""
+    """Where each array of a list sits in a few flat arrays: the small ones packed into one per
+    dtype, each large one flat on its own. A compiled call's fixed cost grows with its count of
+    arguments and results (on a CPU, measured: 18 small arguments and 21 small results 250 µs a
+    call, 3 and 3 35 µs), and the Gauss march's chunk has 18 and 21; a large array (the chunk's
+    stage increments) would cost a copy in a pack and saves nothing there."""
 
     def __init__(self, avals):
         self.shapes = [tuple(a.shape) for a in avals]
         dtypes = [np.dtype(a.dtype) for a in avals]
-        self.kinds = sorted(set(dtypes), key=str)
-        ends = dict.fromkeys(self.kinds, 0)
-        self.where = []  # (kind, start, stop) of each array
-        for shape, dtype in zip(self.shapes, dtypes):
-            size = math.prod(shape)
-            self.where.append((self.kinds.index(dtype), ends[dtype], ends[dtype] + size))
-            ends[dtype] += size
+        sizes = [math.prod(shape) for shape in self.shapes]
+        self.kinds = sorted({d for d, n in zip(dtypes, sizes) if n <= PACK_MAX_SIZE}, key=str)  # each flat's dtype
+        ends = [0] * len(self.kinds)
+        self.where = []  # (flat, start, stop) of each array
+        for dtype, size in zip(dtypes, sizes):
+            if size <= PACK_MAX_SIZE:
+                k = self.kinds.index(dtype)
+                self.where.append((k, ends[k], ends[k] + size))
+                ends[k] += size
+            else:
+                self.kinds.append(dtype)
+                self.where.append((len(self.kinds) - 1, 0, size))
 
     def pack(self, arrays, xp=np) -> list:
         parts = [[] for _ in self.kinds]
         for x, (kind, _, _) in zip(arrays, self.where):
             parts[kind].append(xp.ravel(xp.asarray(x, self.kinds[kind])))
-        return [xp.concatenate(p) for p in parts]
+        return [p[0] if len(p) == 1 else xp.concatenate(p) for p in parts]
 
     def unpack(self, flats) -> list:
         return [flats[kind][a:b].reshape(shape) for (kind, a, b), shape in zip(self.where, self.shapes)]
@@ -349,7 +359,7 @@ class _Packing:
 
 def packed_program(call: Callable, leaves: list, options: dict | None = None, out_avals=None) -> Callable:
     """``call`` (flat arrays in, a flat list of arrays out) compiled for ``leaves`` so that its
-    arguments and results cross the call as one flat array per dtype (:class:`_Packing`); returns
+    small arguments and results cross the call as one flat array per dtype (:class:`_Packing`); returns
     ``run(*leaves) -> list`` of NumPy arrays (views of the packed results). ``out_avals``: the
     results' shapes and dtypes where known (an exported program's), else read while tracing."""
     ins, outs = _Packing(leaves), [] if out_avals is None else [_Packing(out_avals)]
