@@ -27,7 +27,7 @@ from atlasnn.solver import GaussCollocation
 from benchmarks.common import machine_info, write_result
 from benchmarks.gauss_orders import LEVELS, fastest, problems, reference
 from benchmarks.problems import timed
-from benchmarks.solver_workprecision import _row, yoshida_points
+from benchmarks.solver_workprecision import _row, diffrax_points, yoshida_points
 
 GAUSS_TOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12)
 RK_TOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13, 1e-14)
@@ -49,27 +49,6 @@ def gauss_points(system, z0, interval, t, ref, scale) -> list[dict]:
             continue
         rows.append(_row("gauss", tol, best, med, z, ref, scale, first_call_seconds=first, windows=sol.n_windows,
                          stages=sol.info["stages"]))
-    return rows
-
-
-def diffrax_points(system, z0, interval, t, ref, scale) -> list[dict]:
-    import diffrax
-    import jax.numpy as jnp
-
-    rows = []
-    with jax.enable_x64(True):
-        field = lambda tt, y, args: system.vector_field(y[None])[0]  # noqa: E731
-        ts, y0 = jnp.asarray(t), jnp.asarray(z0)
-        for label, method in (("diffrax-dopri8", diffrax.Dopri8()), ("diffrax-tsit5", diffrax.Tsit5())):
-            @jax.jit
-            def run(y0, rtol, atol, method=method):
-                return diffrax.diffeqsolve(diffrax.ODETerm(field), method, interval[0], interval[1], None, y0,
-                                           saveat=diffrax.SaveAt(ts=ts), max_steps=4_000_000,
-                                           stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol)).ys
-            jax.block_until_ready(run(y0, 1e-6, 1e-8))
-            for tol in RK_TOLS:
-                z, best, med = timed(lambda: np.asarray(run(y0, tol, tol / 100)))
-                rows.append(_row(label, tol, best, med, z, ref, scale))
     return rows
 
 
@@ -100,7 +79,8 @@ def main(argv=None) -> None:
         t = np.linspace(*interval, 200)
         ref = reference(name, system, z0, interval, t)
         scale = float(np.ptp(ref, axis=0).max())
-        rows = (gauss_points(system, z0, interval, t, ref, scale) + diffrax_points(system, z0, interval, t, ref, scale)
+        rows = (gauss_points(system, z0, interval, t, ref, scale)
+                + diffrax_points(system, z0, interval, t, ref, scale, RK_TOLS)
                 + yoshida_points(system, z0, interval, t, ref, scale))
         results[name] = {"interval": list(interval), "range": scale, "rows": rows, "levels": verdicts(rows)}
         for level, v in results[name]["levels"].items():

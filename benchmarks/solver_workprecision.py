@@ -114,7 +114,7 @@ def yoshida_points(system, z0, interval, t, ref, scale):
     return rows
 
 
-def diffrax_points(system, z0, interval, t, ref, scale):
+def diffrax_points(system, z0, interval, t, ref, scale, tols=RK_TOLS):
     try:
         import diffrax
     except ImportError:
@@ -135,7 +135,7 @@ def diffrax_points(system, z0, interval, t, ref, scale):
             tic = time.perf_counter()
             jax.block_until_ready(run(y0, 1e-8, 1e-10))
             compile_s = time.perf_counter() - tic
-            for tol in RK_TOLS:
+            for tol in tols:
                 z, best, med = timed(lambda: np.asarray(run(y0, tol, tol / 100)))
                 rows.append(_row(label, tol, best, med, z, ref, scale, compile_seconds=compile_s))
     return rows
