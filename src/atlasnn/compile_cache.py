@@ -32,7 +32,8 @@ import jax.numpy as jnp
 import numpy as np
 
 __all__ = ["cache_dir", "code_digest", "enable_compile_cache", "CACHE_ENV", "CACHE_MAX_BYTES", "program_cache",
-           "clear_programs", "to_host", "jax_time", "JaxTime", "compiled_from_disk", "compile_lowered", "packed_program", "EXPORTED_MAX_BYTES"]
+           "clear_programs", "to_host", "jax_time", "JaxTime", "compiled_from_disk", "compile_lowered",
+           "packed_program", "EXPORTED_MAX_BYTES"]
 
 CACHE_ENV = "ATLASNN_CACHE_DIR"
 #: the cache's size limit (least recently used entries go past it); with it, JAX locks the cache

@@ -41,16 +41,18 @@ class _Exported:
                 self.jitted, args, key=self.key, packages=("solver", "systems"), out_tree=self.out_tree,
                 prefix="march", options=self.options, host=self.host)
             if fn is None and self.host:
-                run = packed_program(self._flat(treedef), leaves, self.options)
-                fn = lambda *xs: jax.tree_util.tree_unflatten(self.out_tree, run(*jax.tree_util.tree_leaves(xs)))  # noqa: E731
+                fn = self._packed(treedef, leaves)
             if fn is None:
                 fn = compile_lowered(self.jitted.lower(*args), self.options) if self.options else self.jitted
             self.loaded[sig] = fn
         return fn(*args)
 
-    def _flat(self, treedef) -> Callable:
-        """The program as a function of its flat arguments returning its flat result."""
-        return lambda *xs: jax.tree_util.tree_leaves(self.jitted(*jax.tree_util.tree_unflatten(treedef, xs)))
+    def _packed(self, treedef, leaves) -> Callable:
+        """The program traced here and compiled as a :func:`packed_program` (its results on the host)."""
+        tree = jax.tree_util
+        run = packed_program(lambda *xs: tree.tree_leaves(self.jitted(*tree.tree_unflatten(treedef, xs))), leaves,
+                             self.options)
+        return lambda *xs: tree.tree_unflatten(self.out_tree, run(*tree.tree_leaves(xs)))
 
 
 @program_cache

@@ -365,7 +365,7 @@ def compiled_gauss_march(system: Any, *, stages: int, steps: str, chunk: int, ma
 @functools.lru_cache(maxsize=64)
 def _served(system, settings: tuple, members_mode: str):
     """The program :func:`compiled_gauss_march` returns, kept per system and settings (finding it
-    again writes its disk key anew: a tenth of a millisecond a call)."""
+    again would write its disk key anew, a JSON text, on every call)."""
     jitted = _cached(system, *settings)[members_mode]
     return exported_program(jitted, system, {"settings": settings, "members": members_mode, "method": "gauss"},
                             _OUT_TREE, host=True, options=cpu_loop_options())

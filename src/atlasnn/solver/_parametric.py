@@ -167,7 +167,7 @@ class ParametricGauss:
             S0, D = np.zeros((z0.size, 0)), np.zeros((theta.size, 0))
         with jax.enable_x64(True):
             out = to_host(self._program()(theta, z0, S0, D, np.float64(t0), np.float64(h), times,
-                                                 np.float64(self.rtol), np.float64(self.atol)))
+                                          np.float64(self.rtol), np.float64(self.atol)))
         self.evaluations += int(out.evaluations)
         good = bool(out.ok) and np.all(np.isfinite(out.Z)) and np.all(np.isfinite(out.S))
         if not good:  # where the march stopped: the start of the window that failed
