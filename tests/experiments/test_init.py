@@ -76,7 +76,7 @@ def test_every_key_is_commented_with_its_meaning(tmp_path, capsys, transfer):
     tomllib.loads(text)
 
 
-@pytest.mark.long
+@pytest.mark.slow  # 22 s; YOUR_SYSTEM.md's `atlasnn init` and `atlasnn run --quick` block runs a template as written (CI stays under 30 min)
 def test_quick_single_interval_template_runs_as_written(tmp_path, capsys):
     _, path, _ = init(tmp_path, capsys, "pendulum.toml")
     out = tmp_path / "run"

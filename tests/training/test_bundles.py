@@ -166,6 +166,7 @@ def test_run_command_trains_a_bundle_from_a_config(tmp_path):
     assert "QUICK" in (out / "summary.md").read_text().upper()
 
 
+@pytest.mark.slow  # 28 s; the family runner's resume is checked by test_fit_door's interrupted family run (CI stays under 30 min)
 def test_an_interrupted_bundle_run_resumes_from_the_seeds_it_finished(tmp_path, monkeypatch):
     """A bundle run interrupted after seed 0 keeps it (its record, its errors, its checkpoint) and
     `family --resume` trains seed 1 only; before, there was no --resume."""

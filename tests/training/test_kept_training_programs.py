@@ -129,7 +129,7 @@ def test_a_write_that_fails_leaves_no_temporary_file_and_the_run_goes_on(cache, 
     assert list(cache.glob("*")) == []
 
 
-@pytest.mark.long
+@pytest.mark.slow  # 22 s; the kept Adam chunk's test checks the same disk path, bit for bit (CI stays under 30 min)
 def test_a_kept_lm_program_is_read_back_and_gives_the_traced_numbers(cache, monkeypatch):
     model = make_model(Z0, width=9, depth=2, seed=5)
     first = _lm(henon_heiles(), model)
