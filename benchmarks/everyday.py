@@ -16,40 +16,20 @@ problems only). Times: the best of 3 after a first call.
 from __future__ import annotations
 
 import argparse
-import time
 
 import jax
 import numpy as np
 
-from atlasnn import solve
 from atlasnn.solver import GaussCollocation
 
 from benchmarks.common import machine_info, write_result
 from benchmarks.gauss_orders import LEVELS, fastest, problems, reference
-from benchmarks.problems import timed
-from benchmarks.solver_workprecision import _row, diffrax_points, yoshida_points
+from benchmarks.solver_workprecision import diffrax_points, solver_points, yoshida_points
 
 GAUSS_TOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12)
 RK_TOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13, 1e-14)
 ANCHORS = ("diffrax-tsit5", "diffrax-dopri8", "yoshida4")
 NAMES = ("henon-heiles", "kepler-e06", "double-pendulum")
-
-
-def gauss_points(system, z0, interval, t, ref, scale) -> list[dict]:
-    rows = []
-    for tol in GAUSS_TOLS:
-        solver = GaussCollocation(rtol=tol, atol=tol / 100)
-        try:
-            tic = time.perf_counter()
-            solve(system, z0, interval, solver=solver)(t)
-            first = time.perf_counter() - tic
-            (sol, z), best, med = timed(lambda: (lambda s: (s, s(t)))(solve(system, z0, interval, solver=solver)))
-        except Exception as exc:  # noqa: BLE001 - a march that cannot meet the tolerance is a result
-            rows.append({"method": "gauss", "setting": tol, "failed": str(exc)[:200]})
-            continue
-        rows.append(_row("gauss", tol, best, med, z, ref, scale, first_call_seconds=first, windows=sol.n_windows,
-                         stages=sol.info["stages"]))
-    return rows
 
 
 def verdicts(rows: list[dict]) -> dict:
@@ -79,7 +59,8 @@ def main(argv=None) -> None:
         t = np.linspace(*interval, 200)
         ref = reference(name, system, z0, interval, t)
         scale = float(np.ptp(ref, axis=0).max())
-        rows = (gauss_points(system, z0, interval, t, ref, scale)
+        rows = (solver_points("gauss", lambda r: GaussCollocation(rtol=r, atol=r / 100), GAUSS_TOLS, system, z0,
+                              interval, t, ref, scale)
                 + diffrax_points(system, z0, interval, t, ref, scale, RK_TOLS)
                 + yoshida_points(system, z0, interval, t, ref, scale))
         results[name] = {"interval": list(interval), "range": scale, "rows": rows, "levels": verdicts(rows)}

@@ -83,7 +83,7 @@ def solver_points(label, make, tols, system, z0, interval, t, ref, scale):
         first = time.perf_counter() - tic
         (sol, z), best, med = timed(lambda: (lambda s: (s, s(t)))(solve(system, z0, interval, solver=solver)))
         rows.append(_row(label, tol, best, med, z, ref, scale, first_call_seconds=first, windows=sol.n_windows,
-                         rejected=sol.info["rejected"]))
+                         rejected=sol.info["rejected"], stages=sol.info.get("stages")))
     return rows
 
 
