@@ -111,7 +111,8 @@ BENCH ?= throughput seed_batch device_accuracy time_to_accuracy compile_once col
 	estimate_effectivity window_optimisers bundle_eval bundle_cost flowmap_estimate flowmap_gauss_newton \
 	inverse_starts inverse_collocation_untuned inverse_noise solver_workprecision solver_suite solver_batch \
 	solver_first_run gauss_stages gauss_roundoff outer_solar energy_long step_modes diffrax_gauss shooting_solver \
-	nls_pde fput_recurrence everyday fixed_cost
+	nls_pde fput_recurrence everyday fixed_cost gauss_orders gauss_scaling time_transform rebound_anchor \
+	gauss_gradients learned_h sine_gordon_pde
 BR := docs/benchmarks
 
 bench: $(BIN)/atlasnn
@@ -173,6 +174,18 @@ bench-solver_batch bench-solver_first_run bench-step_modes bench-gauss_stages be
 	$(BIN)/python -m benchmarks.$* --out $(BR)/$*.json
 bench-everyday bench-fixed_cost: bench-%:
 	taskset -c 1 $(BIN)/python -m benchmarks.$* --out $(BR)/$*.json
+bench-gauss_orders bench-gauss_scaling bench-rebound_anchor: bench-%:
+	$(BIN)/python -m benchmarks.$*
+bench-time_transform:
+	taskset -c 1 $(BIN)/python -m benchmarks.time_transform --out $(BR)/time_transform.json
+bench-gauss_gradients:
+	$(BIN)/python -m benchmarks.gauss_gradients --out $(BR)/gauss_gradients.json
+bench-learned_h:
+	$(BIN)/python -m benchmarks.learned_h --systems two-body double-pendulum pendulum --sigmas 0.0 0.01 0.05 \
+		--steps 1000 --rate 0.003 --seed 0 --out $(BR)/learned_h.json --figure $(BR)/learned_h.png
+bench-sine_gordon_pde:
+	taskset -c 1 $(BIN)/python -m benchmarks.sine_gordon_pde --points 256 --T 10 --out $(BR)/sine_gordon_pde.json \
+		--figure $(BR)/sine_gordon_pde.png
 bench-outer_solar:
 	ATLASNN_CACHE_DIR=off $(BIN)/python -m benchmarks.outer_solar --out $(BR)/outer_solar.json
 bench-energy_long:

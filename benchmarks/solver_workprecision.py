@@ -21,6 +21,7 @@ at the reference's resolution, not a measurement.
     python -m benchmarks.solver_workprecision                       # every problem (tens of minutes)
     python -m benchmarks.solver_workprecision --problems kepler-e06-100 henon-heiles-long
     python -m benchmarks.solver_workprecision --figure-only         # redraw from the JSON
+    python -m benchmarks.solver_workprecision --update --problems kepler-e09-10   # rerun those, keep the rest
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from pathlib import Path
 
@@ -202,12 +204,19 @@ def main(argv=None):
     ap.add_argument("--problems", nargs="*", default=PROBLEMS)
     ap.add_argument("--figure", default="docs/figures/solver/workprecision.png")
     ap.add_argument("--figure-only", action="store_true", help="redraw the figure from --out")
+    ap.add_argument("--update", action="store_true", help="rerun only --problems, keeping the record's others")
     args = ap.parse_args(argv)
     if args.figure_only:
         figure(json.loads(Path(args.out).read_text()), args.figure)
         return
-    results = {"command": "python -m benchmarks.solver_workprecision " + " ".join(argv or []),
+    given = sys.argv[1:] if argv is None else argv
+    results = {"command": "python -m benchmarks.solver_workprecision " + " ".join(given),
                "machine": machine_info(), "problems": {}}
+    if args.update and Path(args.out).is_file():  # the other problems' rows as their own run made them
+        kept = json.loads(Path(args.out).read_text())
+        results["problems"] = {k: v for k, v in kept["problems"].items() if k not in args.problems}
+        results["updated"] = {"problems": args.problems, "earlier": kept.get("command"),
+                              "earlier_machine": kept.get("machine")}
     for name in args.problems:
         system, z0, interval, t, ref, described, gap = problem(name)
         scale = float(np.ptp(ref, axis=0).max())
@@ -222,6 +231,7 @@ def main(argv=None):
                 + yoshida_points(system, z0, interval, t, ref, scale))
         results["problems"][name] = {"interval": list(interval), "range": scale, "reference": described,
                                      "reference_gap": gap, "rows": rows, "equal_accuracy": equal_accuracy(rows)}
+        results["problems"] = {k: results["problems"][k] for k in PROBLEMS if k in results["problems"]}
         for r in rows:
             if "error_rel" in r:
                 print(f"{name:18s} {r['method']:15s} {r['setting']!s:>9}: error {r['error_rel']:.2e} in "

@@ -287,10 +287,12 @@ def time_transform(record: dict) -> str:
         error = f"{r['max_error']:.1e}"
         if r["trusted_until"] < r["T"]:
             error += f" (t ≤ {r['trusted_until']:.3g})"
-        times = f"{_ms(r['seconds'])} ({_ms(r['solve_seconds'])})"
-        rows.append(f"| {r['problem']} | {r['method']} | {r['windows']} | {times} | {error} "
+        times = _ms(r["seconds"]) + (f" ({_ms(r['solve_seconds'])})" if r.get("solve_seconds") else "")
+        method = r["method"] + (" → in τ" if "auto" in r["method"] and r.get("marched_in") == "tau" else "")
+        rows.append(f"| {r['problem']} | {method} | {r['windows'] or '—'} | {times} | {error} "
                     f"| {r['energy_max_rel']:.1e} ({r['energy_end_rel']:.0e}) |")
-    return "\n".join(rows) + (f"\n\nThe call: the solve and its values at {record['output_times']} times, best of 3 "
+    return "\n".join(rows) + (f"\n\nThe call: the solve and its values at {record['output_times']} times, best of "
+                              f"{record.get('repeats', 3)} (in turns across the methods) "
                               f"after a first call; errors and energies at {record['measured_times']} times.")
 
 
@@ -410,7 +412,7 @@ def _choosing_trajectory() -> list[str]:
     return [f"{_suite_range(suite)} of the range at the defaults on every built-in problem",
             f"energy error at most {_e(gauss['energy_max_all'], 1)} over 10⁵ Kepler periods, Diffrax Dopri8's "
             f"{_e(dopri8['energy_max_all'], 1)}",
-            f"{adaptive[0]:.2g}× (e = 0.6, 100 periods) to {adaptive[1]:.2g}× (e = 0.99) faster",
+            f"{adaptive[0]:.2g}× faster on Kepler e = 0.6 over 100 periods, {adaptive[1]:.2g}× at e = 0.99",
             f"{_e(max(best))}–{_e(min(best))} at its tightest, on "
             + ("no problem" if not any(equal) else f"{sum(equal)} problems") + " as accurate as the default",
             f"at that tightest {min(ratios):.2g}–{max(ratios):.2g}× the default's time on the {len(ratios)} of "
@@ -511,6 +513,11 @@ def render(text: str) -> str:
         else:
             load = (record.get("machine") or {}).get("load_average")
             note = f" Load average {load[0]:.1f} while it ran." if load else ""
+            updated = record.get("updated")
+            if updated:  # a record whose named rows a later run replaced (``--update``)
+                rerun = updated.get("problems") or updated.get("methods") or []
+                note += (f" The rows of {', '.join(rerun)} are from that run; the others from an "
+                         f"earlier one, `{updated['earlier'].strip()}`.")
             body = f"{MAKERS[name](record)}\n\nMade by `{record['command'].strip()}` → `{RECORDS[name]}`.{note}\n"
         return match.group(1) + body + match.group(4)
 

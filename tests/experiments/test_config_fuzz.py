@@ -30,7 +30,7 @@ from atlasnn.training import train
 from atlasnn.training import transfer
 
 MAX_EXAMPLES = int(os.environ.get("ATLASNN_FUZZ_EXAMPLES", "250"))
-MAX_COMPILES = 6  # distinct compiled training steps the fuzz test may build (a few seconds each)
+MAX_COMPILES = 3  # distinct compiled training steps the fuzz test may build (a few seconds each)
 
 SHORT = {
     "name": "fuzz-short",

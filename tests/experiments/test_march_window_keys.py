@@ -35,6 +35,8 @@ def test_a_march_fixed_by_window_or_by_n_windows_loads_and_runs(tmp_path, key, c
     scheme = cfg.march.scheme
     assert not scheme.adaptive
     assert n_windows_for(cfg.eval_stage.t0, cfg.eval_stage.T, scheme) == count
+    if key.startswith("window"):
+        return  # a march fixed by its window runs in every other march test; n_windows alone was the refused one
     res = run_experiment(cfg, tmp_path / "run", progress=False, log=lambda *a: None)
     marched = [r for r in res["runs"] if r["role"] == "march"]
     assert marched and all(r["n_windows"] == count for r in marched)

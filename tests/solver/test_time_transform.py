@@ -151,8 +151,8 @@ def test_a_scale_that_reaches_zero_on_the_way_is_refused_with_what_was_computed(
 
 def test_bad_settings_are_refused_in_one_line():
     for value in (3, "n-body"):
-        with pytest.raises(AtlasError, match=r"GaussCollocation time_scale must be None, one of \['potential'\] or a "
-                                             r"function g\(q, p\) > 0, got"):
+        with pytest.raises(AtlasError, match=r"GaussCollocation time_scale must be None, 'auto', one of "
+                                             r"\['potential'\] or a function g\(q, p\) > 0, got"):
             GaussCollocation(time_scale=value)
     with pytest.raises(AtlasError, match=r"time_scale \(potential\) .* got g = nan at z0 = .*: V\(q\) = H\(q, 0\) "
                                          r"must be < 0 there"):
@@ -191,9 +191,9 @@ def test_saving_is_refused_in_one_line(tmp_path):
 @pytest.mark.long
 def test_the_scale_is_recommended_where_it_suits_the_system(monkeypatch):
     """``potential_applies`` recognises a negative potential homogeneous of degree −1 (Kepler, three
-    bodies), not a positive, a periodic or a non-separable one; a default march through an eccentric
-    orbit says to use the scale (its g varies 83-fold at e = 0.9, 2.5-fold at e = 0.3: no advice),
-    and a default march stopped by the windows' memory names it as the remedy."""
+    bodies), not a positive, a periodic or a non-separable one; a march in t (``time_scale=None``)
+    through an eccentric orbit says to use the scale (its g varies 83-fold at e = 0.9, 2.5-fold at
+    e = 0.3: no advice), and one stopped by the windows' memory names it as the remedy."""
     import atlasnn.solver._gauss as gauss
     from atlasnn.solver._gauss_time import potential_applies
     from atlasnn.systems import harmonic_oscillator
@@ -205,11 +205,56 @@ def test_the_scale_is_recommended_where_it_suits_the_system(monkeypatch):
                    expression_system("(p1**2 + p2**2)/2 - 1/sqrt(q1**2 + q2**2)", ["q1", "q2"], ["p1", "p2"],
                                      z0=[1.0, 0.0, 0.0, 1.0])):
         assert not potential_applies(system, system.z0), system.name
-    eccentric = solve(kepler_system(0.9), None, (0.0, 4 * np.pi))
+    in_t = GaussCollocation(time_scale=None)
+    eccentric = solve(kepler_system(0.9), None, (0.0, 4 * np.pi), solver=in_t)
     assert "time_scale='potential' would take fewer windows" in eccentric.info["advice"]
-    assert "advice" not in solve(kepler_system(0.3), None, (0.0, 4 * np.pi)).info
+    assert "advice" not in solve(kepler_system(0.3), None, (0.0, 4 * np.pi), solver=in_t).info
     monkeypatch.setattr(gauss, "available_memory", lambda: 2**20)
     with pytest.raises(AtlasError, match="would need about .* windows .*; a close encounter shortened the windows: "
                                          "time_scale='potential'") as info:
-        solve(kepler_system(0.99), None, (0.0, 20 * np.pi))
+        solve(kepler_system(0.99), None, (0.0, 20 * np.pi), solver=in_t)
     assert info.value.partial is not None
+
+
+@pytest.mark.long
+def test_the_default_marches_in_tau_where_the_scale_varies_and_in_t_elsewhere(monkeypatch):
+    """The default (time_scale="auto"): Kepler e = 0.99 over ten periods from pericentre is marched
+    in τ after one chunk of windows in t (g varies thousands-fold over it), in a few hundred windows
+    rather than ~80 000, saying why, and as accurately as the scale chosen by hand; e = 0.3 (g varies
+    2.5-fold) and a system the scale does not suit stay in t; a batch switches as a whole; and a march
+    in t that the windows' memory stops is marched in τ instead of refused."""
+    import atlasnn.solver._gauss as gauss
+    import atlasnn.solver._gauss_time as gauss_time
+
+    system, T = kepler_system(0.99), 20 * np.pi
+    sol = solve(system, None, (0.0, T))
+    assert isinstance(sol, TimeTransformedSolution) and sol.n_windows < 300
+    assert sol.info["settings"]["time_scale"] == "auto" and sol.info["time_scale"] == "potential"
+    assert "varied" in sol.info["time_scale_chosen"] and "-fold over the first" in sol.info["time_scale_chosen"]
+    t = np.linspace(0.0, T, 2001)
+    by_hand = solve(system, None, (0.0, T), solver=TT)
+    assert np.abs(sol(t) - by_hand(t)).max() < 1e-12
+    assert not isinstance(solve(kepler_system(0.3), None, (0.0, 20 * np.pi)), TimeTransformedSolution)
+    assert not isinstance(solve(henon_heiles(), None, (0.0, 200.0)), TimeTransformedSolution)
+    sols = solve_batch(system, [kepler_system(e).z0 for e in (0.3, 0.99)], (0.0, 4 * np.pi))
+    assert all(isinstance(s, TimeTransformedSolution) for s in sols)
+    assert np.abs(sols[0](t[:200]) - kepler_exact(t[:200], 0.3)).max() < 1e-10
+    monkeypatch.setattr(gauss_time, "SCALE_VARIATION", np.inf)  # the watch never fires: memory stops the march
+    monkeypatch.setattr(gauss, "available_memory", lambda: 2**20)
+    stopped = solve(kepler_system(0.99), None, (0.0, 20 * np.pi))
+    assert "stopped at t = " in stopped.info["time_scale_chosen"]
+
+
+@pytest.mark.long
+def test_atlasnn_solve_says_when_the_default_marched_in_tau_and_refuses_to_save_it(tmp_path, capsys):
+    """The command line on the built-in Kepler e = 0.9 experiment over ten periods: a note says the
+    march was in τ and why; --save of that solution is refused in one line (nothing written)."""
+    from atlasnn.cli import main
+
+    assert main(["solve", "kepler-e09", "--T", "20*pi"]) == 0
+    out = capsys.readouterr().out
+    assert "note: marched in a fictitious time" in out and "-fold over the first" in out
+    target = tmp_path / "kepler.npz"
+    assert main(["solve", "kepler-e09", "--T", "20*pi", "--save", str(target)]) == 2
+    err = capsys.readouterr().err
+    assert "cannot be saved yet" in err and len(err.strip().splitlines()) == 1 and not target.exists()

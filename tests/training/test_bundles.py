@@ -221,15 +221,15 @@ def test_edge_sampling_crowds_the_faces():
 
 
 def test_lm_rounds_draw_fresh_points_and_record_every_trial():
-    """LM split into rounds: every trial is in the history (the start and 40 trials, not one start
+    """LM split into rounds: every trial is in the history (the start and 12 trials, not one start
     per round), and the later rounds fit other points, so the model differs from one fixed set's."""
-    cfg = dict(windows=1, epochs=200, chunk=200, lm_steps=40, lm_points=96)
+    cfg = dict(windows=1, epochs=20, chunk=20, lm_steps=12, lm_points=48)
     one = train_bundle(OSC, BundleBox.around([1.3, 1.0], 0.2, {"lam": (0.5, 1.5)}, T=1.0),
                        BundleTrainConfig(**cfg), width=8, seed=1)
     four = train_bundle(OSC, BundleBox.around([1.3, 1.0], 0.2, {"lam": (0.5, 1.5)}, T=1.0),
                         BundleTrainConfig(**cfg, lm_rounds=4), width=8, seed=1)
     for trained in (one, four):
-        assert trained.lm_loss[0].size == 41 or trained.lm_stop[0] != "budget"
+        assert trained.lm_loss[0].size == 13 or trained.lm_stop[0] != "budget"
         assert np.all(np.isfinite(trained.lm_loss[0]))
     np.testing.assert_array_equal(one.adam_loss[0], four.adam_loss[0])  # the same up to LM
     assert not np.array_equal(np.asarray(one.solution.windows[0].weights[0]),

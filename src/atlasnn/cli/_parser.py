@@ -148,7 +148,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--rtol", type=float, default=None, help="the solver's relative tolerance (default: its own, "
                    "1e-11 for gauss, 1e-12 for collocation)")
     s.add_argument("--atol", type=float, default=None, help="the solver's absolute tolerance (default: its own)")
-    s.add_argument("--stages", type=int, default=None, help="gauss: s, the Gauss nodes per window (default 12)")
+    s.add_argument("--stages", type=int, default=None,
+                   help="gauss: s, the Gauss nodes per window (default: from rtol, 16 at its default)")
     s.add_argument("--steps", dest="step_mode", default=None, choices=("constant", "adaptive"),
                    help="gauss: one window length, "
                    "only shortened where needed (symplectic; default), or every window its own")

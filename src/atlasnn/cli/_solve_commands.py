@@ -119,6 +119,8 @@ def cmd_solve(args) -> int:
           f"(first call, with compilation or cache load: {info['first_call_time']:.2f} s)")
     if info.get("advice"):
         print(f"note: {info['advice']}")
+    if info.get("time_scale_chosen"):
+        print(f"note: marched in a fictitious time (windows counted in it), time_scale={info['time_scale_chosen']}")
     est = sol.estimate(z0=z0)
     trust = "" if est.trusted else f" (quantitative only up to t = {est.trusted_until:.4g}: past it the error is large)"
     print(f"estimated max error: {est.max_abs:.3e} = {est.relative_max:.3e} of the state's range{trust}")
@@ -134,8 +136,8 @@ def cmd_solve(args) -> int:
                  f": within what the reference resolves ({blur:.1e}, its distance from DOP853 at "
                  f"{CHECK_LOOSER['rtol']:g}), so the true error is not known better than that"))
     if args.save is not None:
-        from atlasnn.checkpoint import save_piecewise
+        from atlasnn.checkpoint import save
 
-        save_piecewise(args.save, sol, extra={"interval": [t0, T]})
+        save(args.save, sol, extra={"interval": [t0, T]})
         print(f"wrote {args.save}")
     return 0

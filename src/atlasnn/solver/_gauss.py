@@ -28,8 +28,8 @@ from atlasnn.solver._collocation import require_float64
 from atlasnn.solver._gauss_core import LOOPS, gauss_core
 from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, ReplayState, clock, compiled_gauss_march,
                                          compiled_gauss_replay, compiled_gauss_windows, initial_state)
-from atlasnn.solver._gauss_time import (TimeTransform, check_time_scale, describe_time_scale, potential_applies,
-                                        potential_scale_values)
+from atlasnn.solver._gauss_time import (AUTO, WATCH_FIRST, ScaleVaries, ScaleWatch, TimeTransform, check_time_scale,
+                                        describe_time_scale, march_advice, potential_applies)
 from atlasnn.systems import HamiltonianSystem, require_float64_field
 
 __all__ = ["GaussCollocation", "KEEP_BYTES", "NEWTON_AUTO_SIZE", "STAGES_BY_TOLERANCE", "stages_for"]
@@ -141,8 +141,12 @@ class GaussCollocation(AbstractSolver):
             (Poincaré's transformation: symplectic in the extended phase space; for close
             encounters and eccentric orbits): a function g(q, p) > 0, small where the motion is
             fast, or ``"potential"``: g = (−V(q))^(−3/2) for a separable H whose potential is
-            negative (gravitational N-body problems). None: march in t. ``h`` and the lengths
-            recorded are then in τ (``_gauss_time``; docs/SOLVER.md, "Close encounters").
+            negative (gravitational N-body problems); ``h`` and the lengths recorded are then in τ
+            (``_gauss_time``; docs/SOLVER.md, "Close encounters"). None: march in t. ``"auto"``
+            (the default): march in t, and for a system ``"potential"`` suits (separable, V < 0
+            and homogeneous of degree −1, as gravity's) march in τ with it instead once a march of
+            constant lengths in t finds g varying 20-fold over its windows after a chunk, or is
+            stopped by lengths a close encounter shrank (``info["time_scale_chosen"]`` says why).
         max_windows: the most window tries (accepted or rejected) of a solve run inside ``jax.jit``,
             ``jax.grad``, ``jax.vmap`` or ``jax.jvp`` (its traceable core has static shapes, as
             Diffrax's ``max_steps``); a march that needs more raises when it runs.
@@ -167,7 +171,7 @@ class GaussCollocation(AbstractSolver):
     max_rejects: int = 30
     keep: bool | None = None
     chunk: int = 1024
-    time_scale: str | Callable | None = None
+    time_scale: str | Callable | None = AUTO
     max_windows: int = 4096
     differentiation: str = "reverse"
 
@@ -222,9 +226,9 @@ class GaussCollocation(AbstractSolver):
         ``solve`` returns inside ``jax.jit``, ``jax.grad``, ``jax.vmap`` or ``jax.jvp``. The same
         windows and numbers as ``solve`` on numbers (to round-off); no progress, no error estimate,
         no time scale (docs/JAX.md)."""
-        if self.time_scale is not None:
-            raise ConfigError("GaussCollocation time_scale is not available inside jit/grad/vmap: solve without it "
-                              "there, or call solve on numbers")
+        if self.time_scale not in (None, AUTO):
+            raise ConfigError("GaussCollocation time_scale is not available inside jit/grad/vmap (there the march is "
+                              "in t): solve without it there, or call solve on numbers")
         n = system.state_dim
         require_float64_field(system, constants=False)
         need = self.max_windows * (self.stage_count + 3) * n * 8
@@ -245,9 +249,23 @@ class GaussCollocation(AbstractSolver):
         """One solution per row of ``z0s`` (shape (B, 2d)), all marched by one compiled program."""
         require_float64(system)
         z0s = np.atleast_2d(np.asarray(z0s, np.float64))
-        if self.time_scale is None:
-            return self._solve_rows(system, z0s, t0, T, progress)
-        transform = TimeTransform(system, self.time_scale)
+        if self.time_scale not in (None, AUTO):
+            return self._solve_scaled(system, z0s, t0, T, progress, self.time_scale)
+        auto = (self.time_scale == AUTO and self.steps == "constant" and self.h is None
+                and all(potential_applies(system, z) for z in z0s))
+        tic = time.perf_counter()
+        try:
+            return self._solve_rows(system, z0s, t0, T, progress, watch=ScaleWatch(system, len(z0s)) if auto else None)
+        except ScaleVaries as why:
+            spent = time.perf_counter() - tic  # not in the solution's solve_time, which is the march in τ's
+            return self._solve_scaled(system, z0s, t0, T, progress, "potential",
+                                      chosen=f"{why} (that march took {spent:.3g} s before this one)")
+
+    def _solve_scaled(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float,
+                      progress: Callable[[float], None] | None, time_scale: Any, chosen: str | None = None
+                      ) -> list[TimeTransformedSolution]:
+        """``solve_batch`` in τ with ``time_scale`` (``chosen``: why the default took it)."""
+        transform = TimeTransform(system, time_scale)
         try:
             parts, stop = self._solve_rows(transform.extended, transform.lift(z0s, t0), t0, T, progress,
                                            until=transform.clock), None
@@ -256,6 +274,9 @@ class GaussCollocation(AbstractSolver):
                 raise
             parts, stop = exc.partial, exc
         out, problem = transform.solutions(parts, T)
+        for sol in out if chosen else ():
+            if sol is not None:
+                sol.info["time_scale_chosen"] = f"'potential': {chosen}"
         if problem is None and stop is None:
             return out
         # a scale that stopped the time says so, rather than the march's projection it led to
@@ -264,9 +285,11 @@ class GaussCollocation(AbstractSolver):
         raise error from None
 
     def _solve_rows(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float,
-                    progress: Callable[[float], None] | None, until: int | None = None) -> list[PolynomialSolution]:
+                    progress: Callable[[float], None] | None, until: int | None = None,
+                    watch: ScaleWatch | None = None) -> list[PolynomialSolution]:
         """``solve_batch`` in the march's own time, or (``until``: the index of t in the
-        extended state) in τ until t reaches T."""
+        extended state) in τ until t reaches T; ``watch``: the default's, which raises
+        :class:`ScaleVaries` where the march in t should be one in τ."""
         b, n = z0s.shape
         # a batch padded to 8, 16, 32 … members (copies of the first, already at T, dropped): a few
         # compiled programs rather than one per batch size
@@ -284,7 +307,7 @@ class GaussCollocation(AbstractSolver):
         if until is not None:
             padding[:, until] = float(T)
         rows, state, first_call, stopped = self._march(program, np.concatenate([z0s, padding]), starts, T, progress,
-                                                       2 * per_window, until)
+                                                       2 * per_window, until, watch)
         wall = time.perf_counter() - started
         out, problem = [], None
         for m in range(b):
@@ -297,6 +320,9 @@ class GaussCollocation(AbstractSolver):
                     "h_min": float(length.min(initial=math.inf)), "h_max": float(length.max(initial=0.0)),
                     "solve_time": wall, "first_call_time": first_call, "batch": b}
             if failed or start.size == 0 or end < T:
+                if watch is not None and (stopped is not None or failed in (1, 2)):
+                    raise ScaleVaries(f"the march in t stopped at t = {_times(end)[0]} (windows a close encounter "
+                                      "shortened)")
                 problem = problem or self._stopped_line(m, b, end, t0, T, stopped, failed, z0s[m],
                                                         system.linear_part is not None,
                                                         _diverging(system, z0s[m], np.asarray(state.z[m])),
@@ -305,7 +331,8 @@ class GaussCollocation(AbstractSolver):
                 out.append(self._solution(system, np.append(start, state.t[m]), z, e, L, ratio, info)
                            if start.size else None)
                 continue
-            advice = None if until is not None else self._advice(length, system, z)
+            advice = None if until is not None or self.steps != "constant" or self.h is not None else \
+                march_advice(system, length, z, self.warmup)
             out.append(self._solution(system, np.append(start, state.t[m]), z, e, L, ratio,
                                       {**info, **({"advice": advice} if advice else {})}))
         if problem is not None:
@@ -332,7 +359,7 @@ class GaussCollocation(AbstractSolver):
             return f"{who} stopped at t = {at} of [{start}, {stop}]: {diverging}; check H there"
         why = stopped or FAILURES.get(failed, "the march stopped")
         default_iterations = type(self).__dataclass_fields__["max_iterations"].default
-        if gravitational and self.time_scale is None and (stopped is not None or failed in (1, 2)):
+        if gravitational and self.time_scale in (None, AUTO) and (stopped is not None or failed in (1, 2)):
             remedy = ("a close encounter shortened the windows: time_scale='potential' marches it on windows short "
                       "only there, symplectic (docs/SOLVER.md, 'Close encounters')")
         elif stopped is not None:
@@ -361,50 +388,38 @@ class GaussCollocation(AbstractSolver):
         return f"{who} stopped at t = {at} of [{start}, {stop}]: {why} (rtol={self.rtol:g}, atol={self.atol:g}, " \
                f"h={self.h}); {remedy}"
 
-    def _advice(self, length: np.ndarray, system: HamiltonianSystem, z: np.ndarray) -> str | None:
-        """A line for a march of constant lengths through time scales that differ along the orbit
-        (``z``: the window starts): for a system ``time_scale="potential"`` suits, when the scale g
-        varies 20-fold or more over the windows (an eccentric orbit, a close approach: the constant
-        length is the shortest time scale's throughout); otherwise when the length had to shrink
-        8-fold or more after the warm-up, adaptive lengths."""
-        if self.steps != "constant" or self.h is not None or len(z) < 2:
-            return None
-        if potential_applies(system, z[0]):
-            g = potential_scale_values(system, z)
-            if g.min() > 0 and g.max() >= 20 * g.min():
-                return (f"the time scale (−V)^(−3/2) varies {g.max() / g.min():.0f}-fold over the windows: "
-                        "time_scale='potential' would take fewer windows, symplectic (docs/SOLVER.md, "
-                        "'Close encounters')")
-            return None
-        kept = length[self.warmup:-1]
-        if kept.size < 2 or kept.max() <= 8 * kept.min():
-            return None
-        return (f"the window length shrank {kept.max() / kept.min():.0f}-fold after the warm-up (time scales that "
-                "differ along the orbit): steps='adaptive' would take fewer windows (not symplectic: "
-                "docs/SOLVER.md, 'Window lengths')")
-
-    def _march(self, program, z0s, starts, T, progress, window_bytes, until=None):
+    def _march(self, program, z0s, starts, T, progress, window_bytes, until=None, watch=None):
         """Call the compiled program until every member reaches T (its time, or component ``until``
         of its state) or fails: the accepted windows per call (each (B, ...) cut to the member's
         count), the final state, the first call's time, and why the march was stopped early (None:
         it was not) — when the windows it would take to reach T, projected from the part done,
-        would not fit in the memory available."""
+        would not fit in the memory available. ``watch`` sees each call's window starts and, where
+        a march not yet done should be one in τ, raises :class:`ScaleVaries`."""
         b, t0 = len(z0s), float(np.min(starts))
         counts, room = np.zeros(b), False  # the memory available: read once a second call is needed
         stacked = [initial_state(z, t, self.stage_count) for z, t in zip(z0s, starts)]
         state = GaussState(*(np.array(x) for x in zip(*stacked)))  # not np.stack: its checks, 14 times a call
         args = tuple(np.float64(x) for x in (T, self.rtol, self.atol, self.h or 0.0))
         rows, first_call = [], 0.0
+        # the windows a call may take: all the chunk holds, or for a watched march WATCH_FIRST, then twice as
+        # many each call (it is seen soon, and at most about twice what showed g varying is thrown away)
+        limit = WATCH_FIRST if watch is not None else math.inf
         with jax.enable_x64(True):
             while True:
                 tic = time.perf_counter()
-                out = to_host(program(state, *args))
+                out = to_host(program(state, *args, np.float64(min(limit, 2**30))))
+                limit *= 2
                 if not rows:  # the first call compiles (or loads from the cache) and runs
                     first_call = time.perf_counter() - tic
                 state = out.state
                 kept = np.asarray(out.kept, bool)
                 rows.append([[np.asarray(x)[m][kept[m]] for m in range(b)] for x in out[1:-1]])
                 t_now, failed = np.asarray(clock(state, until)), np.asarray(state.failed)
+                if watch is not None and not np.all(t_now[:len(watch.off)] >= T):
+                    for m in range(len(watch.off)):
+                        watch.see(m, rows[-1][2][m])
+                    if (reason := watch.reason()) is not None:
+                        raise ScaleVaries(reason)
                 if progress is not None:
                     progress(min(1.0, float(t_now.min() - t0) / (T - t0)))
                 if np.all((t_now >= T) | (failed != 0)):

@@ -282,9 +282,11 @@ def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety
     def running(st, T):
         return marching(st, T, until)
 
-    def alone(state: GaussState, T, rtol, atol, h_given):
-        """One member: a while loop that stops at T; row k of the buffers is the k-th accepted window
-        (written in place whatever the outcome: a rejected try is overwritten by the next)."""
+    def alone(state: GaussState, T, rtol, atol, h_given, limit):
+        """One member: a while loop that stops at T, or after ``limit`` accepted windows (at most
+        ``chunk``: a host that looks at the first windows soon asks for fewer); row k of the buffers
+        is the k-th accepted window (written in place whatever the outcome: a rejected try is
+        overwritten by the next)."""
         st = started(system, tab, jax.tree_util.tree_map(lambda x: x[0], state), T, h_given, until)
         n, dt = st.z.shape[0], st.z.dtype
         buf = (jnp.zeros(chunk, dt), jnp.zeros(chunk, dt), jnp.zeros((chunk, n), dt), jnp.zeros((chunk, n), dt),
@@ -295,14 +297,15 @@ def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety
             st, streak, ok, rows = attempt(st, streak, T, rtol, atol, h_given)
             return k + ok.astype(k.dtype), st, streak, tuple(b.at[k].set(x) for b, x in zip(buf, rows))
 
-        k, st, _, buf = lax.while_loop(lambda c: running(c[1], T) & (c[0] < chunk), body,
+        most = jnp.minimum(chunk, limit.astype(jnp.int32))
+        k, st, _, buf = lax.while_loop(lambda c: running(c[1], T) & (c[0] < most), body,
                                        (jnp.asarray(0), st, jnp.asarray(0), buf))
         out = GaussChunk(jnp.arange(chunk) < k, *buf, st)
         return jax.tree_util.tree_map(lambda x: x[None], out)
 
-    def batched(state: GaussState, T, rtol, atol, h_given):
+    def batched(state: GaussState, T, rtol, atol, h_given, limit):
         """Members on a leading axis: a while loop of tries, every member one try per trip (a
-        finished one idling), until all are done or ``chunk`` trips; trip j's rows go to row j of
+        finished one idling), until all are done or ``limit`` trips (at most ``chunk``); trip j's rows go to row j of
         the buffers for every member at once (written in place: a row index per member, under
         ``vmap``, would make every write a scatter that copies the buffers)."""
         st = jax.vmap(started, in_axes=(None, None, 0, None, None, None))(system, tab, state, T, h_given, until)
@@ -321,17 +324,18 @@ def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety
             return (j + 1, st, jnp.where(active, streak2, streak),
                     tuple(bf.at[j].set(x) for bf, x in zip(buf, (ok & active, *rows))))
 
-        _, st, _, buf = lax.while_loop(lambda c: jnp.any(running(c[1], T)) & (c[0] < chunk), body,
+        most = jnp.minimum(chunk, limit.astype(jnp.int32))
+        _, st, _, buf = lax.while_loop(lambda c: jnp.any(running(c[1], T)) & (c[0] < most), body,
                                        (jnp.asarray(0), st, jnp.zeros(b, jnp.int32), buf))
         return GaussChunk(*(jnp.moveaxis(x, 0, 1) for x in buf), st)
 
-    def mapped(state: GaussState, T, rtol, atol, h_given):
+    def mapped(state: GaussState, T, rtol, atol, h_given, limit):
         """Members on a leading axis, marched one after the other inside the program (each its own
         while loop, as :func:`alone`): on a CPU the lock-step loop of :func:`batched` gains nothing
         from its vector width on these small states and pays for the slowest member's iterations,
         so one member at a time is faster there (``benchmarks.solver_batch``)."""
         def one(st):
-            out = alone(jax.tree_util.tree_map(lambda x: x[None], st), T, rtol, atol, h_given)
+            out = alone(jax.tree_util.tree_map(lambda x: x[None], st), T, rtol, atol, h_given, limit)
             return jax.tree_util.tree_map(lambda x: x[0], out)
 
         return lax.map(one, state)

@@ -46,19 +46,71 @@ from atlasnn.errors import ConfigError
 from atlasnn.solutions import PolynomialSolution, TimeTransformedSolution
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["TIME_SCALES", "TimeTransform", "check_time_scale", "describe_time_scale", "poincare_system",
-           "potential_applies", "potential_scale_values"]
+__all__ = ["AUTO", "SCALE_VARIATION", "ScaleVaries", "ScaleWatch", "TIME_SCALES", "TimeTransform", "WATCH_FIRST",
+           "check_time_scale", "describe_time_scale", "march_advice", "poincare_system", "potential_applies",
+           "potential_scale_values"]
 
 #: the scales chosen by name (any other is a function g(q, p))
 TIME_SCALES = ("potential",)
+#: the default: march in t, and in τ with "potential" once a march in t shows it needs it (:class:`ScaleWatch`)
+AUTO = "auto"
+#: how many-fold g = (−V)^(−3/2) varies over a march's windows in t before the default marches in τ
+#: instead (and before a march in t given ``time_scale=None`` advises it): Kepler e = 0.6 (8-fold)
+#: stays in t, where the two cost the same; e = 0.9 (80-fold) takes 2 403 windows in t, 65 in τ
+#: (benchmarks/time_transform.py)
+SCALE_VARIATION = 20.0
+#: the windows of a watched march's first call, each later call's twice the last's (up to the
+#: chunk): what a switch to τ throws away is at most about twice what the march in t needed to show
+#: it, beyond these (the Pythagorean problem: g varies 1 900-fold over its first 128 windows in t).
+#: Each call and look costs about 1–2 ms: on Kepler e = 0.6 (273 windows in t, two calls) 15.1
+#: against 12.4 ms for the call with its values (benchmarks/time_transform.py)
+WATCH_FIRST = 128
+
+
+class ScaleVaries(Exception):
+    """Raised between chunks of a default march in t that :class:`ScaleWatch` found to need τ; its
+    text says why (recorded in the solution's ``info["time_scale_chosen"]``)."""
+
+
+class ScaleWatch:
+    """The default's watch on a march of constant lengths in t of a system ``"potential"`` suits:
+    the range of g = (−V)^(−3/2) over each member's window starts so far (:meth:`see` after each
+    chunk), and the reason to march in τ instead once it spans ``SCALE_VARIATION``-fold for a
+    member (:meth:`reason`; None while it does not). A g that is not finite and positive (V ≥ 0
+    on the way) turns the watch off for that member: the scale does not apply there."""
+
+    def __init__(self, system: HamiltonianSystem, members: int):
+        self.system = system
+        self.low, self.high = np.full(members, np.inf), np.zeros(members)
+        self.off = np.zeros(members, bool)
+        self.windows = np.zeros(members, int)
+
+    def see(self, m: int, z: np.ndarray) -> None:
+        if self.off[m] or len(z) == 0:
+            return
+        g = potential_scale_values(self.system, z)
+        if not np.all(np.isfinite(g) & (g > 0)):
+            self.off[m] = True
+            return
+        self.low[m], self.high[m] = min(self.low[m], g.min()), max(self.high[m], g.max())
+        self.windows[m] += len(z)
+
+    def reason(self) -> str | None:
+        fold = np.where(self.off, 0.0, self.high / np.where(self.low > 0, self.low, np.inf))
+        m = int(np.argmax(fold))
+        if fold[m] < SCALE_VARIATION:
+            return None
+        return (f"the time scale (−V)^(−3/2) varied {fold[m]:.0f}-fold over the first {self.windows[m]} windows "
+                "of constant length in t")
 
 
 def check_time_scale(value: Any) -> None:
-    """Refuse, in one line, a ``time_scale`` that is none of None, a name of :data:`TIME_SCALES`, a function."""
-    if value is None or callable(value) or (isinstance(value, str) and value in TIME_SCALES):
+    """Refuse, in one line, a ``time_scale`` that is none of None, "auto", a name of
+    :data:`TIME_SCALES`, a function."""
+    if value is None or callable(value) or (isinstance(value, str) and value in (AUTO,) + TIME_SCALES):
         return
-    raise ConfigError(f"GaussCollocation time_scale must be None, one of {list(TIME_SCALES)} or a function g(q, p) "
-                      f"> 0, got {value!r}")
+    raise ConfigError(f"GaussCollocation time_scale must be None, {AUTO!r}, one of {list(TIME_SCALES)} or a function "
+                      f"g(q, p) > 0, got {value!r}")
 
 
 def describe_time_scale(value: Any) -> str | None:
@@ -83,8 +135,9 @@ def potential_applies(system: HamiltonianSystem, z0: Any) -> bool:
     """Whether ``time_scale="potential"`` suits ``system`` by the look of it at the first z0 it is
     asked about (kept per system): H declared separable, and V(q) = H(q, 0) negative at q0 and
     homogeneous of degree −1 there (V(λq0) = V(q0)/λ for λ = 1/2, 2, 10 to 1e-9), as a sum of
-    −m_i m_j/r_ij is — gravitational N bodies and Kepler's problem. It picks the advice a stopped or
-    slow march gives, not the method."""
+    −m_i m_j/r_ij is — gravitational N bodies and Kepler's problem. It decides whether the default
+    (``"auto"``) watches g along a march in t (:class:`ScaleWatch`), and the advice a stopped or
+    slow march gives."""
     if not system.separable:
         return False
     known = _SUITS.get(system)
@@ -97,6 +150,29 @@ def potential_applies(system: HamiltonianSystem, z0: Any) -> bool:
         known = _SUITS[system] = bool(np.isfinite(v[0]) and v[0] < 0 and np.all(np.abs(v[1:] * lams[1:] / v[0] - 1)
                                                                                  <= 1e-9))
     return known
+
+
+def march_advice(system: HamiltonianSystem, length: np.ndarray, z: np.ndarray, warmup: int) -> str | None:
+    """A line for a march of constant lengths in t through time scales that differ along the orbit
+    (``length``: its windows' lengths, ``z``: their starts): for a system ``time_scale="potential"``
+    suits, when the scale g varies ``SCALE_VARIATION``-fold or more over the windows (an eccentric
+    orbit, a close approach: the constant length is the shortest time scale's throughout);
+    otherwise when the length had to shrink 8-fold or more after the warm-up, adaptive lengths."""
+    if len(z) < 2:
+        return None
+    if potential_applies(system, z[0]):
+        g = potential_scale_values(system, z)
+        if g.min() > 0 and g.max() >= SCALE_VARIATION * g.min():
+            return (f"the time scale (−V)^(−3/2) varies {g.max() / g.min():.0f}-fold over the windows: "
+                    "time_scale='potential' would take fewer windows, symplectic (docs/SOLVER.md, "
+                    "'Close encounters')")
+        return None
+    kept = length[warmup:-1]
+    if kept.size < 2 or kept.max() <= 8 * kept.min():
+        return None
+    return (f"the window length shrank {kept.max() / kept.min():.0f}-fold after the warm-up (time scales that "
+            "differ along the orbit): steps='adaptive' would take fewer windows (not symplectic: "
+            "docs/SOLVER.md, 'Window lengths')")
 
 
 def potential_scale_values(system: HamiltonianSystem, z: np.ndarray) -> np.ndarray:
