@@ -68,14 +68,14 @@ WATCH_FIRST = 128
 
 
 class ScaleVaries(Exception):
-    """Raised between chunks of a default march in t that :class:`ScaleWatch` found to need τ; its
+    """Raised between calls of a default march in t that :class:`ScaleWatch` found to need τ; its
     text says why (recorded in the solution's ``info["time_scale_chosen"]``)."""
 
 
 class ScaleWatch:
     """The default's watch on a march of constant lengths in t of a system ``"potential"`` suits:
     the range of g = (−V)^(−3/2) over each member's window starts so far (:meth:`see` after each
-    chunk), and the reason to march in τ instead once it spans ``SCALE_VARIATION``-fold for a
+    call of the march's program), and the reason to march in τ instead once it spans ``SCALE_VARIATION``-fold for a
     member (:meth:`reason`; None while it does not). A g that is not finite and positive (V ≥ 0
     on the way) turns the watch off for that member: the scale does not apply there."""
 
