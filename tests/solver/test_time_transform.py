@@ -219,7 +219,7 @@ def test_the_scale_is_recommended_where_it_suits_the_system(monkeypatch):
 @pytest.mark.long
 def test_the_default_marches_in_tau_where_the_scale_varies_and_in_t_elsewhere(monkeypatch):
     """The default (time_scale="auto"): Kepler e = 0.99 over ten periods from pericentre is marched
-    in τ after one chunk of windows in t (g varies thousands-fold over it), in a few hundred windows
+    in τ after its first 128 windows in t (g varies thousands-fold over them), in a few hundred windows
     rather than ~80 000, saying why, and as accurately as the scale chosen by hand; e = 0.3 (g varies
     2.5-fold) and a system the scale does not suit stay in t; a batch switches as a whole; and a march
     in t that the windows' memory stops is marched in τ instead of refused."""

@@ -305,9 +305,9 @@ def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety
 
     def batched(state: GaussState, T, rtol, atol, h_given, limit):
         """Members on a leading axis: a while loop of tries, every member one try per trip (a
-        finished one idling), until all are done or ``limit`` trips (at most ``chunk``); trip j's rows go to row j of
-        the buffers for every member at once (written in place: a row index per member, under
-        ``vmap``, would make every write a scatter that copies the buffers)."""
+        finished one idling), until all are done or ``limit`` trips (at most ``chunk``); trip j's
+        rows go to row j of the buffers for every member at once (written in place: a row index per
+        member, under ``vmap``, would make every write a scatter that copies the buffers)."""
         st = jax.vmap(started, in_axes=(None, None, 0, None, None, None))(system, tab, state, T, h_given, until)
         b, n, dt = st.z.shape[0], st.z.shape[1], st.z.dtype
         buf = (jnp.zeros((chunk, b), bool), jnp.zeros((chunk, b), dt), jnp.zeros((chunk, b), dt),
