@@ -15,7 +15,7 @@ from atlasnn.checkpoint import load_piecewise, save_piecewise
 from atlasnn.solutions import PolynomialSolution, gauss_tableau
 from atlasnn.solver import GaussCollocation
 from atlasnn.solver import _gauss_march
-from atlasnn.solver._gauss_step import gauss_step, tableau_arrays
+from atlasnn.solver._gauss_step import STAGE_SHARE, gauss_step, stage_share, tableau_arrays
 from atlasnn.systems import expression_system, harmonic_oscillator, henon_heiles
 
 
@@ -131,6 +131,25 @@ def test_the_tolerance_controls_the_error():
                      - ho_exact(t)).max() for r in (1e-6, 1e-9, 1e-12)]
     assert errors[0] > errors[1] > errors[2]
     assert errors[2] < 1e-11
+
+
+def test_at_a_loose_tolerance_the_stage_equations_stop_at_their_share():
+    """rtol 1e-5 over 51 windows: each window's stages solved to about 0.01·rtol/51, not round-off —
+    the gap to the same windows solved to round-off is above round-off (the saving is taken) and,
+    added over every window, within a few hundredths of rtol (the budget kept)."""
+    system, z0, rtol = henon_heiles(), np.array([0.3, -0.3, 0.3, 0.15]), 1e-5
+    sol = solve(system, z0, (0.0, 24 * np.pi), solver=GaussCollocation(rtol=rtol, atol=rtol / 100))
+    n = sol.n_windows
+    again = _gauss_march.compiled_gauss_windows(system, stages=sol.stages, max_iterations=100, newton=False)
+    with jax.enable_x64(True):
+        L = np.asarray(again(sol.z[:-1], sol.e[:-1], np.diff(sol.edges)[:-1]))
+    ends = sol.z[:-1] + (sol.e[:-1] + L.sum(axis=1))
+    gap = np.abs(ends - (sol.z[1:] + sol.e[1:])).max(axis=1) / np.abs(sol.z).max()
+    assert gap.max() > 1e-12  # round-off's rule leaves a few 1e-15 here (at rtol 1e-11)
+    assert gap.sum() < 5 * STAGE_SHARE * rtol
+    with jax.enable_x64(True):
+        assert float(stage_share(1e-11, 50.0)) == 0.0  # the default: round-off's rule alone
+        assert float(stage_share(rtol, float(n))) == pytest.approx(STAGE_SHARE * rtol / n)
 
 
 @pytest.mark.long

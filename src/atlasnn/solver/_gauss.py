@@ -111,7 +111,8 @@ class GaussCollocation(AbstractSolver):
     collocated at the s Gauss–Legendre nodes of each window: the s-stage Gauss–Legendre
     Runge–Kutta method. Symplectic, symmetric, of order 2s at the window ends and s + 1 between
     them; conserves every quadratic invariant (angular momentum) to round-off. The stage equations
-    are solved by fixed-point iteration to round-off (simplified Newton where it does not converge),
+    are solved by fixed-point iteration to round-off (simplified Newton where it does not converge;
+    at a tolerance far above round-off, to 0.01·rtol spread over the interval's windows),
     the state summed with compensation, the coefficients symplectic in float64 (docs/SOLVER.md).
 
     Attributes:

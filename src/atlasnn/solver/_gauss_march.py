@@ -14,7 +14,8 @@ The lengths (``steps``):
   scales (an eccentric orbit), at the price of exact symplecticity (the energy error can drift);
 * a length given by the user (``h``): every window that length, the check only recorded.
 
-A window is accepted when its iteration reached round-off and (unless the length is given) its
+A window is accepted when its iteration reached round-off (at a tolerance far above it, its share
+of rtol: :func:`._gauss_step.stage_share`) and (unless the length is given) its
 check's error bound, times ``safety``, is within atol + rtol·|z| for every component (a tolerance
 below round-off counts as round-off). The error is of order s + 1 in h along the window, so the
 next length is h · clip(0.9 ε^(−1/(s+1)), 0.2, growth) with ε the bound over the tolerance.
@@ -47,7 +48,8 @@ from atlasnn.compile_cache import cpu_loop_options, program_cache
 from atlasnn.precision import trace_settings
 from atlasnn.solutions import gauss_tableau
 from atlasnn.solver._exported import exported_program
-from atlasnn.solver._gauss_step import compensated_add, continued_stages, gauss_step, local_error, tableau_arrays
+from atlasnn.solver._gauss_step import (compensated_add, continued_stages, gauss_step, local_error, stage_share,
+                                        tableau_arrays)
 
 __all__ = ["GaussState", "GaussChunk", "ReplayState", "clock", "marching", "started", "try_window",
            "compiled_gauss_march", "compiled_gauss_replay", "compiled_gauss_windows", "initial_state", "FAILURES",
@@ -205,8 +207,13 @@ def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
     last = (st.h >= span - floor) if settings["until"] is None else jnp.asarray(False)
     h = jnp.where(last, span, st.h)
     Y0 = continued_stages(tab, st.z, st.e, st.L_prev, h / st.h_prev)
+    # the stage equations to round-off, or (a tolerance far above it, the lengths the check's) to their
+    # share of rtol over the windows the interval will take: those done and those left at this length
+    windows = st.accepted + jnp.maximum(span, 0.0) / h
+    enough = 0.0 if settings["until"] is not None else jnp.where(h_given > 0, 0.0, stage_share(rtol, windows))
     r = gauss_step(field, jac, tab, st.z, st.e, h, Y0, max_iterations=settings["max_iterations"],
-                   implicit_gradients=settings.get("implicit", False), linear=getattr(system, "linear_part", None))
+                   implicit_gradients=settings.get("implicit", False), linear=getattr(system, "linear_part", None),
+                   enough=lax.stop_gradient(enough))
     # the check only steers the lengths, which carry no derivative (below): kept out of gradients
     zc, ec, hc, Lc, z1 = lax.stop_gradient((st.z, st.e, h, r.L, r.z))
     end, dense = local_error(field, tab, zc, ec, hc, Lc)

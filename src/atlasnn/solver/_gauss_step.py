@@ -29,7 +29,7 @@ from jax import lax
 from atlasnn.solutions import shifted_legendre
 
 __all__ = ["StepResult", "gauss_step", "solved_step", "solve_stages", "compensated_add", "small_matmul", "continued_stages",
-           "local_error", "tableau_arrays", "FIXED_POINT_FLOOR"]
+           "local_error", "tableau_arrays", "FIXED_POINT_FLOOR", "stage_share"]
 
 #: fixed-point iterations per trip of the loop (measured on Hénon–Heiles, s = 12: 6.1 µs a window
 #: with 1, 4.1 µs with 3)
@@ -39,9 +39,26 @@ FIXED_POINT_UNROLL = 3
 FIXED_POINT_FLOOR = 1e-12
 
 
+#: the share of the tolerance that the stage equations' error may take, spread over the interval's
+#: windows (:func:`stage_share`)
+STAGE_SHARE = 1e-2
+
+
+def stage_share(rtol, windows):
+    """How far above round-off the fixed-point iteration may stop: at an update of
+    ``STAGE_SHARE · rtol / windows`` of each component's size, the windows the march's interval
+    will take — so that the equations' error, added up over every window (it is the map's own and
+    may drift), stays a hundredth of rtol. 0 (round-off) where that is below FIXED_POINT_FLOOR: at
+    rtol 1e-11, or over thousands of windows, nothing changes; at 1e-5 over 50 windows it stops at
+    2e-9 (Hénon–Heiles: 26 → 16 iterations a window, the same error; docs/SOLVER.md)."""
+    share = STAGE_SHARE * rtol / jnp.maximum(windows, 1.0)
+    return jnp.where(share > FIXED_POINT_FLOOR, share, 0.0)
+
+
 class StepResult(NamedTuple):
     """One window solved: the end state and its compensation, the stage increments L (s, n), the
-    iterations spent, whether the equations were solved to round-off, and whether Newton was used."""
+    iterations spent, whether the equations were solved (to round-off, or to ``enough``:
+    :func:`stage_share`), and whether Newton was used."""
 
     z: jax.Array
     e: jax.Array
@@ -127,13 +144,15 @@ def _scale(z, L0):
     return jnp.maximum(w, jnp.finfo(w.dtype).tiny)
 
 
-def _fixed_point(field, tab, z, e, hb, L0, max_iterations):
+def _fixed_point(field, tab, z, e, hb, L0, max_iterations, enough=0.0):
     """L by fixed-point iteration from L0 = hb ⊙ f(Y0), Y0 the stage guess: (L, iterations counting
-    L0's evaluation, whether it reached round-off)."""
+    L0's evaluation, whether it reached round-off — or, with ``enough`` > 0, an update whose largest
+    entry relative to its component's size is at most ``enough``)."""
     mu = tab["mu"]
+    scale = _scale(z, L0)
     L, k, dmin, dlast = _iterate(lambda L: hb[:, None] * field(z + (e + small_matmul(mu, L))), L0,
-                                 _scale(z, L0), max_iterations, unroll=FIXED_POINT_UNROLL)
-    return L, k + 1, _solved(L, L0, dmin, dlast)
+                                 scale, max_iterations, unroll=FIXED_POINT_UNROLL, enough=enough)
+    return L, k + 1, _solved(L, L0, dmin, dlast, enough * jnp.max(scale))
 
 
 def _dense_factor(jacobian: Callable) -> Callable:
@@ -210,12 +229,15 @@ def _solved(L, L0, dmin, dlast, noise=0.0):
 
 
 def solve_stages(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Array, e: jax.Array, hb: jax.Array,
-                 L0: jax.Array, max_iterations: int, linear=None) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+                 L0: jax.Array, max_iterations: int, linear=None,
+                 enough=0.0) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     """The stage equations L = hb ⊙ f(z + (e + μL)) solved from L0 = hb ⊙ f(Y0): by fixed-point
     iteration, and by simplified Newton where that fails and ``jacobian`` is given; with a
     ``linear`` part (:class:`atlasnn.systems.LinearPart`), by simplified Newton with it as the
     matrix from the start (the fixed-point iteration would not contract on its stiff modes).
-    Returns (L, iterations, whether it reached round-off, whether Newton was used). Forward only:
+    ``enough``: the fixed-point iteration may stop above round-off, at an update of at most this
+    relative to each component's size (:func:`stage_share`; 0: round-off). Returns (L, iterations,
+    whether it reached round-off or ``enough``, whether Newton was used). Forward only:
     its loops cannot be differentiated in reverse (:func:`gauss_step` with ``implicit_gradients``)."""
     if linear is not None:
         # the round-off an evaluation of the stiff part carries into L: a few ulps of ‖JS‖·|z| times h·b_i
@@ -224,7 +246,7 @@ def solve_stages(field: Callable, jacobian: Callable | None, tab: dict, z: jax.A
         L, k, ok = _newton(field, lambda _, shifts: linear.factor(shifts), tab, z, e, hb, L0, max_iterations,
                            GLOBAL_FLOOR, noise)
         return L, k, ok, jnp.asarray(True)
-    L, k, ok = _fixed_point(field, tab, z, e, hb, L0, max_iterations)
+    L, k, ok = _fixed_point(field, tab, z, e, hb, L0, max_iterations, enough)
     used_newton = jnp.asarray(False)
     if jacobian is not None:
         # a loop that runs once when the fixed-point iteration failed and not at all otherwise: in a
@@ -305,13 +327,15 @@ def _tangent_solve(max_iterations: int, tab: dict | None = None, linear=None, z=
 
 
 def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Array, e: jax.Array, h, Y0: jax.Array,
-               *, max_iterations: int = 100, implicit_gradients: bool = False, linear=None) -> StepResult:
+               *, max_iterations: int = 100, implicit_gradients: bool = False, linear=None,
+               enough=0.0) -> StepResult:
     """One window of length ``h`` from (z, e) with the stage guess Y0 (s, n).
 
     ``field`` maps stage values (s, n) to f(Y) (s, n); ``jacobian`` maps a state (n,) to A(z)
     (n, n), for the simplified Newton iteration (None: fixed-point only); ``tab`` holds the
     tableau's arrays (:func:`tableau_arrays`); ``linear``: the system's declared linear part, the
-    Newton iteration's matrix from the start (:func:`solve_stages`).
+    Newton iteration's matrix from the start (:func:`solve_stages`); ``enough``: where the
+    fixed-point iteration may stop above round-off (:func:`stage_share`; 0: it does not).
 
     ``implicit_gradients``: differentiable (forward and reverse) with respect to z, e, h and
     whatever ``field`` closes over, by the implicit function theorem on the stage equations
@@ -328,13 +352,13 @@ def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Arr
         def solve(_, guess):
             # the counts travel as floats: custom_root gives its auxiliary outputs zero tangents of their
             # own dtype, which JAX refuses for integers and booleans (their tangents must be float0)
-            L, k, ok, used = solve_stages(field, jacobian, tab, z, e, hb, guess, max_iterations, linear)
+            L, k, ok, used = solve_stages(field, jacobian, tab, z, e, hb, guess, max_iterations, linear, enough)
             return L, jnp.stack([k, ok, used]).astype(L.dtype)
 
         L, aux = lax.custom_root(residual, L0, solve, _tangent_solve(max_iterations, tab, linear, z, h), has_aux=True)
         k, ok, used_newton = aux[0].astype(jnp.int32), aux[1] > 0, aux[2] > 0
     else:
-        L, k, ok, used_newton = solve_stages(field, jacobian, tab, z, e, hb, L0, max_iterations, linear)
+        L, k, ok, used_newton = solve_stages(field, jacobian, tab, z, e, hb, L0, max_iterations, linear, enough)
     z1, e1 = compensated_add(z, e, jnp.sum(L, axis=0))
     return StepResult(z1, e1, L, k, ok, used_newton)
 
