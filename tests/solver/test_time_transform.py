@@ -6,6 +6,8 @@ in one line."""
 
 from __future__ import annotations
 
+import re
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -14,6 +16,7 @@ import pytest
 from atlasnn import AtlasError, solve, solve_batch
 from atlasnn.solutions import TimeTransformedSolution, gauss_tableau
 from atlasnn.solver import GaussCollocation
+from atlasnn.solver._base import monotone_progress
 from atlasnn.solver._gauss_step import gauss_step, tableau_arrays
 from atlasnn.solver._gauss_time import TimeTransform, poincare_system
 from atlasnn.systems import expression_system, henon_heiles
@@ -227,10 +230,14 @@ def test_the_default_marches_in_tau_where_the_scale_varies_and_in_t_elsewhere(mo
     import atlasnn.solver._gauss_time as gauss_time
 
     system, T = kepler_system(0.99), 20 * np.pi
-    sol = solve(system, None, (0.0, T))
+    fractions = []
+    sol = solve(system, None, (0.0, T), progress=fractions.append)
     assert isinstance(sol, TimeTransformedSolution) and sol.n_windows < 300
     assert sol.info["settings"]["time_scale"] == "auto" and sol.info["time_scale"] == "potential"
     assert "varied" in sol.info["time_scale_chosen"] and "-fold over the first" in sol.info["time_scale_chosen"]
+    # the call's time counts both marches
+    spent = float(re.search(r"that march took ([0-9.e+-]+) s", sol.info["time_scale_chosen"]).group(1))
+    assert sol.info["solve_time"] >= spent and fractions[-1] == pytest.approx(1.0)
     t = np.linspace(0.0, T, 2001)
     by_hand = solve(system, None, (0.0, T), solver=TT)
     assert np.abs(sol(t) - by_hand(t)).max() < 1e-12
@@ -241,8 +248,18 @@ def test_the_default_marches_in_tau_where_the_scale_varies_and_in_t_elsewhere(mo
     assert np.abs(sols[0](t[:200]) - kepler_exact(t[:200], 0.3)).max() < 1e-10
     monkeypatch.setattr(gauss_time, "SCALE_VARIATION", np.inf)  # the watch never fires: memory stops the march
     monkeypatch.setattr(gauss, "available_memory", lambda: 2**20)
-    stopped = solve(kepler_system(0.99), None, (0.0, 20 * np.pi))
+    fractions = []
+    stopped = solve(kepler_system(0.99), None, (0.0, 20 * np.pi), progress=fractions.append)
     assert "stopped at t = " in stopped.info["time_scale_chosen"]
+    # the march in t reported progress before it stopped; the bar does not move back for the one in τ
+    at = float(re.search(r"stopped at t = ([0-9.e+-]+)", stopped.info["time_scale_chosen"]).group(1))
+    assert fractions[0] > 0 and fractions == sorted(fractions) and fractions[-1] == pytest.approx(1.0)
+    assert max(fractions[:-1]) >= at / (20 * np.pi) - 1e-9
+    seen = []
+    report = monotone_progress(seen.append)
+    for f in (0.1, 0.4, 0.05, 0.3, 0.6, 1.0):  # a march in τ that starts again below the one in t's 0.4
+        report(f)
+    assert seen == [0.1, 0.4, 0.4, 0.4, 0.6, 1.0]
 
 
 @pytest.mark.long

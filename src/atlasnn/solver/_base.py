@@ -24,7 +24,7 @@ from atlasnn.solutions import AbstractSolution
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["AbstractSolver", "SOLVERS", "register_solver", "solver_from_name", "check_tolerance",
-           "refuse_unknown_settings", "solve_one"]
+           "refuse_unknown_settings", "solve_one", "monotone_progress"]
 
 
 def check_tolerance(owner: str, name: str, value: Any, tightest: float, *, zero: bool = False) -> float:
@@ -88,6 +88,18 @@ def solve_one(solve_batch: Callable, system: HamiltonianSystem, z0: np.ndarray, 
         if isinstance(getattr(exc, "partial", None), list):
             exc.partial = exc.partial[0]
         raise
+
+
+def monotone_progress(progress: Callable[[float], None]) -> Callable[[float], None]:
+    """``progress`` never called with less than before (a march that starts again does not move
+    the bar back: it holds until the new march passes the old one's point)."""
+    most = [0.0]
+
+    def report(fraction: float) -> None:
+        most[0] = max(most[0], fraction)
+        progress(most[0])
+
+    return report
 
 
 def refuse_unknown_settings(cls: type) -> type:

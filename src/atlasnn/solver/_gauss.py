@@ -23,7 +23,7 @@ from atlasnn.compile_cache import to_host
 from atlasnn.errors import ConfigError
 from atlasnn.limits import available_memory
 from atlasnn.solutions import PolynomialSolution, TimeTransformedSolution, TracedSolution, bucket_size, gauss_tableau
-from atlasnn.solver._base import AbstractSolver, register_solver, solve_one
+from atlasnn.solver._base import AbstractSolver, monotone_progress, register_solver, solve_one
 from atlasnn.solver._collocation import require_float64
 from atlasnn.solver._gauss_core import LOOPS, gauss_core
 from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, ReplayState, clock, compiled_gauss_march,
@@ -255,17 +255,20 @@ class GaussCollocation(AbstractSolver):
         auto = (self.time_scale == AUTO and self.steps == "constant" and self.h is None
                 and all(potential_applies(system, z) for z in z0s))
         tic = time.perf_counter()
+        if auto and progress is not None:
+            progress = monotone_progress(progress)  # the march in τ that may follow starts again from t0
         try:
             return self._solve_rows(system, z0s, t0, T, progress, watch=ScaleWatch(system, len(z0s)) if auto else None)
         except ScaleVaries as why:
-            spent = time.perf_counter() - tic  # not in the solution's solve_time, which is the march in τ's
+            spent = time.perf_counter() - tic
             return self._solve_scaled(system, z0s, t0, T, progress, "potential",
-                                      chosen=f"{why} (that march took {spent:.3g} s before this one)")
+                                      chosen=f"{why} (that march took {spent:.3g} s before this one)", spent=spent)
 
     def _solve_scaled(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float,
-                      progress: Callable[[float], None] | None, time_scale: Any, chosen: str | None = None
-                      ) -> list[TimeTransformedSolution]:
-        """``solve_batch`` in τ with ``time_scale`` (``chosen``: why the default took it)."""
+                      progress: Callable[[float], None] | None, time_scale: Any, chosen: str | None = None,
+                      spent: float = 0.0) -> list[TimeTransformedSolution]:
+        """``solve_batch`` in τ with ``time_scale`` (``chosen``: why the default took it, after a
+        march in t of ``spent`` seconds, which the solutions' ``solve_time`` includes)."""
         transform = TimeTransform(system, time_scale)
         try:
             parts, stop = self._solve_rows(transform.extended, transform.lift(z0s, t0), t0, T, progress,
@@ -278,6 +281,7 @@ class GaussCollocation(AbstractSolver):
         for sol in out if chosen else ():
             if sol is not None:
                 sol.info["time_scale_chosen"] = f"'potential': {chosen}"
+                sol.info["solve_time"] = sol.info.get("solve_time", 0.0) + spent
         if problem is None and stop is None:
             return out
         # a scale that stopped the time says so, rather than the march's projection it led to
