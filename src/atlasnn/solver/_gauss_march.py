@@ -157,38 +157,40 @@ def field_roundoff(field, z):
     return jnp.max(jnp.abs(f[1:] - f[:1]), axis=0)
 
 
-#: power iterations of A² in :func:`_frequency`
-_POWER_ITERATIONS = 6
+#: products with A in :func:`_frequency` (two per power iteration of A²)
+_POWER_PRODUCTS = 12
 
 
 def _frequency(system, z):
     """ω with ω² ≈ the spectral radius of A², A the field's Jacobian at z (for H = T(p) + V(q), A²'s
-    eigenvalues are −ω² of the linearised motion whatever the masses and units): a few power
-    iterations of A² by Jacobian–vector products (each the cost of a few field evaluations, not of
-    the n × n Jacobian), from a start that has a part along every component. With a declared
-    linear part, A is the Jacobian of the rest of the field."""
-    field = lambda x: system.vector_field(x[None])[0]  # noqa: E731
+    eigenvalues are −ω² of the linearised motion whatever the masses and units): power iterations
+    of A² as pairs of products A·v, each a central difference of the field at z ± δv (one
+    evaluation at two states: one place in the program that evaluates the field, where
+    Jacobian–vector products traced it twice more and took a quarter of the solar system's
+    compile), from a start that has a part along every component. ω only sets the first window's
+    length, which the warm-up then adapts: a few digits suffice. With a declared linear part, A is
+    the Jacobian of the rest of the field."""
+    field = system.vector_field
     linear = getattr(system, "linear_part", None)
     if linear is not None:
         # the stiff linear part is solved exactly in the stage equations and sets no length: the
         # nonlinear part's frequency does (from 1/k_max², the warm-up's windows grew 1.3x each with
         # the check at its round-off floor, and the constant length settled 100x short: NLS, 1 024 points)
-        field = lambda x: system.vector_field(x[None])[0] - linear.field(x)  # noqa: E731
+        field = lambda x: system.vector_field(x) - jax.vmap(linear.field)(x)  # noqa: E731
     n = z.shape[0]
     v = 1.0 + jnp.arange(n, dtype=z.dtype) / n
-
-    def square(v):
-        w = jax.jvp(field, (z,), (v,))[1]
-        return jax.jvp(field, (z,), (w,))[1]
+    delta = jnp.finfo(z.dtype).eps ** (1 / 3) * (1.0 + jnp.sqrt(jnp.sum(z ** 2)))
 
     def body(_, carry):
-        v, _ = carry
+        v, last, growth = carry
         norm = jnp.sqrt(jnp.sum(v ** 2))
         v = v / jnp.where(norm > 0, norm, 1.0)
-        w = square(v)
-        return w, jnp.sqrt(jnp.sum(w ** 2))
+        f = field(jnp.stack([z + delta * v, z - delta * v]))
+        w = (f[0] - f[1]) / (2 * delta)
+        size = jnp.sqrt(jnp.sum(w ** 2))
+        return w, size, last * size  # |A²u| = |Av|·|A(Av/|Av|)|: the last two products' sizes
 
-    _, growth = lax.fori_loop(0, _POWER_ITERATIONS, body, (v, jnp.zeros((), z.dtype)))
+    _, _, growth = lax.fori_loop(0, _POWER_PRODUCTS, body, (v, jnp.zeros((), z.dtype), jnp.zeros((), z.dtype)))
     return jnp.where(jnp.isfinite(growth), jnp.sqrt(growth), 0.0)
 
 
