@@ -50,7 +50,7 @@ def stage_share(rtol, windows):
     will take — so that the equations' error, added up over every window (it is the map's own and
     may drift), stays a hundredth of rtol. 0 (round-off) where that is below FIXED_POINT_FLOOR: at
     rtol 1e-11, or over thousands of windows, nothing changes; at 1e-5 over 50 windows it stops at
-    2e-9 (Hénon–Heiles: 26 → 16 iterations a window, the same error; docs/SOLVER.md)."""
+    2e-9 (Hénon–Heiles: 26 → 13 iterations a window, the same error; docs/SOLVER.md)."""
     share = STAGE_SHARE * rtol / jnp.maximum(windows, 1.0)
     return jnp.where(share > FIXED_POINT_FLOOR, share, 0.0)
 
