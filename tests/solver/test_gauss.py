@@ -133,6 +133,17 @@ def test_the_tolerance_controls_the_error():
     assert errors[2] < 1e-11
 
 
+@pytest.mark.parametrize("H, names, z0, omega", [
+    ("p**2/2 + 9*q**2/2", (["q"], ["p"]), [1.0, 0.0], 3.0),
+    ("(p1**2 + p2**2)/2 + q1**2/2 + 25*q2**2/2 + q1**4/4", (["q1", "q2"], ["p1", "p2"]), [1.0, 0.1, 0.0, 0.0], 5.0),
+])
+def test_the_first_window_is_one_over_the_fastest_frequency(H, names, z0, omega):
+    """The first length is 1/ω, ω² the spectral radius of A² at z0 by power iterations of central
+    differences of the field: 3 for an oscillator of frequency 3, 5 for two modes of 2 and 5."""
+    sol = solve(expression_system(H, *names, z0=z0), None, (0.0, 10.0))
+    assert sol.edges[1] - sol.edges[0] == pytest.approx(1 / omega, rel=1e-6)
+
+
 def test_at_a_loose_tolerance_the_stage_equations_stop_at_their_share():
     """rtol 1e-5 over 51 windows: each window's stages solved to about 0.01·rtol/51, not round-off —
     the gap to the same windows solved to round-off is above round-off (the saving is taken) and,
