@@ -11,6 +11,12 @@ compiled, the whole call with the dense output on 200 times).
    range against a reference (Dopri8 at rtol 1e-14, checked against the Gauss method at s = 16 on
    short windows: their gap is recorded), and the fastest Diffrax run at least as accurate as
    atlasnn's.
+3. ``orders``: the same chains at N = 256 and 1 024 and 256 copies of Hénon–Heiles (d = 1 024) at
+   s = 4, 8, 12, 16 and rtol 1e-8 and 1e-11: time, error, windows and evaluations of the field
+   (states: s × the iterations), beside Diffrax Dopri8's fastest run as accurate and its
+   evaluations (13 a step): where the windows are short for the iteration's reach rather than the
+   tolerance (the chains' fast modes), a lower order costs less; where the tolerance sets them
+   (Hénon–Heiles), it costs more.
 
     python -m benchmarks.gauss_scaling --out docs/benchmarks/gauss_scaling.json --figure docs/benchmarks/gauss_scaling.png
 """
@@ -18,8 +24,10 @@ compiled, the whole call with the dense output on 200 times).
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import time
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -79,7 +87,8 @@ def per_window(kind: str, sizes, T: float) -> list[dict]:
     return rows
 
 
-def diffrax_runs(system, z0, T, ts, tols):
+def diffrax_runs(system, z0, T, ts, tols, steps: bool = False):
+    """{method: {rtol: (values at ts, fastest seconds[, steps taken])}} for Dopri8 and Tsit5."""
     import diffrax
 
     field = lambda t, y, args: system.vector_field(y[None])[0]  # noqa: E731
@@ -88,12 +97,16 @@ def diffrax_runs(system, z0, T, ts, tols):
     for label, method in (("dopri8", diffrax.Dopri8()), ("tsit5", diffrax.Tsit5())):
         @jax.jit
         def run(y0, rtol, atol, method=method):
-            return diffrax.diffeqsolve(diffrax.ODETerm(field), method, 0.0, T, None, y0, saveat=diffrax.SaveAt(ts=ts),
-                                       max_steps=2_000_000,
-                                       stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol)).ys
+            sol = diffrax.diffeqsolve(diffrax.ODETerm(field), method, 0.0, T, None, y0, saveat=diffrax.SaveAt(ts=ts),
+                                      max_steps=2_000_000,
+                                      stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol))
+            return sol.ys, sol.stats["num_steps"]
         y0 = jnp.asarray(z0)
         jax.block_until_ready(run(y0, 1e-8, 1e-10))
-        out[label] = {tol: timed(lambda: np.asarray(run(y0, tol, tol / 100)))[:2] for tol in tols}
+        out[label] = {}
+        for tol in tols:
+            (ys, n), best, _ = timed(lambda: jax.tree_util.tree_map(np.asarray, run(y0, tol, tol / 100)))
+            out[label][tol] = (ys, best, int(n)) if steps else (ys, best)
     return out
 
 
@@ -130,6 +143,42 @@ def fput_comparison(sizes, tols, T: float = 200.0) -> list[dict]:
     return rows
 
 
+ORDERS = (4, 8, 12, 16)
+#: Dopri8's evaluations of the field a step (14 stages, the last the next step's first)
+DOPRI8_EVALUATIONS = 13
+
+
+def orders_at_size(tols=FPUT_TOLS) -> list[dict]:
+    rows = []
+    for system, T in ((fput_chain(256), 200.0), (fput_chain(1024), 200.0), (henon_heiles_copies(256), 50.0)):
+        ts = np.linspace(0.0, T, 200)
+        runs = diffrax_runs(system, system.z0, T, jnp.asarray(ts), RK_TOLS + (1e-14,), steps=True)["dopri8"]
+        # the reference: the Gauss method at s = 16 and rtol 1e-14 (Dopri8 at 1e-14 drifts to 2e-12 of
+        # the range on the Hénon–Heiles copies); its gap to that Dopri8 run is recorded
+        ref = solve(system, None, (0.0, T), solver=GaussCollocation(stages=16, rtol=1e-14, atol=1e-16))(ts)
+        scale = float(np.ptp(ref, axis=0).max())
+        gap = float(np.abs(runs[1e-14][0] - ref).max() / scale)
+        points = [(rt, sec, n, float(np.abs(z - ref).max() / scale)) for rt, (z, sec, n) in runs.items() if rt > 1e-14]
+        for tol in tols:
+            for s in ORDERS:
+                solver = GaussCollocation(stages=s, rtol=tol, atol=tol / 100)
+                solve(system, None, (0.0, T), solver=solver)
+                (sol, z), best, _ = timed(lambda: (lambda q: (q, q(ts)))(solve(system, None, (0.0, T), solver=solver)))
+                err = float(np.abs(z - ref).max() / scale)
+                good = [p for p in points if p[3] <= 2 * err]
+                fastest = min(good, key=lambda p: p[1]) if good else None
+                row = {"system": system.name, "d": system.state_dim, "rtol": tol, "stages": s, "seconds": best,
+                       "reference_gap": gap,
+                       "error": err, "windows": sol.n_windows, "iterations": sol.info["iterations"],
+                       "evaluations": s * sol.info["iterations"],
+                       "dopri8": None if fastest is None else
+                       {"rtol": fastest[0], "seconds": fastest[1], "error": fastest[3],
+                        "evaluations": DOPRI8_EVALUATIONS * fastest[2]}}
+                print(row, flush=True)
+                rows.append(row)
+    return rows
+
+
 def figure(result: dict, path: str) -> None:
     import matplotlib
 
@@ -162,12 +211,20 @@ def main(argv=None) -> None:
     parser.add_argument("--figure", default=None)
     parser.add_argument("--fput-sizes", nargs="*", type=int, default=list(FPUT_SIZES))
     parser.add_argument("--skip-fput", action="store_true")
+    parser.add_argument("--only-orders", action="store_true",
+                        help="run only the orders part and put it into --out's record (the rest kept)")
     args = parser.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
-    result = {"machine": machine_info(), "command": "python -m benchmarks.gauss_scaling",
-              "per_window": per_window("henon-heiles-copies", COPIES, 20.0) + per_window("fput-beta", CHAINS, 50.0)}
-    if not args.skip_fput:
-        result["fput"] = fput_comparison(args.fput_sizes, FPUT_TOLS)
+    if args.only_orders:
+        result = json.loads(Path(args.out).read_text()) if args.out and Path(args.out).exists() else {}
+        result["orders"] = orders_at_size()
+        result["orders_machine"] = machine_info()
+    else:
+        result = {"machine": machine_info(), "command": "python -m benchmarks.gauss_scaling",
+                  "per_window": per_window("henon-heiles-copies", COPIES, 20.0) + per_window("fput-beta", CHAINS, 50.0)}
+        if not args.skip_fput:
+            result["fput"] = fput_comparison(args.fput_sizes, FPUT_TOLS)
+        result["orders"] = orders_at_size()
     if args.out:
         write_result(args.out, result)
     if args.figure:

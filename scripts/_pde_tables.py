@@ -10,15 +10,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from _doc_format import milliseconds as _ms
+
 ROOT = Path(__file__).resolve().parents[1]
 
 RECORDS = {"pde": "docs/benchmarks/nls_pde.json", "sine_gordon": "docs/benchmarks/sine_gordon_pde.json", "pde_scaling": "docs/benchmarks/nls_pde_scaling.json",
            "pde_long": "docs/benchmarks/nls_pde_long.json", "fput": "docs/runs/fput/recurrence.json"}
-
-
-def _ms(seconds: float) -> str:
-    ms = seconds * 1e3
-    return f"{ms:.3g} ms" if ms < 1000 else f"{seconds:.3g} s"
 
 
 NAMES = {"strang": "Strang", "yoshida4": "Yoshida-4", "etdrk4": "ETDRK4", "tsit5": "Diffrax Tsit5",

@@ -14,7 +14,8 @@ the pages hold what it makes, so no number on them can drift from its record):
 * ``roundoff``: docs/benchmarks/gauss_roundoff.json (``python -m benchmarks.gauss_roundoff``);
 * ``orders``: docs/benchmarks/gauss_orders.json (``python -m benchmarks.gauss_orders``);
 * ``everyday``: docs/benchmarks/everyday.json (``python -m benchmarks.everyday``);
-* ``scaling``: docs/benchmarks/gauss_scaling.json (``python -m benchmarks.gauss_scaling``);
+* ``scaling`` and ``orders_at_size``: docs/benchmarks/gauss_scaling.json (``python -m benchmarks.gauss_scaling``,
+  ``scripts/_scaling_tables.py``);
 * ``time_transform``: docs/benchmarks/time_transform.json (``python -m benchmarks.time_transform``);
 * ``rebound``: docs/benchmarks/rebound_anchor.json (``python -m benchmarks.rebound_anchor``);
 * ``gradients``: docs/benchmarks/gauss_gradients.json (``python -m benchmarks.gauss_gradients``, docs/JAX.md);
@@ -43,6 +44,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _pde_tables as pde_tables  # noqa: E402  (the PDE page's tables, beside this script)
+import _scaling_tables as scaling_tables  # noqa: E402  (the tables of SOLVER.md's "At size")
+from _doc_format import milliseconds as _ms  # noqa: E402
 
 PAGES = [ROOT / "docs" / "SOLVER.md", ROOT / "docs" / "CHOOSING.md", ROOT / "docs" / "JAX.md",
          ROOT / "docs" / "howto" / "LEARN_H.md", ROOT / "docs" / "howto" / "PDE.md"]
@@ -57,12 +60,12 @@ RECORDS = {
     "roundoff": "docs/benchmarks/gauss_roundoff.json",
     "orders": "docs/benchmarks/gauss_orders.json",
     "everyday": "docs/benchmarks/everyday.json",
-    "scaling": "docs/benchmarks/gauss_scaling.json",
     "time_transform": "docs/benchmarks/time_transform.json",
     "rebound": "docs/benchmarks/rebound_anchor.json",
     "gradients": "docs/benchmarks/gauss_gradients.json",
     "learned": "docs/benchmarks/learned_h.json",
     **pde_tables.RECORDS,
+    **scaling_tables.RECORDS,
 }
 METHODS = [("gauss-adaptive", "Gauss, adaptive"), ("diffrax-dopri8", "Diffrax Dopri8"),
            ("diffrax-tsit5", "Diffrax Tsit5"), ("dop853", "SciPy DOP853"), ("yoshida4", "Yoshida-4"),
@@ -73,11 +76,6 @@ _BLOCK = re.compile(r"(<!-- solver-doc: (\w+) -->\n)(.*?)(<!-- /solver-doc -->)"
 def _load(name: str) -> dict | None:
     path = ROOT / RECORDS[name]
     return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else None
-
-
-def _ms(seconds: float) -> str:
-    ms = seconds * 1e3
-    return f"{ms:.3g} ms" if ms < 1000 else f"{seconds:.3g} s"
 
 
 def suite(record: dict) -> str:
@@ -248,34 +246,6 @@ def everyday(record: dict) -> str:
                               "elsewhere); \"never\": none of its runs got there.")
 
 
-def scaling(record: dict) -> str:
-    rows = ["| system | d | s | windows | iterations / window | µs / window | of which the field's evaluations | "
-            "first call |", "|---|---|---|---|---|---|---|---|"]
-    for r in record["per_window"]:
-        rows.append(f"| {r['kind']} | {r['d']} | {r['stages']} | {r['windows']} | {r['iterations_per_window']:.1f} | "
-                    f"{r['us_per_window']:.3g} | {r['field_us'] * r['iterations_per_window']:.3g} | "
-                    f"{r['first_call_seconds']:.2f} s |")
-    out = "\n".join(rows)
-    if record.get("fput"):
-        rows = ["| FPUT-β, N | rtol | atlasnn: time, error (s, windows) | Diffrax Dopri8, fastest as accurate | "
-                "Diffrax Tsit5, fastest as accurate |", "|---|---|---|---|---|"]
-        for r in record["fput"]:
-            cells = []
-            for label in ("dopri8", "tsit5"):
-                good = [p for p in r[label]["points"] if p["error"] <= 2 * r["atlasnn_error"]]
-                f = min(good, key=lambda p: p["seconds"]) if good else None
-                cells.append("none within 2× of its error" if f is None else
-                             f"{_ms(f['seconds'])}, {f['error']:.0e} (rtol {f['rtol']:.0e}): "
-                             f"atlasnn {r['atlasnn_seconds'] / f['seconds']:.2g}×")
-            rows.append(f"| {r['n']} | {r['rtol']:.0e} | {_ms(r['atlasnn_seconds'])}, {r['atlasnn_error']:.0e} "
-                        f"(s = {r['stages']}, {r['windows']}) | " + " | ".join(cells) + " |")
-        out += "\n\n" + "\n".join(rows) + ("\n\nErrors: max over 200 times / range, against Diffrax Dopri8 at rtol "
-                                           "1e-14 (at N ≤ 256 within 1e-14 of the Gauss method at s = 16); a Diffrax "
-                                           "run counts as accurate as atlasnn's within 2× of its error (rtol 1e-6 … "
-                                           "1e-13 swept); \"atlasnn k×\": atlasnn's time over that run's.")
-    return out
-
-
 def time_transform(record: dict) -> str:
     rows = ["| problem | method | windows | call (solve) | max error | max \\|H/H0 − 1\\| (at T) |",
             "|---|---|---|---|---|---|"]
@@ -372,8 +342,8 @@ def learned(record: dict) -> str:
 
 MAKERS = {"learned": learned, "gradients": gradients, "suite": suite, "workprecision": workprecision, "energy": energy, "step_modes": step_modes, "batch": batch,
           "first_run": first_run, "stages": stages,
-          "roundoff": roundoff, "orders": orders, "everyday": everyday, "scaling": scaling,
-          "rebound": rebound, "time_transform": time_transform, **pde_tables.MAKERS}
+          "roundoff": roundoff, "orders": orders, "everyday": everyday,
+          "rebound": rebound, "time_transform": time_transform, **pde_tables.MAKERS, **scaling_tables.MAKERS}
 
 
 # ------------------------------------------------------------------ key numbers of the prose

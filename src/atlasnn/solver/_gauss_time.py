@@ -96,7 +96,7 @@ class ScaleWatch:
         self.windows[m] += len(z)
 
     def reason(self) -> str | None:
-        fold = np.where(self.off, 0.0, self.high / np.where(self.low > 0, self.low, np.inf))
+        fold = np.where(self.off, 0.0, scale_fold(self.low, self.high))
         m = int(np.argmax(fold))
         if fold[m] < SCALE_VARIATION:
             return None
@@ -162,8 +162,9 @@ def march_advice(system: HamiltonianSystem, length: np.ndarray, z: np.ndarray, w
         return None
     if potential_applies(system, z[0]):
         g = potential_scale_values(system, z)
-        if g.min() > 0 and g.max() >= SCALE_VARIATION * g.min():
-            return (f"the time scale (−V)^(−3/2) varies {g.max() / g.min():.0f}-fold over the windows: "
+        fold = float(scale_fold(g.min(), g.max()))
+        if fold >= SCALE_VARIATION:
+            return (f"the time scale (−V)^(−3/2) varies {fold:.0f}-fold over the windows: "
                     "time_scale='potential' would take fewer windows, symplectic (docs/SOLVER.md, "
                     "'Close encounters')")
         return None
@@ -173,6 +174,12 @@ def march_advice(system: HamiltonianSystem, length: np.ndarray, z: np.ndarray, w
     return (f"the window length shrank {kept.max() / kept.min():.0f}-fold after the warm-up (time scales that "
             "differ along the orbit): steps='adaptive' would take fewer windows (not symplectic: "
             "docs/SOLVER.md, 'Window lengths')")
+
+
+def scale_fold(low, high) -> np.ndarray:
+    """How many-fold g varies from ``low`` to ``high`` (0 where ``low`` is not positive: no range)."""
+    low, high = np.asarray(low, np.float64), np.asarray(high, np.float64)
+    return np.where(low > 0, high / np.where(low > 0, low, 1.0), 0.0)
 
 
 def potential_scale_values(system: HamiltonianSystem, z: np.ndarray) -> np.ndarray:
