@@ -11,9 +11,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from atlasnn import HamiltonianSystem, solve
+from atlasnn import HamiltonianSystem, solve, solve_batch
 from atlasnn.solutions import gauss_tableau
-from atlasnn.solver import GaussCollocation
+from atlasnn.solver import GaussCollocation, _gauss
+from atlasnn.solver._gauss_march import NEWTON_LATER
 from atlasnn.solver._gauss_step import _dense_factor, _newton, small_matmul, tableau_arrays
 
 
@@ -100,6 +101,31 @@ def test_a_stiff_system_is_solved_by_newton_to_the_closed_form():
         M = np.eye(6) + 0.01 * np.kron(tab.b[None, :], np.eye(6)) @ K
         expected = np.linalg.matrix_power(M, 100) @ system.z0
         assert np.abs(sol(T) - expected).max() <= 1e-10 * np.abs(expected).max()
+
+
+def test_newton_is_compiled_only_once_a_window_needs_it(monkeypatch):
+    """By default the march's program leaves Newton's iteration out; a window the fixed-point
+    iteration cannot solve hands the march, unchanged, to the program with it, which goes on to
+    the solution Newton given from the start gives (every member of a batch), with the same
+    windows, Newton windows and rejections."""
+    asked = []
+    real = _gauss.compiled_gauss_march
+    monkeypatch.setattr(_gauss, "compiled_gauss_march", lambda *a, **k: asked.append(k["newton"]) or real(*a, **k))
+    with jax.enable_x64(True):
+        system = HamiltonianSystem(lambda q, p: jnp.sum(p ** 2 + (50.0 * q) ** 2) / 2, 1, name="stiff-oscillator",
+                                   z0=np.array([1.0, 0.0]))
+        smooth = solve(system, None, (0.0, 4.0), solver=GaussCollocation(rtol=1e-6))
+        assert asked == [NEWTON_LATER] and smooth.info["newton_windows"] == 0
+        z0s = np.array([[1.0, 0.0], [-0.5, 20.0], [0.1, 3.0]])
+        asked.clear()
+        later = solve_batch(system, z0s, (0.0, 4.0), solver=GaussCollocation(stages=4, h=0.2))
+        assert asked == [NEWTON_LATER, True]
+        eager = solve_batch(system, z0s, (0.0, 4.0), solver=GaussCollocation(stages=4, h=0.2, newton=True))
+        for a, b in zip(later, eager):
+            assert a.n_windows == b.n_windows == 20
+            assert a.info["newton_windows"] == b.info["newton_windows"] >= 19
+            assert a.info["rejected"] == b.info["rejected"]
+            np.testing.assert_allclose(a.z, b.z, rtol=0, atol=1e-12 * np.abs(b.z).max())
 
 
 def copies_of_henon_heiles(m: int) -> HamiltonianSystem:

@@ -26,8 +26,10 @@ from atlasnn.solutions import PolynomialSolution, TimeTransformedSolution, Trace
 from atlasnn.solver._base import AbstractSolver, monotone_progress, register_solver, solve_one
 from atlasnn.solver._collocation import require_float64
 from atlasnn.solver._gauss_core import LOOPS, gauss_core
-from atlasnn.solver._gauss_march import (FAILURES, STEP_MODES, GaussState, ReplayState, clock, compiled_gauss_march,
-                                         compiled_gauss_replay, compiled_gauss_windows, initial_state)
+from atlasnn.solver._gauss_march import (FAILURES, NEWTON_LATER, STEP_MODES, GaussState, ReplayState, clock,
+                                         compiled_gauss_march, compiled_gauss_replay, compiled_gauss_windows,
+                                         initial_state)
+from atlasnn.solver._gauss_stops import diverging, readable_times
 from atlasnn.solver._gauss_time import (AUTO, WATCH_FIRST, ScaleVaries, ScaleWatch, TimeTransform, check_time_scale,
                                         describe_time_scale, march_advice, potential_applies)
 from atlasnn.systems import HamiltonianSystem, require_float64_field
@@ -76,37 +78,6 @@ def _integer(name: str, value: Any, low: int = 1) -> int:
     return int(value)
 
 
-def _diverging(system: HamiltonianSystem, z0: np.ndarray, z: np.ndarray) -> str | None:
-    """Whether the field is what stopped a march at the state z it reached: not finite there or a
-    little way along the flow from it (where the next window's stages went), or grown a million-fold
-    over its size at z0 (a singularity, or a solution that blows up in finite time); else None."""
-    with jax.enable_x64(True):
-        f = lambda x: np.asarray(system.vector_field(np.atleast_2d(x)))  # noqa: E731
-        f_end = f(z)
-        if not np.all(np.isfinite(f_end)):
-            return "the vector field J∇H is not finite at the state reached"
-        scale = np.max(np.abs(z)) + 1e-300
-        steps = np.geomspace(1e-8, 1e-1, 8) * scale / (np.max(np.abs(f_end)) + 1e-300)
-        ahead = f(z[None, :] + steps[:, None] * f_end[0][None, :])
-        if not np.all(np.isfinite(ahead)):
-            return "the vector field J∇H is not finite just ahead along the flow (a NaN or an infinity in H there)"
-        grown = np.max(np.abs(f_end)) / (np.max(np.abs(f(z0))) + 1e-300)
-        if grown > 1e6:
-            return (f"the field grew {grown:.1e}-fold from z0 to the state reached (a singularity of H, or a solution "
-                    "that blows up in finite time)")
-    return None
-
-
-def _times(*values: float) -> list[str]:
-    """The times with 6 significant digits, or as many more as tell the different ones apart (an
-    interval [1e12, 1e12 + 10] is not "[1e+12, 1e+12]")."""
-    for digits in range(6, 18):
-        out = [f"{float(v):.{digits}g}" for v in values]
-        if len(set(out)) == len(set(float(v) for v in values)):
-            return out
-    return [repr(float(v)) for v in values]
-
-
 @register_solver
 @dataclass(frozen=True)
 class GaussCollocation(AbstractSolver):
@@ -134,7 +105,8 @@ class GaussCollocation(AbstractSolver):
         newton: solve a window by simplified Newton iterations where the fixed-point iteration fails
             (decoupled: s/2 complex systems of the state's size); None: for states of at most
             ``NEWTON_AUTO_SIZE`` components, else the window is shortened instead (its Jacobian and
-            their factorisations cost more than many fixed-point windows there). A system that
+            their factorisations cost more than many fixed-point windows there), and compiled into
+            the march only once a window needs it (``NEWTON_LATER``). A system that
             declares a ``linear_part`` is solved by Newton iterations with it whatever this says.
         max_iterations: iterations per window at most (each kind).
         max_rejects: rejected tries in a row before the march gives up.
@@ -304,10 +276,13 @@ class GaussCollocation(AbstractSolver):
         padded = b if b == 1 else bucket_size(b)
         per_window = 8 * (self.stage_count + 3) * n + 24
         chunk = int(min(self.chunk, max(16, _CHUNK_BYTES // (padded * per_window))))
-        program = compiled_gauss_march(system, stages=self.stage_count, steps=self.steps, chunk=chunk,
-                                       max_iterations=self.max_iterations, newton=self.newton_for(n), growth=self.growth,
-                                       safety=self.safety, warmup=self.warmup, max_rejects=self.max_rejects,
-                                       members=padded, until=until)
+        settings = dict(stages=self.stage_count, steps=self.steps, chunk=chunk, max_iterations=self.max_iterations,
+                        growth=self.growth, safety=self.safety, warmup=self.warmup, max_rejects=self.max_rejects,
+                        members=padded, until=until)
+        # Newton's iteration by default: compiled only once a window needs it (NEWTON_LATER)
+        later = self.newton is None and self.newton_for(n)
+        program = compiled_gauss_march(system, newton=NEWTON_LATER if later else self.newton_for(n), **settings)
+        with_newton = (lambda: compiled_gauss_march(system, newton=True, **settings)) if later else None
         started = time.perf_counter()
         # the padding members start at T: nothing to march
         starts = np.concatenate([np.full(b, float(t0)), np.full(padded - b, float(T))])
@@ -315,7 +290,7 @@ class GaussCollocation(AbstractSolver):
         if until is not None:
             padding[:, until] = float(T)
         rows, state, first_call, stopped = self._march(program, np.concatenate([z0s, padding]), starts, T, progress,
-                                                       2 * per_window, until, watch)
+                                                       2 * per_window, until, watch, with_newton)
         wall = time.perf_counter() - started
         out, problem = [], None
         for m in range(b):
@@ -329,11 +304,11 @@ class GaussCollocation(AbstractSolver):
                     "solve_time": wall, "first_call_time": first_call, "batch": b}
             if failed or start.size == 0 or end < T:
                 if watch is not None and (stopped is not None or failed in (1, 2)):
-                    raise ScaleVaries(f"the march in t stopped at t = {_times(end)[0]} (windows a close encounter "
-                                      "shortened)")
+                    raise ScaleVaries(f"the march in t stopped at t = {readable_times(end)[0]} (windows a close "
+                                      "encounter shortened)")
                 problem = problem or self._stopped_line(m, b, end, t0, T, stopped, failed, z0s[m],
                                                         system.linear_part is not None,
-                                                        _diverging(system, z0s[m], np.asarray(state.z[m])),
+                                                        diverging(system, z0s[m], np.asarray(state.z[m])),
                                                         until is None and potential_applies(system, z0s[m]))
                 # what was computed up to the stop is kept: the error's .partial
                 out.append(self._solution(system, np.append(start, state.t[m]), z, e, L, ratio, info)
@@ -356,14 +331,14 @@ class GaussCollocation(AbstractSolver):
                       gravitational: bool = False) -> str:
         """Why member m stopped (``stopped``: the host's reason, else the program's code ``failed``),
         and the remedy for that reason (``linear``: the system declares a linear part;
-        ``diverging``: what ``_diverging`` found of the field just past the stop; ``gravitational``:
+        ``diverging``: what :func:`diverging` found of the field just past the stop; ``gravitational``:
         ``time_scale="potential"`` suits the system, the remedy for windows a close encounter shrank)."""
         who = "the Gauss march" + ("" if b == 1 else f" of member {m}")
         if failed == 4:
             return (f"{who} cannot start: the vector field J∇H is not finite at z0 = {np.asarray(z0).tolist()} "
                     "(a NaN or an infinity in H or its gradient there); check H and z0")
         if diverging is not None and stopped is None and failed in (1, 3):
-            at, start, stop = _times(end, t0, T)
+            at, start, stop = readable_times(end, t0, T)
             return f"{who} stopped at t = {at} of [{start}, {stop}]: {diverging}; check H there"
         why = stopped or FAILURES.get(failed, "the march stopped")
         default_iterations = type(self).__dataclass_fields__["max_iterations"].default
@@ -373,9 +348,9 @@ class GaussCollocation(AbstractSolver):
         elif stopped is not None:
             remedy = "shorten the interval, loosen the tolerance or give a longer h"
         elif failed == 1:
-            remedy = (f"times near t = {_times(end)[0]} are float64 numbers {np.spacing(abs(end)):.3g} apart, which "
-                      "the lengths the tolerance asks for come down to: give h (a window length well above that), or "
-                      "start the interval nearer 0 (H does not depend on t)")
+            remedy = (f"times near t = {readable_times(end)[0]} are float64 numbers {np.spacing(abs(end)):.3g} apart, "
+                      "which the lengths the tolerance asks for come down to: give h (a window length well above "
+                      "that), or start the interval nearer 0 (H does not depend on t)")
         elif failed == 3 and self.max_iterations < default_iterations:
             remedy = f"raise max_iterations ({self.max_iterations}; the default is {default_iterations})"
         elif failed == 3 and linear:
@@ -392,17 +367,18 @@ class GaussCollocation(AbstractSolver):
             remedy = "try a shorter h"
         else:
             remedy = "loosen the tolerance, or the system may be singular there"
-        at, start, stop = _times(end, t0, T)
+        at, start, stop = readable_times(end, t0, T)
         return f"{who} stopped at t = {at} of [{start}, {stop}]: {why} (rtol={self.rtol:g}, atol={self.atol:g}, " \
                f"h={self.h}); {remedy}"
 
-    def _march(self, program, z0s, starts, T, progress, window_bytes, until=None, watch=None):
+    def _march(self, program, z0s, starts, T, progress, window_bytes, until=None, watch=None, with_newton=None):
         """Call the compiled program until every member reaches T (its time, or component ``until``
         of its state) or fails: the accepted windows per call (each (B, ...) cut to the member's
         count), the final state, the first call's time, and why the march was stopped early (None:
         it was not) — when the windows it would take to reach T, projected from the part done,
         would not fit in the memory available. ``watch`` sees each call's window starts and, where
-        a march not yet done should be one in τ, raises :class:`ScaleVaries`."""
+        a march not yet done should be one in τ, raises :class:`ScaleVaries`. ``with_newton``: the
+        program with Newton's iteration, for the rest of the march once a window needs it."""
         b, t0 = len(z0s), float(np.min(starts))
         counts, room = np.zeros(b), False  # the memory available: read once a second call is needed
         stacked = [initial_state(z, t, self.stage_count) for z, t in zip(z0s, starts)]
@@ -423,6 +399,9 @@ class GaussCollocation(AbstractSolver):
                 kept = np.asarray(out.kept, bool)
                 rows.append([[np.asarray(x)[m][kept[m]] for m in range(b)] for x in out[1:-1]])
                 t_now, failed = np.asarray(clock(state, until)), np.asarray(state.failed)
+                if with_newton is not None and np.any(failed == 5):  # on, by the program with Newton
+                    program, with_newton, failed = with_newton(), None, np.where(failed == 5, 0, failed)
+                    state = state._replace(failed=failed.astype(state.failed.dtype))
                 if watch is not None and not np.all(t_now[:len(watch.off)] >= T):
                     for m in range(len(watch.off)):
                         watch.see(m, rows[-1][2][m])
