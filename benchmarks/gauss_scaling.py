@@ -18,7 +18,10 @@ compiled, the whole call with the dense output on 200 times).
    tolerance (the chains' fast modes), a lower order costs less; where the tolerance sets them
    (Hénon–Heiles), it costs more.
 
-    python -m benchmarks.gauss_scaling --out docs/benchmarks/gauss_scaling.json --figure docs/benchmarks/gauss_scaling.png
+    ATLASNN_CACHE_DIR=off python -m benchmarks.gauss_scaling --out docs/benchmarks/gauss_scaling.json \
+        --figure docs/benchmarks/gauss_scaling.png
+
+(the cache off: the first call at each size compiles, as in a new process on a new machine).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import time
 from pathlib import Path
 
@@ -220,7 +224,8 @@ def main(argv=None) -> None:
         result["orders"] = orders_at_size()
         result["orders_machine"] = machine_info()
     else:
-        result = {"machine": machine_info(), "command": "python -m benchmarks.gauss_scaling",
+        cache = "ATLASNN_CACHE_DIR=off " if os.environ.get("ATLASNN_CACHE_DIR") == "off" else ""
+        result = {"machine": machine_info(), "command": cache + "python -m benchmarks.gauss_scaling",
                   "per_window": per_window("henon-heiles-copies", COPIES, 20.0) + per_window("fput-beta", CHAINS, 50.0)}
         if not args.skip_fput:
             result["fput"] = fput_comparison(args.fput_sizes, FPUT_TOLS)

@@ -44,6 +44,22 @@ def test_good_hamiltonians_are_built_as_before():
     HamiltonianSystem(hh.hamiltonian, 2, params=hh.params, parametric=hh.parametric)
 
 
+def test_jaxs_own_indexing_inside_h_is_not_taken_for_an_index_past_the_state():
+    """jnp.triu_indices gathers one past a helper array of the pairs' count (10 for 5 particles,
+    the size of the whole state): the index check reports it, but H indexes neither q nor p past
+    their 5 components. Before, this Calogero–Moser H was refused."""
+    n = 5
+
+    def hamiltonian(q, p):
+        dq = q[:, None] - q[None, :]
+        return jnp.sum(p ** 2) / 2 + jnp.sum(1.0 / dq[jnp.triu_indices(n, 1)] ** 2) + jnp.sum(q ** 2) / 2
+
+    z0 = np.r_[[-3.0, -1.2, 0.1, 1.5, 2.8], np.zeros(n)]
+    system = HamiltonianSystem(hamiltonian, n, name="calogero", z0=z0)
+    pairs = sum(1.0 / (z0[i] - z0[j]) ** 2 for i in range(n) for j in range(i + 1, n))
+    assert system.energy64(z0[None])[0] == pytest.approx(pairs + np.sum(z0[:n] ** 2) / 2, rel=1e-14)
+
+
 @pytest.mark.parametrize("hamiltonian, got", [
     (lambda q, p: jnp.stack([q[0], p[0]]), "shape (2,)"),
     (lambda q, p: q[0] + 1j * p[0], "complex"),

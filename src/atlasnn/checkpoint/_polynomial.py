@@ -1,10 +1,10 @@
 """Gauss collocation solutions saved as one checkpoint file (``kind = "polynomial"``), and loaded back.
 
 The format is :mod:`atlasnn.checkpoint._format`'s (arrays + JSON meta under one content hash,
-atomic, no pickle): the window edges, start states and their compensation, and the stage
-increments L when the solution kept them (float64); the solver's settings, the system and a free
-``extra`` dict in the meta. The loaded solution evaluates bit-identically and has its error
-estimate back (its solver is rebuilt from the settings).
+atomic, no pickle): the window edges (and their offsets, where not all zero), start states and
+their compensation, and the stage increments L when the solution kept them (float64); the
+solver's settings, the system and a free ``extra`` dict in the meta. The loaded solution evaluates
+bit-identically and has its error estimate back (its solver is rebuilt from the settings).
 """
 
 from __future__ import annotations
@@ -51,6 +51,8 @@ def polynomial_payload(p: str, solution: PolynomialSolution,
         arrays["poly_L"] = solution.L
     if solution.check is not None:
         arrays["poly_check"] = solution.check
+    if np.any(solution.offsets != 0):
+        arrays["poly_offsets"] = solution.offsets
     return meta, {k: np.asarray(v, np.float64) for k, v in arrays.items()}
 
 
@@ -76,7 +78,8 @@ def polynomial_from(p: str, arrays: Mapping[str, np.ndarray], meta: Mapping[str,
         info.update({"path": p, "content_sha256": meta["content_sha256"], "extra": meta.get("extra") or {}})
         L = arrays.get("poly_L")
         sol = PolynomialSolution(sys_, edges, z, e, L, stages, arrays.get("poly_check"), info,
-                                 resolve=None if L is not None else solver.resolver(sys_))
+                                 resolve=None if L is not None else solver.resolver(sys_),
+                                 offsets=arrays.get("poly_offsets"))
         sol.estimator = lambda: solver.companion(sol)
         return sol
     except CheckpointError:

@@ -11,7 +11,7 @@ from atlasnn.solutions._bounds import log_norm, residual_bound
 from atlasnn.solutions._evaluate import bucket_size
 from atlasnn.solutions._estimate import TRUST_FRACTION, ErrorEstimate, estimate_error, state_range
 from atlasnn.solutions._linearised import propagate, residual_and_jacobian
-from atlasnn.solutions._polynomial import PolynomialSolution
+from atlasnn.solutions._polynomial import PolynomialSolution, edge_offsets
 from atlasnn.solutions._transformed import TimeTransformedSolution
 from atlasnn.solutions._traced import TracedSolution
 from atlasnn.solutions._piecewise import PiecewiseSolution, WindowRecord, stack_models, unstack_models, window_edges
@@ -36,6 +36,7 @@ __all__ = [
     "Solution",
     "PiecewiseSolution",
     "PolynomialSolution",
+    "edge_offsets",
     "TimeTransformedSolution",
     "TracedSolution",
     "BundleSolution",

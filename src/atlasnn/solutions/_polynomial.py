@@ -33,7 +33,16 @@ from atlasnn.solutions._solution import check_outside_mode
 from atlasnn.solutions._tableau import gauss_tableau, shifted_legendre
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["PolynomialSolution"]
+__all__ = ["PolynomialSolution", "edge_offsets"]
+
+
+def edge_offsets(edges: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """The offsets o_k of windows of these ``lengths`` laid end to end from edges[0] (exactly, as
+    the march laid them) over the float64 ``edges`` t_k that stand for them: t_k + o_k = t_0 + the
+    sum of the lengths before k. The differences of neighbouring edges are exact far from 0, so
+    each term, and their sum, is a small number computed to its own precision."""
+    edges, lengths = np.asarray(edges, np.float64), np.asarray(lengths, np.float64)
+    return np.concatenate([[0.0], np.cumsum(lengths - np.diff(edges))])
 
 #: the most nodes an error estimate keeps (three a window below it)
 _MAX_NODES = 1_000_000
@@ -57,6 +66,9 @@ class PolynomialSolution(AbstractSolution):
     Attributes:
         system: the Hamiltonian system.
         edges: the window edges t_0..t_n (float64, increasing).
+        offsets: what each edge's float64 number leaves out of the edge (the edge is t_k + o_k: far
+            from 0 the sum of the window lengths falls between float64 numbers, and an evaluation
+            placed by t_k alone would be off by up to half their spacing); None: zeros.
         z: the window start states z_k (n, 2d); ``e``: their compensation (the part of z_k float64
             could not hold: z_k + e_k is the state).
         L: the stage increments (n, s, 2d), or None (solved again from the starts when needed).
@@ -82,6 +94,7 @@ class PolynomialSolution(AbstractSolution):
     estimator: Callable[[], "PolynomialSolution"] | None = field(default=None, repr=False)
     resolve: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = field(default=None, repr=False)
     outside: str = "warn"
+    offsets: np.ndarray | None = None
     _warned: bool = field(default=False, init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -92,6 +105,10 @@ class PolynomialSolution(AbstractSolution):
         n, d = self.edges.size - 1, self.system.state_dim
         if n < 1 or not np.all(np.diff(self.edges) > 0):
             raise ConfigError(f"a polynomial solution needs increasing edges, at least two, got {self.edges.size}")
+        self.offsets = np.zeros(n + 1) if self.offsets is None else np.asarray(self.offsets, np.float64)
+        if self.offsets.shape != (n + 1,) or not np.all(np.isfinite(self.offsets)):
+            raise ConfigError(f"a polynomial solution of {n} windows needs {n + 1} finite edge offsets, got "
+                              f"shape {self.offsets.shape}")
         if self.z.shape != (n, d) or self.e.shape != (n, d):
             raise ConfigError(f"a polynomial solution of {n} windows needs z and e of shape ({n}, {d}), got "
                               f"{self.z.shape} and {self.e.shape}")
@@ -118,7 +135,7 @@ class PolynomialSolution(AbstractSolution):
         if self.L is not None:
             return self.L[k, :, columns]
         unique, where = np.unique(k, return_inverse=True)
-        rows = self.resolve(self.z[unique], self.e[unique], np.diff(self.edges)[unique])
+        rows = self.resolve(self.z[unique], self.e[unique], self.lengths[unique])
         return np.asarray(rows)[where][..., columns]
 
     def _evaluate(self, t) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
@@ -139,8 +156,8 @@ class PolynomialSolution(AbstractSolution):
         """(ẑ(t), dẑ/dt(t)) by window k's polynomial (times (m,) and windows (m,), no check that
         each time is inside its window), shape (m, 2d) each; with ``component``, that one only (m,)."""
         t, k = np.asarray(t, np.float64), np.asarray(k, np.int64)
-        start, length = self.edges[k], self.edges[k + 1] - self.edges[k]
-        theta = (t - start) / length
+        length = self.lengths[k]
+        theta = ((t - self.edges[k]) - self.offsets[k]) / length
         basis = shifted_legendre(theta, self.stages)  # (m, s + 1)
         weights = np.stack([theta[:, None] * (basis[:, :-1] @ self._tab.value.T), basis @ self._tab.rate.T], axis=1)
         pick = slice(None) if component is None else slice(component, component + 1)
@@ -190,7 +207,7 @@ class PolynomialSolution(AbstractSolution):
             D = Gc - np.einsum("hcd,kdn->khcn", tab.halves, G)
             D[:, :, 0] += shift
             bound = np.abs(np.einsum("gc,khcn->khgn", grid, D)).max(axis=2)  # (m, 2, 2d)
-            start, length = self.edges[k], np.diff(self.edges)[k]
+            start, length = self.edges[k], self.lengths[k]
             t = np.stack([start, start + 0.25 * length, start + 0.75 * length], axis=1)  # (m, 3)
             d = np.concatenate([shift[:, :1], bound], axis=1)  # (m, 3, 2d)
             if block > 1:  # of every block of windows, the one of the largest error
@@ -223,6 +240,11 @@ class PolynomialSolution(AbstractSolution):
         return out
 
     # ------------------------------------------------------------------ attributes
+    @property
+    def lengths(self) -> np.ndarray:
+        """The windows' lengths (n,): the differences of the edges with their offsets."""
+        return np.diff(self.edges) + np.diff(self.offsets)
+
     @property
     def interval(self) -> tuple[float, float]:
         return float(self.edges[0]), float(self.edges[-1])

@@ -22,7 +22,8 @@ import numpy as np
 from atlasnn.compile_cache import to_host
 from atlasnn.errors import ConfigError
 from atlasnn.limits import available_memory
-from atlasnn.solutions import PolynomialSolution, TimeTransformedSolution, TracedSolution, bucket_size, gauss_tableau
+from atlasnn.solutions import (PolynomialSolution, TimeTransformedSolution, TracedSolution, bucket_size, edge_offsets,
+                               gauss_tableau)
 from atlasnn.solver._base import AbstractSolver, monotone_progress, register_solver, solve_one
 from atlasnn.solver._collocation import require_float64
 from atlasnn.solver._gauss_core import LOOPS, gauss_core
@@ -311,12 +312,12 @@ class GaussCollocation(AbstractSolver):
                                                         diverging(system, z0s[m], np.asarray(state.z[m])),
                                                         until is None and potential_applies(system, z0s[m]))
                 # what was computed up to the stop is kept: the error's .partial
-                out.append(self._solution(system, np.append(start, state.t[m]), z, e, L, ratio, info)
+                out.append(self._solution(system, np.append(start, state.t[m]), length, z, e, L, ratio, info)
                            if start.size else None)
                 continue
             advice = None if until is not None or self.steps != "constant" or self.h is not None else \
                 march_advice(system, length, z, self.warmup)
-            out.append(self._solution(system, np.append(start, state.t[m]), z, e, L, ratio,
+            out.append(self._solution(system, np.append(start, state.t[m]), length, z, e, L, ratio,
                                       {**info, **({"advice": advice} if advice else {})}))
         if problem is not None:
             kept = any(part is not None for part in out)
@@ -422,10 +423,10 @@ class GaussCollocation(AbstractSolver):
         return rows, state, first_call, None
 
     # ------------------------------------------------------------------ the solution
-    def _solution(self, system, edges, z, e, L, ratio, info) -> PolynomialSolution:
+    def _solution(self, system, edges, lengths, z, e, L, ratio, info) -> PolynomialSolution:
         keep = self.keep if self.keep is not None else L.nbytes <= KEEP_BYTES
         sol = PolynomialSolution(system, edges, z, e, L if keep else None, self.stage_count, ratio, info,
-                                 resolve=None if keep else self.resolver(system))
+                                 resolve=None if keep else self.resolver(system), offsets=edge_offsets(edges, lengths))
         sol.estimator = lambda: self.companion(sol)
         return sol
 
@@ -451,7 +452,7 @@ class GaussCollocation(AbstractSolver):
     def companion(self, sol: PolynomialSolution) -> PolynomialSolution:
         """The same method over the same interval on windows half as long: the reference of the
         error estimate (module docstring of ``atlasnn.solutions._polynomial``)."""
-        starts, lengths = sol.edges[:-1], np.diff(sol.edges)
+        starts, lengths = sol.edges[:-1] + sol.offsets[:-1], sol.lengths
         halves = np.repeat(0.5 * lengths, 2)
         edges = np.append(np.stack([starts, starts + 0.5 * lengths], axis=1).reshape(-1), sol.edges[-1])
         replay = compiled_gauss_replay(sol.system, stages=self.stage_count, max_iterations=self.max_iterations,
@@ -474,4 +475,5 @@ class GaussCollocation(AbstractSolver):
         keep = sol.L is not None
         return PolynomialSolution(sol.system, edges, np.concatenate(zs), np.concatenate(es), L if keep else None,
                                   self.stage_count, None, {"companion_of": sol.info.get("solver")}, outside="allow",
-                                  resolve=None if keep else self.resolver(sol.system))
+                                  resolve=None if keep else self.resolver(sol.system),
+                                  offsets=sol.offsets[0] + edge_offsets(edges, halves))

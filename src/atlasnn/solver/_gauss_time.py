@@ -282,6 +282,7 @@ class TimeTransform:
             keep = slice(0, k - 1)
             ext = PolynomialSolution(ext.system, ext.edges[:k], ext.z[keep], ext.e[keep],
                                      None if ext.L is None else ext.L[keep], ext.stages,
-                                     None if ext.check is None else ext.check[keep], ext.info, resolve=ext.resolve)
+                                     None if ext.check is None else ext.check[keep], ext.info, resolve=ext.resolve,
+                                     offsets=ext.offsets[:k])
         info = {**ext.info, "time_scale": self.label, "tau_interval": list(ext.interval)}
         return TimeTransformedSolution(self.system, ext, float(T), info), line
