@@ -135,7 +135,7 @@ class PolynomialSolution(AbstractSolution):
         if self.L is not None:
             return self.L[k, :, columns]
         unique, where = np.unique(k, return_inverse=True)
-        rows = self.resolve(self.z[unique], self.e[unique], self.lengths[unique])
+        rows = self.resolve(self.z[unique], self.e[unique], self.length_of(unique))
         return np.asarray(rows)[where][..., columns]
 
     def _evaluate(self, t) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
@@ -156,7 +156,7 @@ class PolynomialSolution(AbstractSolution):
         """(ẑ(t), dẑ/dt(t)) by window k's polynomial (times (m,) and windows (m,), no check that
         each time is inside its window), shape (m, 2d) each; with ``component``, that one only (m,)."""
         t, k = np.asarray(t, np.float64), np.asarray(k, np.int64)
-        length = self.lengths[k]
+        length = self.length_of(k)
         theta = ((t - self.edges[k]) - self.offsets[k]) / length
         basis = shifted_legendre(theta, self.stages)  # (m, s + 1)
         weights = np.stack([theta[:, None] * (basis[:, :-1] @ self._tab.value.T), basis @ self._tab.rate.T], axis=1)
@@ -207,7 +207,7 @@ class PolynomialSolution(AbstractSolution):
             D = Gc - np.einsum("hcd,kdn->khcn", tab.halves, G)
             D[:, :, 0] += shift
             bound = np.abs(np.einsum("gc,khcn->khgn", grid, D)).max(axis=2)  # (m, 2, 2d)
-            start, length = self.edges[k], self.lengths[k]
+            start, length = self.edges[k], self.length_of(k)
             t = np.stack([start, start + 0.25 * length, start + 0.75 * length], axis=1)  # (m, 3)
             d = np.concatenate([shift[:, :1], bound], axis=1)  # (m, 3, 2d)
             if block > 1:  # of every block of windows, the one of the largest error
@@ -244,6 +244,10 @@ class PolynomialSolution(AbstractSolution):
     def lengths(self) -> np.ndarray:
         """The windows' lengths (n,): the differences of the edges with their offsets."""
         return np.diff(self.edges) + np.diff(self.offsets)
+
+    def length_of(self, k: np.ndarray) -> np.ndarray:
+        """The lengths of windows k (as :attr:`lengths`, without the whole array)."""
+        return (self.edges[k + 1] - self.edges[k]) + (self.offsets[k + 1] - self.offsets[k])
 
     @property
     def interval(self) -> tuple[float, float]:
