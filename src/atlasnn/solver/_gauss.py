@@ -400,7 +400,7 @@ class GaussCollocation(AbstractSolver):
                 kept = np.asarray(out.kept, bool)
                 rows.append([[np.asarray(x)[m][kept[m]] for m in range(b)] for x in out[1:-1]])
                 t_now, failed = np.asarray(clock(state, until)), np.asarray(state.failed)
-                if with_newton is not None and np.any(failed == 5):  # on, by the program with Newton
+                if with_newton is not None and np.any(failed == 5):  # a window needs Newton: the program with it
                     program, with_newton, failed = with_newton(), None, np.where(failed == 5, 0, failed)
                     state = state._replace(failed=failed.astype(state.failed.dtype))
                 if watch is not None and not np.all(t_now[:len(watch.off)] >= T):
