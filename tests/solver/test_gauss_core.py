@@ -178,6 +178,17 @@ def test_a_traced_interval_that_is_empty_or_not_finite_raises_and_times_outside_
             jax.block_until_ready(run(T).z)
 
 
+def test_a_traced_interval_far_from_zero_is_as_accurate_as_one_at_zero():
+    """[1.7e9, 1.7e9 + 40] (a Unix time, float64 times 2.4e-7 apart): the windows are placed by their
+    starts and the offsets those leave out, as on the host, not by the rounded starts alone (1e-7
+    off before)."""
+    t0 = 1.7e9
+    ts = t0 + jnp.linspace(0.0, 40.0, 101)
+    z = jax.jit(lambda z0: solve(oscillator(1.0), z0, (t0, t0 + 40.0))(ts))(jnp.array([1.0, 0.0]))
+    exact = np.stack([np.cos(np.asarray(ts) - t0), -np.sin(np.asarray(ts) - t0)], axis=-1)
+    assert np.abs(np.asarray(z) - exact).max() < 1e-11
+
+
 @pytest.mark.long
 def test_a_float32_h_a_budget_past_memory_and_complex_times_are_refused_when_traced(monkeypatch):
     """What the traced core cannot do well is refused at trace time in one line: an H computing in

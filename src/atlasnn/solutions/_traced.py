@@ -39,6 +39,8 @@ class TracedSolution(eqx.Module):
         t0: the start of the interval.
         T: its end.
         starts: each window's start t_k in order (budget,); entries past ``count`` are +inf.
+        offsets: what each start's float64 number leaves out (budget,): the start is t_k + o_k
+            (:class:`PolynomialSolution`'s ``offsets``).
         rows: the row of window k in the arrays below (budget,): they hold every try of a window,
             accepted or not, in the order tried (sorting them would copy them all).
         lengths: each try's length (budget,).
@@ -54,6 +56,7 @@ class TracedSolution(eqx.Module):
     t0: jax.Array
     T: jax.Array
     starts: jax.Array
+    offsets: jax.Array
     rows: jax.Array
     lengths: jax.Array
     z: jax.Array
@@ -69,7 +72,7 @@ class TracedSolution(eqx.Module):
         """(row of the window, θ) of each time: window k with t_k ≤ t < t_{k+1}, clipped to the windows."""
         k = jnp.clip(jnp.searchsorted(self.starts, t, side="right") - 1, 0, self.count - 1)
         row = self.rows[k]
-        return row, (t - self.starts[k]) / self.lengths[row]
+        return row, ((t - self.starts[k]) - self.offsets[k]) / self.lengths[row]
 
     def _values(self, t) -> tuple[jax.Array, jax.Array]:
         t = jnp.asarray(_real_times(t), self.z.dtype)

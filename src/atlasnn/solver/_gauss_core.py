@@ -217,4 +217,8 @@ def _solution(system: HamiltonianSystem, stages: int, t0, T, out: _Carry) -> Tra
                 f"solve (traced core): the window budget, GaussCollocation(max_windows={budget}), was spent before T: "
                 "raise max_windows or loosen the tolerance"]
     starts = eqx.branched_error_if(jnp.where(position < count, start[order], jnp.inf), code > 0, code, messages)
-    return TracedSolution(t0, T, starts, order, length, z, e, L, count, st.rejected, st.iterations, stages, system)
+    # the offsets of the starts' float64 numbers (edge_offsets): 0 in exact arithmetic, so no derivative
+    gaps = jnp.where(position[1:] < count, length[order][:-1] - (start[order][1:] - start[order][:-1]), 0.0)
+    offsets = lax.stop_gradient(jnp.concatenate([jnp.zeros(1, gaps.dtype), jnp.cumsum(gaps)]))
+    return TracedSolution(t0, T, starts, offsets, order, length, z, e, L, count, st.rejected, st.iterations, stages,
+                          system)
