@@ -246,7 +246,7 @@ class PolynomialSolution(AbstractSolution):
         return np.diff(self.edges) + np.diff(self.offsets)
 
     def length_of(self, k: np.ndarray) -> np.ndarray:
-        """The lengths of windows k (as :attr:`lengths`, without the whole array)."""
+        """The lengths of windows k (as `lengths` has them, without the whole array)."""
         return (self.edges[k + 1] - self.edges[k]) + (self.offsets[k + 1] - self.offsets[k])
 
     @property

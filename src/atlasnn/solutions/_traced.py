@@ -40,7 +40,7 @@ class TracedSolution(eqx.Module):
         T: its end.
         starts: each window's start t_k in order (budget,); entries past ``count`` are +inf.
         offsets: what each start's float64 number leaves out (budget,): the start is t_k + o_k
-            (:class:`PolynomialSolution`'s ``offsets``).
+            (as a `PolynomialSolution`'s `offsets`).
         rows: the row of window k in the arrays below (budget,): they hold every try of a window,
             accepted or not, in the order tried (sorting them would copy them all).
         lengths: each try's length (budget,).
