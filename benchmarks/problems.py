@@ -87,7 +87,7 @@ def kepler_eccentricity(system, z0) -> float | None:
 def gauss_reference(system, z0, interval, t):
     """(reference at t, its description, its gap to DOP853 at rtol 2.3e-14 relative to the range):
     the Gauss collocation with s = 16 on windows a quarter of the default's shortest."""
-    default = solve(system, z0, interval)
+    default = solve(system, z0, interval, solver=GaussCollocation())
     h = float(np.diff(default.edges).min()) / 4
     ref = solve(system, z0, interval, solver=GaussCollocation(stages=16, h=h))(t)
     dop = reference_solution(system, z0, t, rtol=2.3e-14, atol=1e-16)

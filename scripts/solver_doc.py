@@ -21,6 +21,7 @@ the pages hold what it makes, so no number on them can drift from its record):
 * ``gradients``: docs/benchmarks/gauss_gradients.json (``python -m benchmarks.gauss_gradients``, docs/JAX.md);
 * ``learned``: docs/benchmarks/learned_h.json (``python -m benchmarks.learned_h``, docs/howto/LEARN_H.md);
 * ``pde`` and ``fput``: docs/howto/PDE.md (``scripts/_pde_tables.py``).
+* ``splitting``, ``splitting_nls``, ``splitting_long``: docs/SPLITTING.md (``scripts/_splitting_tables.py``).
 
 The prose around the tables is written by hand; a few of its key numbers (and the machines
 PERFORMANCE.md names) are checked against their records all the same (``PROSE`` below): each check
@@ -45,10 +46,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _pde_tables as pde_tables  # noqa: E402  (the PDE page's tables, beside this script)
 import _scaling_tables as scaling_tables  # noqa: E402  (the tables of SOLVER.md's "At size")
+import _splitting_tables as splitting_tables  # noqa: E402  (the tables of SPLITTING.md)
 from _doc_format import milliseconds as _ms  # noqa: E402
 
 PAGES = [ROOT / "docs" / "SOLVER.md", ROOT / "docs" / "CHOOSING.md", ROOT / "docs" / "JAX.md",
-         ROOT / "docs" / "howto" / "LEARN_H.md", ROOT / "docs" / "howto" / "PDE.md"]
+         ROOT / "docs" / "howto" / "LEARN_H.md", ROOT / "docs" / "howto" / "PDE.md", ROOT / "docs" / "SPLITTING.md"]
 RECORDS = {
     "suite": "docs/runs/solver/suite.json",
     "workprecision": "docs/benchmarks/solver_workprecision.json",
@@ -66,6 +68,7 @@ RECORDS = {
     "learned": "docs/benchmarks/learned_h.json",
     **pde_tables.RECORDS,
     **scaling_tables.RECORDS,
+    **splitting_tables.RECORDS,
 }
 METHODS = [("gauss-adaptive", "Gauss, adaptive"), ("diffrax-dopri8", "Diffrax Dopri8"),
            ("diffrax-tsit5", "Diffrax Tsit5"), ("dop853", "SciPy DOP853"), ("yoshida4", "Yoshida-4"),
@@ -343,7 +346,8 @@ def learned(record: dict) -> str:
 MAKERS = {"learned": learned, "gradients": gradients, "suite": suite, "workprecision": workprecision, "energy": energy, "step_modes": step_modes, "batch": batch,
           "first_run": first_run, "stages": stages,
           "roundoff": roundoff, "orders": orders, "everyday": everyday,
-          "rebound": rebound, "time_transform": time_transform, **pde_tables.MAKERS, **scaling_tables.MAKERS}
+          "rebound": rebound, "time_transform": time_transform, **pde_tables.MAKERS, **scaling_tables.MAKERS,
+          **splitting_tables.MAKERS}
 
 
 # ------------------------------------------------------------------ key numbers of the prose

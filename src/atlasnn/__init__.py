@@ -3,8 +3,9 @@ collocation of its trial solution (JAX).
 
 The face: one door per question, each taking method objects that hold their settings.
 
-* a trajectory: :func:`solve` (and :func:`solve_batch`) with :class:`GaussCollocation` (default),
-  :class:`AdamMarch` or :class:`Transfer` (the deprecated ``Collocation``: ``atlasnn.solver``);
+* a trajectory: :func:`solve` (and :func:`solve_batch`) with :class:`GaussCollocation` or
+  :class:`SplittingComposition` (the default chooses), :class:`AdamMarch` or :class:`Transfer` (the
+  deprecated ``Collocation``: ``atlasnn.solver``);
 * a bundle (every initial state and parameter of a :class:`BundleBox`): :func:`solve_bundle` with
   :class:`FlowMap` (default) or :class:`NetworkBundle`;
 * parameters from observations: :func:`fit` with :class:`Shooting` (default), :class:`CollocationFit`,
@@ -39,8 +40,8 @@ apply_matmul_precision()  # full float32 products on a GPU too (atlasnn.precisio
 # name -> the subpackage that defines it
 _FACE = {
     "systems": ("HamiltonianSystem", "builtin_system", "expression_system", "BundleBox"),
-    "solver": ("solve", "solve_batch", "GaussCollocation", "AdamMarch", "Transfer", "solve_bundle", "FlowMap",
-               "NetworkBundle"),
+    "solver": ("solve", "solve_batch", "GaussCollocation", "SplittingComposition", "AdamMarch", "Transfer",
+               "solve_bundle", "FlowMap", "NetworkBundle"),
     "checkpoint": ("save", "load"),
     "evaluation": ("reference_solution", "integrate"),
     "inverse": ("fit", "Shooting", "CollocationFit", "Joint", "BundleFit", "FitResult", "learn_hamiltonian"),

@@ -14,14 +14,15 @@ from atlasnn.checkpoint._format import _fail, _read
 from atlasnn.checkpoint._piecewise import KIND_PIECEWISE, load_piecewise, save_piecewise
 from atlasnn.checkpoint._polynomial import KIND_POLYNOMIAL
 from atlasnn.checkpoint._single import KIND_MODEL, load_checkpoint, save_checkpoint
+from atlasnn.checkpoint._splitting import KIND_SPLITTING, load_splitting, save_splitting
 from atlasnn.errors import CheckpointError
 from atlasnn.solutions import (BundleSolution, FlowMapBundle, PiecewiseSolution, PolynomialSolution, Solution,
-                                TimeTransformedSolution)
+                                SplittingSolution, TimeTransformedSolution)
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["save", "load"]
 
-_SOLUTIONS = (PolynomialSolution, PiecewiseSolution, FlowMapBundle, BundleSolution, Solution)
+_SOLUTIONS = (PolynomialSolution, PiecewiseSolution, SplittingSolution, FlowMapBundle, BundleSolution, Solution)
 
 
 def save(path: str | os.PathLike, solution: Any, *, extra: Mapping[str, Any] | None = None) -> str:
@@ -40,6 +41,8 @@ def save(path: str | os.PathLike, solution: Any, *, extra: Mapping[str, Any] | N
                               f"save({type(path).__name__}, {type(solution).__name__})")
     if isinstance(solution, (PolynomialSolution, PiecewiseSolution)):
         return save_piecewise(path, solution, extra=extra)
+    if isinstance(solution, SplittingSolution):
+        return save_splitting(path, solution, extra=extra)
     if isinstance(solution, TimeTransformedSolution):
         raise _fail(os.fspath(path), "a time-transformed solution (GaussCollocation(time_scale=...)) cannot be saved "
                                      "yet; solve again, or evaluate it and save the values")
@@ -69,6 +72,8 @@ def load(path: str | os.PathLike, system: HamiltonianSystem | None = None) -> An
     kind = _read(p)[1].get("kind")
     if kind in (KIND_PIECEWISE, KIND_POLYNOMIAL):
         return load_piecewise(p, system)
+    if kind == KIND_SPLITTING:
+        return load_splitting(p, system)
     if kind == KIND_FLOWMAP:
         return load_flowmap(p)
     if kind == KIND_BUNDLE:

@@ -22,21 +22,21 @@ from atlasnn.solver import GaussCollocation
 from atlasnn.systems import HamiltonianSystem
 from atlasnn.version import __version__
 
-__all__ = ["KIND_POLYNOMIAL", "polynomial_payload", "polynomial_from"]
+__all__ = ["KIND_POLYNOMIAL", "polynomial_payload", "polynomial_from", "solved_meta"]
 
 KIND_POLYNOMIAL = "polynomial"
 
 
-def polynomial_payload(p: str, solution: PolynomialSolution,
-                       extra: Mapping[str, Any] | None) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """The meta and arrays a polynomial solution is saved as (before the hash)."""
+def solved_meta(p: str, kind: str, architecture: dict[str, Any], solution: Any,
+                extra: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The meta of a solution a solver computed (kind, architecture, z0, t0, the system and its
+    probes, the solver's record, ``extra``), or a one-line refusal of what is not JSON-able."""
     system = solution.system
     try:
-        meta = {
-            "format": FORMAT, "format_version": FORMAT_VERSION, "kind": KIND_POLYNOMIAL,
+        return {
+            "format": FORMAT, "format_version": FORMAT_VERSION, "kind": kind,
             "atlasnn_version": __version__, "jax_version": jax.__version__,
-            "architecture": {"kind": "gauss-polynomial", "state_dim": int(system.state_dim),
-                             "stages": int(solution.stages)},
+            "architecture": {"state_dim": int(system.state_dim), **architecture},
             "z0": _to_json(np.asarray(solution.z0, np.float64), "z0"), "t0": float(solution.t0),
             "dtype": "float64", "system": _to_json(system.describe(), "system"),
             "system_probes": _to_json(record_probes(system, np.asarray(solution.z0, np.float64)), "system_probes"),
@@ -46,6 +46,13 @@ def polynomial_payload(p: str, solution: PolynomialSolution,
         }
     except (TypeError, ValueError) as exc:
         raise _fail(p, f"cannot save: {exc}") from None
+
+
+def polynomial_payload(p: str, solution: PolynomialSolution,
+                       extra: Mapping[str, Any] | None) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The meta and arrays a polynomial solution is saved as (before the hash)."""
+    meta = solved_meta(p, KIND_POLYNOMIAL, {"kind": "gauss-polynomial", "stages": int(solution.stages)}, solution,
+                       extra)
     arrays = {"poly_edges": solution.edges, "poly_z": solution.z, "poly_e": solution.e}
     if solution.L is not None:
         arrays["poly_L"] = solution.L

@@ -142,18 +142,20 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("solve", help="solve one trajectory (a built-in system or the system of a config) with the "
                                      "Gauss collocation or another solver; print its error estimate")
     add_problem_options(s, "a TOML experiment file or a built-in experiment's name (kepler-e09)")
-    s.add_argument("--solver", default="gauss", choices=("gauss", "collocation"),
-                   help="gauss: the trial solution at Gauss–Legendre nodes (symplectic, order 2s; default); "
-                        "collocation: random tanh features by Gauss–Newton")
+    s.add_argument("--solver", default="auto", choices=("auto", "gauss", "splitting", "collocation"),
+                   help="auto: chosen from the system (default; printed); gauss: the trial solution at "
+                        "Gauss–Legendre nodes (symplectic, order 2s, any H); splitting: explicit symplectic "
+                        "splitting methods (separable H); collocation: random tanh features by Gauss–Newton")
+    s.add_argument("--scheme", default=None, help="splitting: the scheme (default: from rtol), e.g. kahan_li8")
     s.add_argument("--rtol", type=float, default=None, help="the solver's relative tolerance (default: its own, "
-                   "1e-11 for gauss, 1e-12 for collocation)")
+                   "1e-11 for gauss and splitting, 1e-12 for collocation)")
     s.add_argument("--atol", type=float, default=None, help="the solver's absolute tolerance (default: its own)")
     s.add_argument("--stages", type=int, default=None,
                    help="gauss: s, the Gauss nodes per window (default: from rtol, 16 at its default)")
     s.add_argument("--steps", dest="step_mode", default=None, choices=("constant", "adaptive"),
                    help="gauss: one window length, "
                    "only shortened where needed (symplectic; default), or every window its own")
-    s.add_argument("--h", type=float, default=None, help="gauss: one window length throughout")
+    s.add_argument("--h", type=float, default=None, help="gauss: one window length throughout; splitting: one step")
     s.add_argument("--features", type=int, default=None, help="collocation: random features per window (20)")
     s.add_argument("--seed", type=int, default=None, help="collocation: the draw of the random features (0)")
     s.add_argument("--check", action="store_true", help="also compare with DOP853 at rtol "

@@ -79,18 +79,36 @@ def cmd_integrate(args) -> int:
     return 0
 
 
-def _solver_from_args(args):
-    """The solver object of ``atlasnn solve``'s options (an option of the other solver is refused)."""
-    from atlasnn.solver import solver_from_name
+def _solver_from_args(args, system=None, z0=None):
+    """The solver object of ``atlasnn solve``'s options (an option of another solver is refused);
+    ``--solver auto``: the one ``solve`` would choose for the system."""
+    from atlasnn.solver import default_solver, solver_from_name
 
-    own = {"gauss": ("stages", "steps", "h"), "collocation": ("features", "seed")}[args.solver]
+    name = args.solver if args.solver != "auto" else default_solver(system, z0).name
+    own = {"gauss": ("stages", "steps", "h"), "collocation": ("features", "seed"),
+           "splitting": ("scheme", "h")}[name]
     options = {"stages": "stages", "step_mode": "steps", "h": "h", "features": "features", "seed": "seed",
-               "rtol": "rtol", "atol": "atol"}
-    given = {key: getattr(args, dest) for dest, key in options.items() if getattr(args, dest) is not None}
+               "rtol": "rtol", "atol": "atol", "scheme": "scheme"}
+    given = {key: getattr(args, dest, None) for dest, key in options.items() if getattr(args, dest, None) is not None}
     for key in sorted(set(given) - set(own) - {"rtol", "atol"}):
-        raise AtlasError(f"--{key} is a setting of another solver than --solver {args.solver}; drop it or choose "
-                         f"--solver {'collocation' if args.solver == 'gauss' else 'gauss'}")
-    return solver_from_name(args.solver, **given)
+        raise AtlasError(f"--{key} is not a setting of the {name} solver"
+                         f"{' (the one --solver auto chose for this system)' if args.solver == 'auto' else ''}; "
+                         f"drop it or choose the solver it belongs to with --solver")
+    return solver_from_name(name, **given)
+
+
+def _work_line(system, t0, T, sol) -> str:
+    """What the march did, in one line."""
+    info = sol.info
+    if info.get("solver") == "splitting":
+        return (f"{system.name}: [{t0:g}, {T:.6g}] by the splitting scheme {info['scheme']} (order {info['order']}, "
+                f"{info['stages']} force evaluations a step) in {info['steps']} steps of h = {info['h']:.4g}, "
+                f"{info['solve_time'] * 1e3:.1f} ms")
+    work = (f"{info['rejected']} rejected, {info['iterations']} iterations" if "iterations" in info else
+            f"{info['rejected']} rejected, {info['newton_iterations']} Gauss-Newton iterations")
+    return (f"{system.name}: [{t0:g}, {T:.6g}] by {info.get('solver', 'the solver')} in {sol.n_windows} windows "
+            f"({work}), {info['solve_time'] * 1e3:.1f} ms (first call, with compilation or cache load: "
+            f"{info['first_call_time']:.2f} s)")
 
 
 def cmd_solve(args) -> int:
@@ -105,7 +123,7 @@ def cmd_solve(args) -> int:
     if args.config_pos in builtin_experiments() and not Path(args.config_pos).exists():
         args.config_pos = str(builtin_config_path(args.config_pos))  # a built-in experiment by name
     system, z0, t0, T, _ = _integrate_problem(args)
-    solver = _solver_from_args(args)
+    solver = _solver_from_args(args, system, z0)
     if args.save is not None and Path(args.save).exists():
         raise AtlasError(f"--save {args.save}: the file exists; choose another path or remove it")
     if args.save is not None and not Path(args.save).resolve().parent.is_dir():
@@ -113,10 +131,7 @@ def cmd_solve(args) -> int:
                          "first (checked before solving, so nothing is lost)")
     sol = solve(system, z0, (t0, T), solver=solver)
     info = sol.info
-    work = (f"{info['rejected']} rejected, {info['iterations']} iterations" if "iterations" in info else
-            f"{info['rejected']} rejected, {info['newton_iterations']} Gauss-Newton iterations")
-    print(f"{system.name}: [{t0:g}, {T:.6g}] in {sol.n_windows} windows ({work}), {info['solve_time'] * 1e3:.1f} ms "
-          f"(first call, with compilation or cache load: {info['first_call_time']:.2f} s)")
+    print(_work_line(system, t0, T, sol))
     if info.get("advice"):
         print(f"note: {info['advice']}")
     if info.get("time_scale_chosen"):

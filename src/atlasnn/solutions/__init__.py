@@ -2,7 +2,7 @@
 with their residual; one trial solution (:class:`Solution`) or a time-marching chain of windows
 (:class:`PiecewiseSolution`); and their a-posteriori error estimate, with no reference needed. The
 Gauss collocation's: :class:`PolynomialSolution`, and :class:`TimeTransformedSolution` for its
-time-transformed march."""
+time-transformed march; an explicit splitting method's: :class:`SplittingSolution`."""
 
 from atlasnn.solutions._base import AbstractSolution
 from atlasnn.solutions._bundle import MEMBER_CHUNK, BundleSolution, bundle_start
@@ -14,6 +14,10 @@ from atlasnn.solutions._linearised import propagate, residual_and_jacobian
 from atlasnn.solutions._polynomial import PolynomialSolution, edge_offsets
 from atlasnn.solutions._transformed import TimeTransformedSolution
 from atlasnn.solutions._traced import TracedSolution
+from atlasnn.solutions._splitting_tables import SCHEMES as SPLITTING_SCHEMES, SplittingScheme, splitting_scheme
+from atlasnn.solutions._splitting import SplittingSolution
+from atlasnn.solutions._splitting_traced import TracedSplittingSolution
+from atlasnn.solutions._splitting_step import SplitState, lax_steps, linear_splitting, split_step, stability_limit, start_state
 from atlasnn.solutions._piecewise import PiecewiseSolution, WindowRecord, stack_models, unstack_models, window_edges
 from atlasnn.solutions._base import INTERVAL_SLACK, ExtrapolationError, ExtrapolationWarning
 from atlasnn.solutions._solution import OUTSIDE_MODES, Solution
@@ -39,6 +43,17 @@ __all__ = [
     "edge_offsets",
     "TimeTransformedSolution",
     "TracedSolution",
+    "SPLITTING_SCHEMES",
+    "SplittingScheme",
+    "splitting_scheme",
+    "SplittingSolution",
+    "TracedSplittingSolution",
+    "linear_splitting",
+    "stability_limit",
+    "SplitState",
+    "split_step",
+    "start_state",
+    "lax_steps",
     "BundleSolution",
     "MEMBER_CHUNK",
     "bundle_start",

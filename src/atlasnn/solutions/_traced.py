@@ -17,7 +17,7 @@ from atlasnn.errors import ConfigError
 from atlasnn.solutions._base import INTERVAL_SLACK, finite_times
 from atlasnn.solutions._tableau import gauss_tableau, shifted_legendre
 
-__all__ = ["TracedSolution"]
+__all__ = ["TracedSolution", "TracedReading"]
 
 
 def _real_times(t):
@@ -30,7 +30,27 @@ def _real_times(t):
     return finite_times(t)
 
 
-class TracedSolution(eqx.Module):
+class TracedReading(eqx.Module):
+    """What a solution held as JAX values offers, from its ``_values(t) -> (ẑ, dẑ/dt)``: ẑ(t),
+    dẑ/dt(t) and H(ẑ(t)) (an abstract base: its subclasses hold the arrays and ``system``)."""
+
+    def _values(self, t) -> tuple[jax.Array, jax.Array]:
+        raise NotImplementedError
+
+    def __call__(self, t) -> jax.Array:
+        """ẑ(t), shape t.shape + (2d,); NaN outside [t0, T]."""
+        return self._values(t)[0]
+
+    def derivative(self, t) -> jax.Array:
+        """dẑ/dt(t), shape t.shape + (2d,)."""
+        return self._values(t)[1]
+
+    def energy(self, t) -> jax.Array:
+        """H(ẑ(t)), shape t.shape."""
+        return self.system.energy(self(t))
+
+
+class TracedSolution(TracedReading):
     """A Gauss collocation solution over [t0, T] as a pytree of arrays, callable at any times
     inside it; a time outside (beyond the relative slack ``INTERVAL_SLACK`` of the host
     solutions) gives NaN, as no warning can be raised inside a trace.
@@ -90,18 +110,6 @@ class TracedSolution(eqx.Module):
         z, dz = jnp.where(outside, jnp.nan, z), jnp.where(outside, jnp.nan, dz)
         shape = t.shape + (self.z.shape[-1],)
         return z.reshape(shape), dz.reshape(shape)
-
-    def __call__(self, t) -> jax.Array:
-        """ẑ(t), shape t.shape + (2d,)."""
-        return self._values(t)[0]
-
-    def derivative(self, t) -> jax.Array:
-        """dẑ/dt(t), shape t.shape + (2d,)."""
-        return self._values(t)[1]
-
-    def energy(self, t) -> jax.Array:
-        """H(ẑ(t)), shape t.shape."""
-        return self.system.energy(self(t))
 
     @property
     def end_state(self) -> jax.Array:

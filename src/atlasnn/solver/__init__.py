@@ -21,11 +21,14 @@ from atlasnn.solver._flowmap import FlowMap, FlowMapProblem, flowmap_bundle, flo
 from atlasnn.solver._gauss import GaussCollocation
 from atlasnn.solver._parametric import ParametricGauss, ParametricSolveFailed
 from atlasnn.solver._features import WINDOW_SCALINGS, RandomFeatures, collocation_nodes
-from atlasnn.solver._solve import solve, solve_batch
+from atlasnn.solver._solve import SPLITTING_AUTO_SIZE, default_solver, solve, solve_batch
+from atlasnn.solver._splitting import SCHEME_BY_TOLERANCE, SplittingComposition, scheme_for
 from atlasnn.solver._trained import AdamMarch, Transfer
 
 __all__ = [
     "solve",
+    "default_solver",
+    "SPLITTING_AUTO_SIZE",
     "solve_bundle",
     "FlowMap",
     "NetworkBundle",
@@ -35,6 +38,9 @@ __all__ = [
     "solve_batch",
     "AbstractSolver",
     "GaussCollocation",
+    "SplittingComposition",
+    "SCHEME_BY_TOLERANCE",
+    "scheme_for",
     "ParametricGauss",
     "ParametricSolveFailed",
     "Collocation",

@@ -14,9 +14,11 @@ from atlasnn.solutions import AbstractSolution
 from atlasnn.solver._base import AbstractSolver
 from atlasnn.solver._collocation import Collocation
 from atlasnn.solver._gauss import GaussCollocation
+from atlasnn.solver._gauss_time import potential_applies
+from atlasnn.solver._splitting import SplittingComposition
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["solve", "solve_batch"]
+__all__ = ["solve", "solve_batch", "default_solver", "SPLITTING_AUTO_SIZE"]
 
 
 def _interval(system: Any, interval: Any) -> tuple[float, float]:
@@ -34,8 +36,41 @@ def _interval(system: Any, interval: Any) -> tuple[float, float]:
     return t0, T
 
 
-def _solver(solver: Any, rtol: Any, atol: Any) -> AbstractSolver:
-    solver = GaussCollocation() if solver is None else solver
+#: the smallest state (2d components) of a separable H that the default solves by a splitting
+#: method: below it the Gauss solver's fewer, longer windows cost less than the splitting's
+#: pilot, check and steps (benchmarks/splitting_workprecision.py: Hénon–Heiles, 4 components,
+#: 0.67–1.1 ms by Gauss against 1.2–2.0 ms by the fastest scheme; FPUT-β with 64 particles, 128
+#: components, the default's splitting in 0.62–0.90 of the Gauss solver's time)
+SPLITTING_AUTO_SIZE = 64
+
+
+def default_solver(system: HamiltonianSystem, z0: Any = None) -> AbstractSolver:
+    """The solver ``solve`` takes when none is given, from what is known before marching:
+
+    * H declared separable, no linear part, not gravitational, and at least
+      ``SPLITTING_AUTO_SIZE`` components:
+      [`SplittingComposition`][atlasnn.solver.SplittingComposition] (explicit, symplectic; the
+      scheme from the tolerance);
+    * otherwise [`GaussCollocation`][atlasnn.solver.GaussCollocation] (any H; a declared linear
+      part solved exactly in its stage equations; close encounters and eccentric orbits of
+      gravitational systems by its time transformation, which a constant explicit step cannot
+      follow). A PDE with a declared linear part stays there too, its flows declared or not: on
+      the NLS soliton the Gauss solver's long windows beat the split-step compositions at every
+      tolerance measured (benchmarks/splitting_nls.py).
+
+    The rule and its measurement: docs/CHOOSING.md (benchmarks/splitting_workprecision.py)."""
+    if system.traced:
+        return GaussCollocation()
+    if system.separable and system.linear_part is None and system.state_dim >= SPLITTING_AUTO_SIZE:
+        gravitational = z0 is not None and potential_applies(system, z0)
+        if not gravitational:
+            return SplittingComposition()
+    return GaussCollocation()
+
+
+def _solver(solver: Any, rtol: Any, atol: Any, system: Any = None, z0: Any = None) -> AbstractSolver:
+    if solver is None:
+        solver = default_solver(system, z0) if isinstance(system, HamiltonianSystem) else GaussCollocation()
     if not isinstance(solver, AbstractSolver):
         raise ConfigError(f"solver must be a solver object such as GaussCollocation(), got {type(solver).__name__}")
     return solver.with_tolerance(rtol, atol)
@@ -47,8 +82,9 @@ def _traced(system: HamiltonianSystem, *values: Any) -> bool:
 
 
 def _solve_traced(system: HamiltonianSystem, z0: Any, interval: Any, solver: AbstractSolver):
-    if not isinstance(solver, GaussCollocation):
-        raise ConfigError(f"inside jit/grad/vmap solve needs a GaussCollocation solver, got {type(solver).__name__}")
+    if not isinstance(solver, (GaussCollocation, SplittingComposition)):
+        raise ConfigError("inside jit/grad/vmap solve needs a GaussCollocation or SplittingComposition(steps=N) "
+                          f"solver, got {type(solver).__name__}")
     try:
         t0, T = interval
     except (TypeError, ValueError):
@@ -67,10 +103,15 @@ def solve(system: HamiltonianSystem, z0: Any = None, interval: tuple[float, floa
         z0: the initial state (q then p); default the system's own.
         interval: (t0, T) with t0 < T.
         solver: a solver object, holding its settings and tolerances:
-            [`GaussCollocation`][atlasnn.solver.GaussCollocation] (default: the trial solution collocated at
-            Gauss–Legendre nodes; symplectic, order 2s), [`Collocation`][atlasnn.solver.Collocation]
+            [`GaussCollocation`][atlasnn.solver.GaussCollocation] (the trial solution collocated at
+            Gauss–Legendre nodes; symplectic, order 2s; any H),
+            [`SplittingComposition`][atlasnn.solver.SplittingComposition] (explicit symplectic
+            splitting methods for a separable H), [`Collocation`][atlasnn.solver.Collocation]
             (random tanh features, Gauss–Newton) or [`AdamMarch`][atlasnn.solver.AdamMarch] (the
-            paper's networks trained by Adam, window by window).
+            paper's networks trained by Adam, window by window). None: chosen from the system
+            ([`default_solver`][atlasnn.solver.default_solver]: a splitting method for a separable,
+            non-gravitational H without a linear part, else the Gauss solver); ``sol.info["solver"]``
+            says which ran.
         rtol: replaces the solver's own relative tolerance (each solver says what it means).
         atol: replaces the solver's own absolute tolerance.
         progress: called with the fraction of the interval done as the march advances.
@@ -86,10 +127,11 @@ def solve(system: HamiltonianSystem, z0: Any = None, interval: tuple[float, floa
     z0, the interval and H's parameters (docs/JAX.md).
     """
     if isinstance(system, HamiltonianSystem) and _traced(system, z0, interval):
+        solver = GaussCollocation() if solver is None else solver  # a step count must be static for a splitting
         return _solve_traced(system, z0, interval, _solver(solver, rtol, atol))
     t0, T = _interval(system, interval)
     z = system.initial_state(z0)
-    return _solver(solver, rtol, atol).solve(system, z, t0, T, progress=progress)
+    return _solver(solver, rtol, atol, system, z).solve(system, z, t0, T, progress=progress)
 
 
 def _seeds(seeds: Any, count: int) -> list[int] | None:
@@ -137,12 +179,13 @@ def solve_batch(system: HamiltonianSystem, z0s: Any, interval: tuple[float, floa
         raise ConfigError(f"z0s must be a list of initial states, got {type(z0s).__name__}") from None
     if not rows:
         raise ConfigError("z0s must hold at least one initial state")
-    solver = _solver(solver, rtol, atol)
+    solver = _solver(solver, rtol, atol, system, rows[0])
     seeds = _seeds(seeds, len(rows))
     if isinstance(solver, Collocation):
         return solver.solve_batch(system, np.stack(rows), t0, T, seeds=seeds, progress=progress)
-    if not isinstance(solver, GaussCollocation):
-        raise ConfigError(f"solve_batch needs a GaussCollocation or Collocation solver, got {type(solver).__name__}")
+    if not isinstance(solver, (GaussCollocation, SplittingComposition)):
+        raise ConfigError("solve_batch needs a GaussCollocation, SplittingComposition or Collocation solver, got "
+                          f"{type(solver).__name__}")
     if seeds is not None:
-        raise ConfigError("seeds draw the random features of a Collocation solver; GaussCollocation has none")
+        raise ConfigError(f"seeds draw the random features of a Collocation solver; {type(solver).__name__} has none")
     return solver.solve_batch(system, np.stack(rows), t0, T, progress=progress)

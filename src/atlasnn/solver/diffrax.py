@@ -1,4 +1,5 @@
-"""The Gauss collocation as a Diffrax solver: ``GaussLegendre`` for ``diffrax.diffeqsolve``.
+"""atlasnn's methods as Diffrax solvers, for ``diffrax.diffeqsolve``: the Gauss collocation
+(``GaussLegendre``) and the explicit splitting methods (``SplittingSolver``).
 
 This module imports Diffrax (the ``atlasnn[diffrax]`` extra); nothing else in atlasnn imports it, so
 atlasnn works without Diffrax. The step is :func:`._gauss_step.gauss_step`, the one that
@@ -18,10 +19,18 @@ one implementation, two doors. What this module adds is the face Diffrax expects
   the step differentiates their solution by the implicit function theorem instead
   (``gauss_step(..., implicit_gradients=True)``), so ``RecursiveCheckpointAdjoint`` (the default)
   and forward mode work.
+
+``SplittingSolver`` is a scheme of :mod:`atlasnn.solutions._splitting_tables` (leapfrog to order
+10) on the pair of terms (dq/dt = T'(p), dp/dt = −V'(q)) that Diffrax's ``SemiImplicitEuler``
+takes. It follows :func:`atlasnn.solutions._splitting_step.split_step`, the step of
+``SplittingComposition``: the same flows in the same order, the same compensated summation, the
+force carried from one step to the next; for the same steps the two give the same numbers to
+round-off. Its dense output is the cubic Hermite interpolant of the step's ends and rates.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, ClassVar, NamedTuple
 
 try:
@@ -29,18 +38,22 @@ try:
 except ImportError:  # the optional extra
     raise ImportError("atlasnn.solver.diffrax needs Diffrax: pip install 'atlasnn[diffrax]'") from None
 import equinox as eqx
+import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
+import jax.tree_util as jtu
 import numpy as np
 import optimistix as optx  # a dependency of Diffrax: the results of a nonlinear solve
 from jax import lax
 from jax.flatten_util import ravel_pytree
 
 from atlasnn.errors import ConfigError
-from atlasnn.solutions import MAX_STAGES, gauss_tableau, shifted_legendre, window_value
+from atlasnn.solutions import (MAX_STAGES, SPLITTING_SCHEMES, SplittingScheme, gauss_tableau, shifted_legendre,
+                               splitting_scheme, window_value)
 from atlasnn.solver._gauss_step import continued_stages, gauss_step, local_error, tableau_arrays
 
-__all__ = ["GaussLegendre", "GaussLegendreInterpolation", "GaussLegendreState"]
+__all__ = ["GaussLegendre", "GaussLegendreInterpolation", "GaussLegendreState", "SplittingSolver",
+           "SplittingSolverState"]
 
 
 class GaussLegendreState(NamedTuple):
@@ -227,3 +240,179 @@ class GaussLegendre(diffrax.AbstractAdaptiveSolver):
 
     def func(self, terms, t0, y0, args):
         return terms.vf(t0, y0, args)
+
+
+# ====================================================================== splitting methods
+class SplittingSolverState(NamedTuple):
+    """What a splitting step hands the next: the state (q, p) it ended at, the compensation of each
+    (the part of the sum float64 could not hold), and the kick term's vector field at that q
+    (None for a scheme that does not begin and end with a kick: nothing is carried then)."""
+
+    y: Any
+    e: Any
+    force: Any
+
+
+def _carries_force(scheme: SplittingScheme) -> bool:
+    """Whether the step begins and ends with a kick: the force at its end is the next one's first."""
+    b = scheme.b_f
+    return float(b[0]) != 0.0 and float(b[-1]) != 0.0
+
+
+def _scaled(control: Any, c: float) -> Any:
+    """A step's control times a flow's coefficient (for an ``ODETerm``: c·h)."""
+    return jtu.tree_map(lambda x: c * x, control)
+
+
+def _compensated_add(x: Any, e: Any, d: Any) -> tuple[Any, Any]:
+    """(x, e) + d leaf by leaf, x + e being the value before and after (Kahan–Babuška)."""
+    y = jtu.tree_map(lambda di, ei: di + ei, d, e)
+    s = jtu.tree_map(lambda xi, yi: xi + yi, x, y)
+    return s, jtu.tree_map(lambda xi, si, yi: (xi - si) + yi, x, s, y)
+
+
+def _same(a: Any, b: Any) -> jax.Array:
+    """Whether two PyTrees of arrays hold the same numbers (a scalar bool)."""
+    leaves = [jnp.all(x == y) for x, y in zip(jtu.tree_leaves(a), jtu.tree_leaves(b))]
+    return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
+
+
+class _Flows(NamedTuple):
+    """A step's flows: kick i at t0 + κ_i·(t1 − t0), drift i at t0 + δ_i·(t1 − t0)."""
+
+    a: tuple[float, ...]
+    b: tuple[float, ...]
+    kick_at: tuple[float, ...]  # κ_i = a_0 + … + a_{i−1}: time moves with the drifts
+    drift_at: tuple[float, ...]  # δ_i = b_0 + … + b_i: time moves with the kicks
+
+
+def _flows(scheme: SplittingScheme) -> _Flows:
+    a = tuple(float(x) for x in scheme.a_f)
+    b = tuple(float(x) for x in scheme.b_f)
+    kick_at = tuple(float(x) for x in np.concatenate([[0.0], np.cumsum(a)]))
+    drift_at = tuple(float(x) for x in np.cumsum(b)[:len(a)])
+    return _Flows(a, b, kick_at, drift_at)
+
+
+class SplittingSolver(diffrax.AbstractSolver):
+    """An explicit symplectic splitting method for a separable H = T(p) + V(q), for
+    ``diffrax.diffeqsolve`` on the pair of terms Diffrax's ``SemiImplicitEuler`` takes:
+
+        terms = (ODETerm(lambda t, p, args: dT/dp), ODETerm(lambda t, q, args: −dV/dq)),
+        y0 = (q0, p0)   (two PyTrees).
+
+    A step of length h is the composition B(b_0) A(a_0) B(b_1) … A(a_{m−1}) B(b_m) of the scheme's
+    drifts A(c): q ← q + (first term over c·h) and kicks B(c): p ← p + (second term over c·h),
+    each the exact flow of its part: symplectic, and time-reversible for a symmetric scheme, for
+    any h; of the scheme's order (2 to 10; ``atlasnn.solutions.SPLITTING_SCHEMES``; a Nyström
+    scheme, ``nystrom=True``, has it only for T quadratic in p). It is the step
+    of ``atlasnn.solve(..., solver=SplittingComposition(scheme=...))`` (same flows, same order of
+    operations, the state summed with compensation) and for the same step lengths gives the same
+    numbers to round-off.
+
+    * Steps: fixed (``diffrax.ConstantStepSize``, or ``StepTo``); there is no error estimate, so no
+      adaptive controller. Constant steps keep the method symplectic: the energy error of a
+      Hamiltonian system stays bounded over long times.
+    * Cost: a scheme that begins and ends with a kick carries its last force into the next step
+      (kept in the solver state, recomputed after a jump of the vector field): one evaluation of
+      the kick term per nonzero kick minus one, and one of the drift term per nonzero drift.
+    * Dense output (``SaveAt(ts=...)``, ``SaveAt(dense=True)``, events): the cubic Hermite
+      interpolant of the step's two ends and the vector field there (``diffrax``'s
+      ``ThirdOrderHermitePolynomialInterpolation``): between the step ends its error is the
+      scheme's plus O(h⁴) (the step ends have the scheme's order). Its end rates cost two more
+      evaluations of the drift term a step (and two of the kick term for a scheme that does not
+      carry its force), only where dense output is asked for.
+    * Time-dependent terms: a kick is evaluated at the time the drifts before it have reached, a
+      drift at the time the kicks before it have reached; with only V (or only T) depending on t
+      the scheme keeps its order. The control of each flow is the step's control ``contr(t0, t1)``
+      times the flow's coefficient (exact for ``ODETerm``).
+    * Gradients through ``RecursiveCheckpointAdjoint`` (the default) and ``ForwardMode``;
+      ``jax.vmap``; any float dtype (float64 for round-off-level results).
+
+    Attributes:
+        scheme: the scheme's name: one of ``atlasnn.solutions.SPLITTING_SCHEMES`` (for example
+            ``"leapfrog"``, ``"yoshida4"``, ``"kahan_li8"``).
+    """
+
+    term_structure: ClassVar = (diffrax.AbstractTerm, diffrax.AbstractTerm)
+    interpolation_cls: ClassVar[Callable[..., diffrax.ThirdOrderHermitePolynomialInterpolation]] = (
+        diffrax.ThirdOrderHermitePolynomialInterpolation)
+
+    scheme: str = eqx.field(static=True)
+
+    def __check_init__(self):
+        if not isinstance(self.scheme, str) or self.scheme not in SPLITTING_SCHEMES:
+            raise ConfigError(f"SplittingSolver scheme must be one of {', '.join(SPLITTING_SCHEMES)}; "
+                              f"got {self.scheme!r}")
+
+    @property
+    def table(self) -> SplittingScheme:
+        """The scheme's coefficients."""
+        return splitting_scheme(self.scheme)
+
+    def order(self, terms) -> int:
+        """The scheme's order at the step ends (a Nyström scheme's for T quadratic in p)."""
+        del terms
+        return int(self.table.order)
+
+    def error_order(self, terms) -> None:
+        """None: the solver makes no error estimate."""
+        del terms
+        return None
+
+    # ------------------------------------------------------------------ the step
+    def init(self, terms, t0, t1, y0, args) -> SplittingSolverState:
+        del t1
+        zeros = jtu.tree_map(lambda x: jnp.zeros_like(jnp.asarray(x)), y0)
+        force = terms[1].vf(t0, y0[0], args) if _carries_force(self.table) else None
+        return SplittingSolverState(y0, zeros, force)
+
+    def _first_force(self, kick_term, t0, q0, args, state: SplittingSolverState, same, made_jump):
+        """The kick term's field at (t0, q0): the carried one unless the vector field jumped at t0 or
+        y0 is not the state the carried force was made for (then evaluated again)."""
+        if not _carries_force(self.table):
+            return None
+        stale = jnp.logical_not(same) if made_jump is False else jnp.logical_not(same) | made_jump
+        return lax.cond(eqxi.unvmap_any(stale), lambda: kick_term.vf(t0, q0, args), lambda: state.force)
+
+    def step(self, terms, t0, t1, y0, args, solver_state: SplittingSolverState, made_jump):
+        drift_term, kick_term = terms
+        q0, p0 = y0
+        same = _same(y0, solver_state.y)
+        eq, ep = jtu.tree_map(lambda e: jnp.where(same, e, jnp.zeros_like(e)), solver_state.e)
+        drift_control, kick_control = drift_term.contr(t0, t1), kick_term.contr(t0, t1)
+        dt = t1 - t0
+        fl = _flows(self.table)
+        first = force = self._first_force(kick_term, t0, q0, args, solver_state, same, made_jump)
+        q, p = q0, p0
+        for i, b in enumerate(fl.b):
+            if b != 0.0:
+                if force is None:  # the previous flow moved q (or nothing is carried): evaluate here
+                    force = kick_term.vf(t0 + fl.kick_at[i] * dt, q, args)
+                p, ep = _compensated_add(p, ep, kick_term.prod(force, _scaled(kick_control, b)))
+            if i < len(fl.a) and fl.a[i] != 0.0:
+                velocity = drift_term.vf_prod(t0 + fl.drift_at[i] * dt, p, args, _scaled(drift_control, fl.a[i]))
+                q, eq = _compensated_add(q, eq, velocity)
+                force = None
+        y1 = (q, p)
+        last = force if force is not None else kick_term.vf(t1, q, args)  # the field at q1
+        dense_info = {"y0": y0, "y1": y1,
+                      "k0": self._rates(terms, t0, y0, args, first, drift_control, kick_control),
+                      "k1": self._rates(terms, t1, y1, args, last, drift_control, kick_control)}
+        carried = force if _carries_force(self.table) else None
+        return y1, None, dense_info, SplittingSolverState(y1, (eq, ep), carried), diffrax.RESULTS.successful
+
+    @staticmethod
+    def _rates(terms, t, y, args, force, drift_control, kick_control) -> tuple[Any, Any]:
+        """h·dy/dt at (t, y) (the Hermite interpolant's end rates), the kick term's field being
+        ``force`` when known (evaluated otherwise)."""
+        drift_term, kick_term = terms
+        q, p = y
+        if force is None:
+            force = kick_term.vf(t, q, args)
+        return drift_term.vf_prod(t, p, args, drift_control), kick_term.prod(force, kick_control)
+
+    def func(self, terms, t0, y0, args):
+        """(dq/dt, dp/dt) at (t0, y0)."""
+        q0, p0 = y0
+        return terms[0].vf(t0, p0, args), terms[1].vf(t0, q0, args)

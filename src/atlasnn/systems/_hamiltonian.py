@@ -55,6 +55,11 @@ class HamiltonianSystem:
             which the Gauss solver uses as the matrix of its stage iteration so that its windows
             are set by accuracy, not by the stiffness. H stays the truth: S only steers the
             iteration (a poor S costs iterations, never accuracy).
+        nonlinear_flow: with a ``linear_part``, the exact flow of the rest N = H − ½ zᵀ S z, as
+            ``flow(z, t) -> z`` for one state (JAX-traceable; t may be negative): the user's
+            declaration, like ``separable``, not checked. ``SplittingComposition`` composes it with
+            the linear part's exact flow (a split-step method): the NLS built-in declares its phase
+            rotation, sine-Gordon the kick of its N, which depends on q only.
 
     Equality is identity, so a system can key a cache of compiled functions.
     """
@@ -70,6 +75,7 @@ class HamiltonianSystem:
     spec: Mapping[str, Any] | None = None
     parametric: ParametricFn | None = None
     linear_part: LinearPart | None = None
+    nonlinear_flow: Callable[[jax.Array, jax.Array], jax.Array] | None = None
 
     def __post_init__(self) -> None:
         if not callable(self.hamiltonian):
@@ -98,6 +104,10 @@ class HamiltonianSystem:
             if self.linear_part.size != 2 * d:
                 raise SystemError_(f"linear_part has {self.linear_part.size} components, the state {2 * d} "
                                    f"(dim = {d}: q then p)")
+        if self.nonlinear_flow is not None and (self.linear_part is None or not callable(self.nonlinear_flow)):
+            raise SystemError_("nonlinear_flow must be a function flow(z, t) of a system with a linear_part (the "
+                               "flow of H minus the linear part's quadratic form); without a linear_part pass "
+                               "nonlinear_flow=None too")
         object.__setattr__(self, "_traced", _probe(self))
 
     # ------------------------------------------------------------------ basics

@@ -59,6 +59,10 @@ class LinearPart(abc.ABC):
         """JS z for a state z of shape (size,)."""
 
     @abc.abstractmethod
+    def flow(self, z: jax.Array, t: jax.Array) -> jax.Array:
+        """exp(t·JS) z, the exact flow of ½ zᵀ S z over a time t (any sign), for one state."""
+
+    @abc.abstractmethod
     def norm(self) -> float:
         """‖JS‖, the largest |eigenvalue| of JS (the fastest frequency of the linear part)."""
 
@@ -154,6 +158,22 @@ class FourierLinearPart(LinearPart):
         apply = lambda k, x: jnp.real(jnp.fft.ifft(k * jnp.fft.fft(x)))  # noqa: E731
         return jnp.concatenate([apply(self.p_symbol, p), -apply(self.q_symbol, q)])
 
+    def flow(self, z: jax.Array, t: jax.Array) -> jax.Array:
+        # per wavenumber q̂' = K_p p̂, p̂' = −K_q q̂: with w² = K_q K_p, c = cos(wt) and s = sin(wt)/w
+        # (cosh and sinh/w where w² < 0, t where w = 0) q̂(t) = c q̂ + K_p s p̂, p̂(t) = c p̂ − K_q s q̂
+        # the symbols are even and q, p real: the half spectrum of a real FFT holds all of it
+        m = self.q_symbol.size
+        half = m // 2 + 1
+        kq, kp = jnp.asarray(self.q_symbol[:half]), jnp.asarray(self.p_symbol[:half])
+        w2 = kq * kp
+        w = jnp.sqrt(jnp.abs(w2))
+        wt = w * t
+        c = jnp.where(w2 >= 0, jnp.cos(wt), jnp.cosh(wt))
+        safe = jnp.where(w > 0, w, 1.0)
+        s = jnp.where(w > 0, jnp.where(w2 >= 0, jnp.sin(wt), jnp.sinh(wt)) / safe, t)
+        qh, ph = jnp.fft.rfft(z[:m]), jnp.fft.rfft(z[m:])
+        return jnp.concatenate([jnp.fft.irfft(c * qh + kp * s * ph, n=m), jnp.fft.irfft(c * ph - kq * s * qh, n=m)])
+
     def factor(self, shifts: jax.Array) -> Callable[[jax.Array], jax.Array]:
         m = self.q_symbol.size
         c = shifts[:, None]
@@ -211,6 +231,9 @@ class DenseLinearPart(LinearPart):
 
     def field(self, z: jax.Array) -> jax.Array:
         return jnp.asarray(self._js()) @ z
+
+    def flow(self, z: jax.Array, t: jax.Array) -> jax.Array:
+        return jax.scipy.linalg.expm(t * jnp.asarray(self._js(), z.dtype)) @ z
 
     def factor(self, shifts: jax.Array) -> Callable[[jax.Array], jax.Array]:
         js = jnp.asarray(self._js(), shifts.dtype)

@@ -136,8 +136,18 @@ def nls(points: int = 512, length: float = 64.0, amplitude: float = 1.0, speed: 
         p_names=tuple(f"im{j}" for j in range(points)), z0=nls_soliton(0.0, points, length, amplitude, v),
         spec={"kind": "builtin", "name": "nls",
               "params": {"points": points, "length": length, "amplitude": float(amplitude), "speed": v}},
-        linear_part=FourierLinearPart(symbol, symbol),
+        linear_part=FourierLinearPart(symbol, symbol), nonlinear_flow=_nls_rotation,
     )
+
+
+def _nls_rotation(z, t):
+    """The exact flow of the NLS's N = −¼ Σ (q² + p²)²: each point's ψ = q + ip turned by |ψ|²·t
+    (|ψ| is constant along it)."""
+    m = z.shape[-1] // 2
+    q, p = z[:m], z[m:]
+    angle = (q * q + p * p) * t
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    return jnp.concatenate([c * q - s * p, s * q + c * p])
 
 
 def sine_gordon_breather(t, points: int = 256, length: float = 80.0, omega: float = 0.5) -> np.ndarray:
@@ -175,8 +185,16 @@ def sine_gordon(points: int = 256, length: float = 80.0, omega: float = 0.5) -> 
         separable=True,
         spec={"kind": "builtin", "name": "sine_gordon",
               "params": {"points": points, "length": length, "omega": float(omega)}},
-        linear_part=FourierLinearPart(1.0 + symbol, np.ones(points)),
+        linear_part=FourierLinearPart(1.0 + symbol, np.ones(points)), nonlinear_flow=_sine_gordon_kick,
     )
+
+
+def _sine_gordon_kick(z, t):
+    """The exact flow of sine-Gordon's N = Σ (1 − cos u − u²/2), which depends on u only: a kick
+    v ← v − t·(sin u − u)."""
+    m = z.shape[-1] // 2
+    u = z[:m]
+    return jnp.concatenate([u, z[m:] - t * (jnp.sin(u) - u)])
 
 
 def _fput_h(q, p, alpha, beta):

@@ -1,0 +1,155 @@
+"""The compiled march of an explicit splitting method, and the step its tolerance asks for.
+
+One program per system, scheme, batch size and buffer length: it takes the states of a batch
+(B, 2d) with their compensations, a step h, ``every`` and ``slots`` (both traced: any interval, any
+tolerance, the same program), takes ``slots`` × ``every`` steps and returns the state after each
+block of ``every`` steps (a buffer of ``chunk`` rows, the first ``slots`` filled). The host calls it
+until the march is done (progress between calls).
+
+The step from the tolerance (:func:`pilot_step`): from a first guess (a tenth of the period of the
+fastest linearised motion at z0, and never past the scheme's stability limit for that frequency:
+a chain excited in its slow modes would otherwise blow up in its fast ones), a pilot of a few steps with h and with h/2 measures the error
+constant of the method on this problem (the difference of the two, as the error estimate does);
+a global error that grows linearly in t (as a symplectic method's does on a regular orbit) then
+gives the step that meets the tolerance at T. The pilot grows h where its error is at round-off
+and shrinks it where the march blew up.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from atlasnn.compile_cache import program_cache, to_host
+from atlasnn.solutions import lax_steps, linear_splitting, splitting_scheme, stability_limit, start_state
+from atlasnn.solver._gauss_march import _frequency
+
+__all__ = ["MarchOut", "compiled_split_march", "pilot_step", "step_bounds", "fastest_frequency"]
+
+#: the pilot's steps at h (and twice as many at h/2)
+PILOT_STEPS = 16
+#: the pilot's tries at most (each a factor 4 on h)
+PILOT_TRIES = 12
+#: the largest step as a fraction of the scheme's stability limit over the fastest frequency at z0
+#: (the power iterations read that frequency to a few digits, and an orbit reaches faster ones:
+#: at 0.7, FPUT-β N = 256 excited in its first mode blew up with McLachlan's scheme)
+STABLE_FRACTION = 0.55
+
+
+class MarchOut(NamedTuple):
+    """A call's result: the end state and its compensation (B, 2d); the states after each block of
+    steps and their compensations (chunk, B, 2d)."""
+
+    z: jax.Array
+    e: jax.Array
+    zs: jax.Array
+    es: jax.Array
+
+
+def _joined(st) -> tuple[jax.Array, jax.Array]:
+    return jnp.concatenate([st.q, st.p], axis=-1), jnp.concatenate([st.eq, st.ep], axis=-1)
+
+
+@program_cache
+@functools.lru_cache(maxsize=32)
+def compiled_split_march(system: Any, scheme: str, chunk: int, members: int):
+    """The compiled march (module docstring) for ``members`` states at once and a buffer of
+    ``chunk`` rows."""
+    sch = splitting_scheme(scheme)
+
+    def one(z, e, h, every, slots):
+        def block(i, carry):
+            st, zs, es = carry
+            st = lax_steps(system, sch, st, h, every)
+            z_, e_ = _joined(st)
+            return st, zs.at[i].set(z_), es.at[i].set(e_)
+
+        zs = jnp.zeros((chunk,) + z.shape, z.dtype)
+        st, zs, es = lax.fori_loop(0, slots, block, (start_state(system, z, e), zs, zs))
+        return (*_joined(st), zs, es)
+
+    def run(z, e, h, every, slots):
+        z, e, zs, es = jax.vmap(one, in_axes=(0, 0, None, None, None), out_axes=(0, 0, 1, 1))(z, e, h, every, slots)
+        return MarchOut(z, e, zs, es)
+
+    return jax.jit(run)
+
+
+def march_to(program, z: np.ndarray, e: np.ndarray, h: float, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The states (B, 2d) after ``steps`` steps of h from z + e, in one call (one block)."""
+    with jax.enable_x64(True):
+        out = to_host(program(z, e, np.float64(h), np.int64(steps), np.int64(1)))
+    return out.z, out.e
+
+
+@program_cache
+@functools.lru_cache(maxsize=32)
+def _compiled_frequency(system: Any):
+    return jax.jit(lambda z: _frequency(system, z))
+
+
+def fastest_frequency(system: Any, z0: np.ndarray) -> float:
+    """ω, the fastest linearised frequency at z0 (0 where there is none)."""
+    with jax.enable_x64(True):
+        omega = float(_compiled_frequency(system)(np.asarray(z0, np.float64)))
+    return omega if math.isfinite(omega) and omega > 0 else 0.0
+
+
+def step_bounds(system: Any, z0s: np.ndarray, span: float, scheme: Any) -> tuple[float, float]:
+    """(a first step, the largest stable step) for the batch: a tenth of 2π/ω and
+    ``STABLE_FRACTION`` of the scheme's stability limit over ω, ω the fastest linearised frequency
+    at any member's z0 (``span``/16 and ``span`` where there is none)."""
+    omega = max(fastest_frequency(system, z) for z in z0s)  # of N alone where S's flow is exact
+    if omega == 0.0:
+        return span / PILOT_STEPS, span
+    # a linear splitting's stiff part is solved exactly: N's frequency sets no stability limit
+    largest = span if linear_splitting(system) else STABLE_FRACTION * stability_limit(scheme) / omega
+    return min(0.1 * 2 * math.pi / omega, largest, span / PILOT_STEPS), largest
+
+
+def pilot_step(program, z0s: np.ndarray, span: float, order: int, rtol: float, atol: float, h: float,
+               largest: float) -> tuple[float, dict[str, Any]]:
+    """The step that meets the tolerance over ``span`` (module docstring), at most ``largest`` (the
+    stable steps), and the pilot's record. ``h`` is the first guess; the batch's smallest step
+    serves every member."""
+    zero = np.zeros_like(z0s)
+    record: dict[str, Any] = {"pilot_tries": 0}
+    err = scale = math.nan
+    for _ in range(PILOT_TRIES):
+        record["pilot_tries"] += 1
+        pilot = min(PILOT_STEPS * h, span)
+        h = pilot / PILOT_STEPS
+        z1, e1 = march_to(program, z0s, zero, h, PILOT_STEPS)
+        z2, e2 = march_to(program, z0s, zero, 0.5 * h, 2 * PILOT_STEPS)
+        diff = np.abs((z2 - z1) + (e2 - e1)) * (2.0 ** order / (2.0 ** order - 1.0))
+        scale = np.maximum(np.abs(z0s).max(axis=1), np.abs(z1).max(axis=1))  # (B,)
+        if not np.all(np.isfinite(diff)) or np.any(diff.max(axis=1) > 0.1 * np.maximum(scale, 1e-300)):
+            h *= 0.25  # unstable or far from the asymptotic regime
+            continue
+        floor = 64 * np.finfo(np.float64).eps * np.maximum(scale, np.abs(z1).max(axis=1)) * math.sqrt(PILOT_STEPS)
+        err = float(np.max(diff.max(axis=1) / (atol + rtol * scale)))
+        if np.all(diff.max(axis=1) <= floor) and pilot < span:
+            if h >= largest:
+                record.update(pilot_h=h, pilot_error=err, pilot_span=pilot, limited_by="stability")
+                return min(largest, span), record
+            h = min(4.0 * h, largest)  # at round-off: the error constant cannot be read here
+            continue
+        # the error grows linearly over the interval: what it would be at the end, in tolerances
+        grown = err * span / pilot
+        record.update(pilot_h=h, pilot_error=err, pilot_span=pilot)
+        proposed = span if grown <= 0 else h * (0.5 / grown) ** (1.0 / order)
+        if proposed > largest:
+            record["limited_by"] = "stability"
+            proposed = largest
+        if proposed > 4.0 * h and pilot < span:
+            h = proposed  # far from the pilot's step: measured again there
+            continue
+        return min(proposed, span), record
+    record.update(pilot_h=h, pilot_error=err)
+    return h, record

@@ -1,0 +1,237 @@
+"""The explicit splitting solver: its step from the tolerance against exact solutions, dense output,
+the error estimate, symplecticity of every scheme's step, the default's choice, jit/grad/vmap,
+batches, save and load, and its refusals."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from atlasnn import builtin_system, expression_system, load, save, solve, solve_batch
+from atlasnn.errors import AtlasError, ConfigError
+from atlasnn.evaluation import reference_solution
+from atlasnn.solutions import SPLITTING_SCHEMES, SplittingSolution, splitting_scheme
+from atlasnn.solutions import split_step, start_state
+from atlasnn.solver import GaussCollocation, SplittingComposition, default_solver
+from atlasnn.systems import HamiltonianSystem
+
+HH = builtin_system("henon_heiles")
+HH_Z0 = np.array([0.3, -0.3, 0.3, 0.15])
+
+
+def _pendulum() -> HamiltonianSystem:
+    return expression_system("p**2/2 - cos(q)", ["q"], ["p"], separable=True, z0=[1.5, 0.0], name="pendulum")
+
+
+def _kepler() -> HamiltonianSystem:
+    e = 0.6
+    return expression_system("(px**2 + py**2)/2 - 1/sqrt(qx**2 + qy**2)", ["qx", "qy"], ["px", "py"], separable=True,
+                             z0=[1 - e, 0.0, 0.0, math.sqrt((1 + e) / (1 - e))], name="kepler")
+
+
+@pytest.mark.parametrize("rtol", [1e-6, 1e-9])
+def test_the_step_from_the_tolerance_meets_it_on_an_exact_solution(rtol):
+    """Harmonic oscillator (exact) and a pendulum at large amplitude (DOP853 at 1e-13, far below the
+    tolerance): the error over the interval within a few tolerances, not a thousand times below."""
+    osc = builtin_system("harmonic_oscillator")
+    T = 40.0
+    t = np.linspace(0.0, T, 301)
+    sol = solve(osc, [1.0, 0.0], (0.0, T), solver=SplittingComposition(rtol=rtol, atol=0.0))
+    err = np.abs(sol(t) - np.stack([np.cos(t), -np.sin(t)], axis=1)).max()
+    assert err <= 3 * rtol, (err, rtol)
+    pend = _pendulum()
+    sol = solve(pend, None, (0.0, T), solver=SplittingComposition(rtol=rtol, atol=0.0))
+    ref = reference_solution(pend, pend.z0, t, rtol=1e-13, atol=1e-13)
+    err = np.abs(sol(t) - ref).max() / np.abs(ref).max()
+    assert 1e-3 * rtol < err <= 3 * rtol, (err, rtol, sol.info)
+
+
+def test_dense_output_between_steps_is_as_accurate_as_at_the_steps_and_continuous():
+    sol = solve(HH, HH_Z0, (0.0, 20.0), solver=SplittingComposition(scheme="yoshida4", h=0.1))
+    steps = sol.t0 + sol.h * np.arange(1, sol.n_steps)
+    mid = steps[:-1] + 0.37 * sol.h
+    ref_steps = reference_solution(HH, HH_Z0, steps, rtol=1e-13, atol=1e-13)
+    ref_mid = reference_solution(HH, HH_Z0, mid, rtol=1e-13, atol=1e-13)
+    at_steps, between = np.abs(sol(steps) - ref_steps).max(), np.abs(sol(mid) - ref_mid).max()
+    assert between < 3 * at_steps
+    jump = np.abs(sol(steps - 1e-12) - sol(steps + 1e-12)).max()
+    assert jump < 1e-10
+    # the derivative is the rate of the dense output: close to the field, not equal to it
+    res = np.abs(sol.residual(mid)).max()
+    assert 0 < res < 100 * at_steps / sol.h
+
+
+@pytest.mark.parametrize("scheme", ["yoshida4", "kahan_li8"])
+def test_the_estimate_is_the_true_error_within_a_factor_two(scheme):
+    pend = _pendulum()
+    T = 30.0
+    sol = solve(pend, None, (0.0, T), solver=SplittingComposition(scheme=scheme, rtol=1e-7))
+    t = np.linspace(0.0, T, 400)
+    true = np.abs(sol(t) - reference_solution(pend, pend.z0, t, rtol=1e-13, atol=1e-13)).max()
+    est = np.abs(sol.error_estimate(t)).max()
+    assert 0.5 < est / true < 2.0, (est, true)
+    assert 0.5 < sol.estimate().max_abs / true < 2.0
+
+
+@pytest.mark.parametrize("name", sorted(SPLITTING_SCHEMES))
+def test_every_schemes_step_is_symplectic(name):
+    """M^T J M = J for the Jacobian M of one step, on Hénon–Heiles (a nonlinear force)."""
+    scheme = splitting_scheme(name)
+    with jax.enable_x64(True):
+        def step(z):
+            st = split_step(HH, scheme, start_state(HH, z), jnp.asarray(0.3))
+            return jnp.concatenate([st.q + st.eq, st.p + st.ep])
+
+        M = np.asarray(jax.jacfwd(step)(jnp.asarray(HH_Z0)))
+    J = np.block([[np.zeros((2, 2)), np.eye(2)], [-np.eye(2), np.zeros((2, 2))]])
+    assert np.abs(M.T @ J @ M - J).max() < 1e-12
+
+
+def test_the_default_chooses_by_what_it_knows_before_marching():
+    pendulum2 = expression_system("(p1**2 + 2*p2**2 - 2*p1*p2*cos(q1 - q2)) / (2*(1 + sin(q1 - q2)**2)) - 2*cos(q1) "
+                                  "- cos(q2)", ["q1", "q2"], ["p1", "p2"], z0=[1.0, 0.5, 0.0, 0.0])
+    from atlasnn.solver import SPLITTING_AUTO_SIZE
+    from atlasnn.systems import fput
+
+    assert isinstance(default_solver(HH, HH_Z0), GaussCollocation)  # small: the Gauss solver's longer windows
+    chain = fput(particles=SPLITTING_AUTO_SIZE // 2, beta=1.0)
+    assert isinstance(default_solver(chain, chain.z0), SplittingComposition)
+    assert isinstance(default_solver(pendulum2, pendulum2.z0), GaussCollocation)  # not separable
+    kepler = _kepler()
+    assert isinstance(default_solver(kepler, kepler.z0), GaussCollocation)  # gravitational: close encounters
+    sol = solve(chain, chain.z0, (0.0, 5.0), rtol=1e-8)
+    assert isinstance(sol, SplittingSolution) and sol.info["solver"] == "splitting"
+    assert sol.info["scheme"] in SPLITTING_SCHEMES
+
+
+def test_jit_grad_and_vmap_through_a_splitting_solve():
+    solver = SplittingComposition(scheme="yoshida4", steps=200)
+    T = 5.0
+
+    def q_end(z):
+        return solve(HH, z, (0.0, T), solver=solver)(jnp.asarray(T))[0]
+
+    with jax.enable_x64(True):
+        z = jnp.asarray(HH_Z0)
+        g = np.asarray(jax.jit(jax.grad(q_end))(z))
+        eps = 1e-6
+        fd = np.array([(q_end(z + eps * e) - q_end(z - eps * e)) / (2 * eps) for e in jnp.eye(4)])
+        assert np.abs(g - fd).max() < 1e-7
+        host = solve(HH, HH_Z0, (0.0, T), solver=solver)
+        assert abs(float(q_end(z)) - host(np.array([T]))[0, 0]) < 1e-14
+        ends = jax.vmap(lambda z: solve(HH, z, (0.0, T), solver=solver).end_state)(jnp.stack([z, 0.9 * z]))
+        assert np.abs(np.asarray(ends[0]) - host.end_state).max() < 1e-14
+    with pytest.raises(ConfigError, match="steps=N"):
+        jax.jit(lambda z: solve(HH, z, (0.0, T), solver=SplittingComposition()).end_state)(jnp.asarray(HH_Z0))
+
+
+def test_a_batch_shares_one_step_and_saves_and_loads(tmp_path):
+    sols = solve_batch(HH, [HH_Z0, 0.8 * HH_Z0], (0.0, 10.0), solver=SplittingComposition(rtol=1e-8))
+    t = np.linspace(0.0, 10.0, 50)
+    assert sols[0].h == sols[1].h
+    for sol, z0 in zip(sols, (HH_Z0, 0.8 * HH_Z0)):  # the shared step meets each member's tolerance
+        ref = reference_solution(HH, z0, t, rtol=1e-13, atol=1e-13)
+        assert np.abs(sol(t) - ref).max() <= 3e-8 * np.abs(ref).max()
+    path = tmp_path / "s.npz"
+    save(path, sols[1])
+    back = load(path)
+    assert isinstance(back, SplittingSolution)
+    assert np.array_equal(back(t), sols[1](t))
+    assert back.estimate().max_abs == pytest.approx(sols[1].estimate().max_abs, rel=1e-12)
+
+
+def test_refusals_are_one_line():
+    pendulum2 = expression_system("p1**2/2 + p2**2/2 + p1*p2*cos(q1 - q2) - cos(q1)", ["q1", "q2"], ["p1", "p2"],
+                                  z0=[1.0, 0.5, 0.0, 0.0])
+    for bad, match in ((lambda: SplittingComposition(scheme="nope"), "unknown splitting scheme"),
+                       (lambda: SplittingComposition(h=0.1, steps=3), "h or steps"),
+                       (lambda: SplittingComposition(steps=0), "steps must be an integer"),
+                       (lambda: solve(pendulum2, None, (0.0, 1.0), solver=SplittingComposition()), "separable")):
+        with pytest.raises(AtlasError, match=match) as info:
+            bad()
+        assert "\n" not in str(info.value)
+
+
+def test_the_cli_says_which_method_ran(capsys):
+    from atlasnn.cli import main
+
+    assert main(["solve", "--system", "henon_heiles", "--T", "6*pi", "--rtol", "1e-8", "--solver", "splitting"]) == 0
+    out = capsys.readouterr().out
+    assert "splitting scheme" in out and "estimated max error" in out
+
+
+def test_the_linear_parts_flow_is_the_matrix_exponential():
+    from scipy.linalg import expm
+
+    from atlasnn.systems import DenseLinearPart, FourierLinearPart, fourier_wavenumbers
+
+    k2 = fourier_wavenumbers(16, 10.0) ** 2
+    z = np.random.default_rng(0).standard_normal(32)
+    J = np.block([[np.zeros((16, 16)), np.eye(16)], [-np.eye(16), np.zeros((16, 16))]])
+    S = np.random.default_rng(1).standard_normal((32, 32))
+    # elliptic modes, a wave equation's, and hyperbolic ones (K_q K_p < 0 at small k)
+    for part in (FourierLinearPart(0.5 * k2, 0.5 * k2), FourierLinearPart(1 + k2, np.ones(16)),
+                 FourierLinearPart(k2 - 3.0, np.ones(16)), DenseLinearPart(S + S.T)):
+        with jax.enable_x64(True):
+            got = np.asarray(part.flow(jnp.asarray(z), -0.37))
+        assert np.abs(got - expm(-0.37 * J @ part.matrix()) @ z).max() < 1e-11
+
+
+def test_a_pde_with_its_declared_flows_is_split_step_solved_to_its_tolerance():
+    """NLS: the linear part's flow and the phase rotation, composed; against the exact soliton,
+    mass to round-off; the declared rotation's rate is J∇H − JSz (the split is exact)."""
+    from atlasnn.systems import nls, nls_mass, sine_gordon
+
+    wave = nls(points=64, length=32.0)
+    with jax.enable_x64(True):
+        z = jnp.asarray(wave.z0)
+        rest = wave.vector_field(z[None])[0] - wave.linear_part.field(z)
+        eps = 1e-6
+        rate = (wave.nonlinear_flow(z, eps) - wave.nonlinear_flow(z, -eps)) / (2 * eps)
+    assert np.abs(np.asarray(rest - rate)).max() < 1e-8
+    assert isinstance(default_solver(wave, wave.z0), GaussCollocation)  # measured faster on the soliton
+    T = 3.0
+    sol = solve(wave, None, (0.0, T), solver=SplittingComposition(rtol=1e-8, atol=0.0))
+    # the semi-discrete solution (the exact soliton is 1e-4 off it on this coarse grid): Gauss at 1e-13
+    exact = solve(wave, None, (0.0, T), solver=GaussCollocation(rtol=1e-13)).end_state
+    err = np.abs(sol(np.asarray([T]))[0] - exact).max()
+    assert 1e-12 < err <= 3e-8
+    assert abs(nls_mass(sol.end_state) / nls_mass(wave.z0) - 1) < 1e-13
+    sg = sine_gordon(points=64, length=40.0)
+    sol = solve(sg, None, (0.0, 5.0), solver=SplittingComposition(rtol=1e-7, atol=0.0))
+    ref = solve(sg, None, (0.0, 5.0), solver=GaussCollocation(rtol=1e-13)).end_state
+    assert np.abs(sol.end_state - ref).max() <= 3e-7 * np.abs(ref).max()
+
+
+def test_a_linear_part_without_the_rests_flow_is_refused_in_one_line():
+    import dataclasses
+
+    from atlasnn.systems import nls
+
+    wave = dataclasses.replace(nls(points=16, length=16.0), nonlinear_flow=None)
+    assert isinstance(default_solver(wave, wave.z0), GaussCollocation)
+    with pytest.raises(ConfigError, match="nonlinear_flow") as info:
+        solve(wave, None, (0.0, 1.0), solver=SplittingComposition())
+    assert "\n" not in str(info.value)
+
+
+def test_a_stability_bound_step_takes_the_scheme_that_reaches_furthest():
+    """FPUT-β excited in its slowest mode: the step is held by the fastest mode's stability, not
+    by accuracy; the default then weighs McLachlan's order-4 scheme (the furthest reach per force
+    evaluation) against the tolerance's, takes the one of fewer evaluations, and meets the tolerance."""
+    from atlasnn.systems import fput
+
+    n = 32
+    chain = fput(particles=n, beta=1.0)
+    z0 = np.concatenate([np.zeros(n), np.sin(np.pi * np.arange(1, n + 1) / (n + 1))])
+    sol = solve(chain, z0, (0.0, 50.0), rtol=1e-8)
+    costs = sol.info["scheme_choice"]
+    assert sol.info["limited_by"] == "stability" and "mclachlan4" in costs and len(costs) == 2
+    assert sol.info["scheme"] == min(costs, key=costs.get)
+    t = np.linspace(0.0, 50.0, 40)
+    ref = reference_solution(chain, z0, t, rtol=1e-13, atol=1e-13)
+    assert np.abs(sol(t) - ref).max() <= 3e-8 * np.abs(ref).max()
