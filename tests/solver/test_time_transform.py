@@ -182,13 +182,14 @@ def test_an_interval_off_zero_and_windows_solved_again_read_alike():
     assert kept.edges[0] == 1.0 and kept.edges[-1] == interval[1]
 
 
-def test_saving_is_refused_in_one_line(tmp_path):
-    from atlasnn import save
+def test_a_solution_in_tau_saves_and_loads(tmp_path):
+    from atlasnn import load, save
 
     sol = solve(kepler_system(0.9), None, (0.0, 1.0), solver=TT)
-    with pytest.raises(AtlasError, match=r"a time-transformed solution .* cannot be saved yet") as caught:
-        save(tmp_path / "tt.atlas", sol)
-    assert "\n" not in str(caught.value)
+    save(tmp_path / "tt.atlas", sol)
+    back = load(tmp_path / "tt.atlas")
+    t = np.linspace(0.0, 1.0, 33)
+    assert isinstance(back, TimeTransformedSolution) and np.array_equal(back(t), sol(t))
 
 
 @pytest.mark.long
@@ -263,15 +264,14 @@ def test_the_default_marches_in_tau_where_the_scale_varies_and_in_t_elsewhere(mo
 
 
 @pytest.mark.long
-def test_atlasnn_solve_says_when_the_default_marched_in_tau_and_refuses_to_save_it(tmp_path, capsys):
+def test_atlasnn_solve_says_when_the_default_marched_in_tau_and_saves_it(tmp_path, capsys):
     """The command line on the built-in Kepler e = 0.9 experiment over ten periods: a note says the
-    march was in τ and why; --save of that solution is refused in one line (nothing written)."""
+    march was in τ and why; --save writes that solution, which loads back."""
+    from atlasnn import load
     from atlasnn.cli import main
 
-    assert main(["solve", "kepler-e09", "--T", "20*pi"]) == 0
+    target = tmp_path / "kepler.npz"
+    assert main(["solve", "kepler-e09", "--T", "20*pi", "--save", str(target)]) == 0
     out = capsys.readouterr().out
     assert "note: marched in a fictitious time" in out and "-fold over the first" in out
-    target = tmp_path / "kepler.npz"
-    assert main(["solve", "kepler-e09", "--T", "20*pi", "--save", str(target)]) == 2
-    err = capsys.readouterr().err
-    assert "cannot be saved yet" in err and len(err.strip().splitlines()) == 1 and not target.exists()
+    assert f"wrote {target}" in out and isinstance(load(target), TimeTransformedSolution)

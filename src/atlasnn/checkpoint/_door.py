@@ -15,6 +15,7 @@ from atlasnn.checkpoint._piecewise import KIND_PIECEWISE, load_piecewise, save_p
 from atlasnn.checkpoint._polynomial import KIND_POLYNOMIAL
 from atlasnn.checkpoint._single import KIND_MODEL, load_checkpoint, save_checkpoint
 from atlasnn.checkpoint._splitting import KIND_SPLITTING, load_splitting, save_splitting
+from atlasnn.checkpoint._transformed import KIND_TRANSFORMED, load_transformed, save_transformed
 from atlasnn.errors import CheckpointError
 from atlasnn.solutions import (BundleSolution, FlowMapBundle, PiecewiseSolution, PolynomialSolution, Solution,
                                 SplittingSolution, TimeTransformedSolution)
@@ -22,7 +23,8 @@ from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["save", "load"]
 
-_SOLUTIONS = (PolynomialSolution, PiecewiseSolution, SplittingSolution, FlowMapBundle, BundleSolution, Solution)
+_SOLUTIONS = (PolynomialSolution, PiecewiseSolution, SplittingSolution, TimeTransformedSolution, FlowMapBundle,
+              BundleSolution, Solution)
 
 
 def save(path: str | os.PathLike, solution: Any, *, extra: Mapping[str, Any] | None = None) -> str:
@@ -44,8 +46,7 @@ def save(path: str | os.PathLike, solution: Any, *, extra: Mapping[str, Any] | N
     if isinstance(solution, SplittingSolution):
         return save_splitting(path, solution, extra=extra)
     if isinstance(solution, TimeTransformedSolution):
-        raise _fail(os.fspath(path), "a time-transformed solution (GaussCollocation(time_scale=...)) cannot be saved "
-                                     "yet; solve again, or evaluate it and save the values")
+        return save_transformed(path, solution, extra=extra)
     if isinstance(solution, FlowMapBundle):
         return save_flowmap(path, solution, extra=extra)
     if isinstance(solution, BundleSolution):
@@ -74,6 +75,8 @@ def load(path: str | os.PathLike, system: HamiltonianSystem | None = None) -> An
         return load_piecewise(p, system)
     if kind == KIND_SPLITTING:
         return load_splitting(p, system)
+    if kind == KIND_TRANSFORMED:
+        return load_transformed(p, system)
     if kind == KIND_FLOWMAP:
         return load_flowmap(p)
     if kind == KIND_BUNDLE:

@@ -19,6 +19,7 @@ from atlasnn.solver._collocation import Collocation, require_float64
 from atlasnn.solver._bundle import NetworkBundle, solve_bundle
 from atlasnn.solver._flowmap import FlowMap, FlowMapProblem, flowmap_bundle, flowmap_problem
 from atlasnn.solver._gauss import GaussCollocation
+from atlasnn.solver._gauss_time import poincare_system
 from atlasnn.solver._parametric import ParametricGauss, ParametricSolveFailed
 from atlasnn.solver._features import WINDOW_SCALINGS, RandomFeatures, collocation_nodes
 from atlasnn.solver._solve import SPLITTING_AUTO_SIZE, default_solver, solve, solve_batch
@@ -38,6 +39,7 @@ __all__ = [
     "solve_batch",
     "AbstractSolver",
     "GaussCollocation",
+    "poincare_system",
     "SplittingComposition",
     "SCHEME_BY_TOLERANCE",
     "scheme_for",
