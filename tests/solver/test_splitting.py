@@ -235,3 +235,14 @@ def test_a_stability_bound_step_takes_the_scheme_that_reaches_furthest():
     t = np.linspace(0.0, 50.0, 40)
     ref = reference_solution(chain, z0, t, rtol=1e-13, atol=1e-13)
     assert np.abs(sol(t) - ref).max() <= 3e-8 * np.abs(ref).max()
+
+
+def test_a_float32_state_inside_jit_is_told_what_to_do():
+    """With 64-bit mode on, a float32 z0 is refused with the remedy that applies (a float64 z0), not
+    the advice to turn on the mode that is on; by either solver."""
+    with jax.enable_x64(True):
+        z32 = jnp.asarray(HH_Z0, jnp.float32)
+        for solver in (SplittingComposition(steps=10), GaussCollocation()):
+            with pytest.raises(ConfigError, match="pass z0 as float64") as info:
+                jax.jit(lambda z, s=solver: solve(HH, z, (0.0, 1.0), solver=s).end_state)(z32)
+            assert "64-bit mode" not in str(info.value)

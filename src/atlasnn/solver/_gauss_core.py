@@ -35,7 +35,7 @@ from atlasnn.solver._gauss_march import FAILURES, GaussState, started, marching,
 from atlasnn.solver._gauss_step import solved_step, tableau_arrays
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["gauss_core", "LOOPS"]
+__all__ = ["gauss_core", "LOOPS", "traced_inputs"]
 
 #: GaussCollocation.differentiation → how (module docstring)
 LOOPS = {"reverse": "the march's adjoint", "forward": "through the loop"}
@@ -57,12 +57,13 @@ def _start(z0: jax.Array, t0: jax.Array, stages: int) -> GaussState:
                       izero, izero, izero, izero, izero, zero, izero)
 
 
-def _traced_inputs(system: HamiltonianSystem, z0: Any, t0: Any, T: Any) -> tuple[jax.Array, jax.Array, jax.Array]:
+def traced_inputs(system: HamiltonianSystem, z0: Any, t0: Any, T: Any) -> tuple[jax.Array, jax.Array, jax.Array]:
     """z0, t0 and T as float64 JAX values, or a one-line refusal."""
     z0 = jnp.asarray(z0)
     if z0.dtype != jnp.float64:
-        raise ConfigError(f"solve inside jit/grad/vmap needs float64 states, got z0 of dtype {z0.dtype}: turn on "
-                          "JAX's 64-bit mode first, jax.config.update('jax_enable_x64', True)")
+        remedy = ("pass z0 as float64, e.g. jnp.asarray(z0, jnp.float64)" if jax.config.jax_enable_x64 else
+                  "turn on JAX's 64-bit mode first, jax.config.update('jax_enable_x64', True)")
+        raise ConfigError(f"solve inside jit/grad/vmap needs float64 states, got z0 of dtype {z0.dtype}: {remedy}")
     if z0.shape != (system.state_dim,):
         raise ConfigError(f"z0 must have {system.state_dim} components {list(system.state_names)}, got shape "
                           f"{tuple(z0.shape)}")
@@ -185,7 +186,7 @@ def gauss_core(system: HamiltonianSystem, z0: Any, t0: Any, T: Any, *, stages: i
                newton: bool, growth: float, safety: float, warmup: int, max_rejects: int) -> TracedSolution:
     """The march of the module docstring from z0 over [t0, T] (traced or not). A march that fails
     or spends ``max_windows`` tries before T raises when it runs (``eqx.error_if``), naming why."""
-    z0, t0, T = _traced_inputs(system, z0, t0, T)
+    z0, t0, T = traced_inputs(system, z0, t0, T)
     static = _Static(int(stages), str(steps), float(rtol), float(atol), None if h is None else float(h),
                      int(max_windows), int(max_iterations), bool(newton), float(growth), float(safety), int(warmup),
                      int(max_rejects))

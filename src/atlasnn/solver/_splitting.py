@@ -26,6 +26,7 @@ from atlasnn.limits import available_memory
 from atlasnn.solutions import SplittingSolution, TracedSplittingSolution, linear_splitting, splitting_scheme
 from atlasnn.solver._base import AbstractSolver, register_solver, solve_one
 from atlasnn.solver._collocation import require_float64
+from atlasnn.solver._gauss_core import traced_inputs
 from atlasnn.solver._splitting_march import compiled_split_march, pilot_step, step_bounds
 from atlasnn.systems import HamiltonianSystem
 
@@ -270,6 +271,7 @@ class SplittingComposition(AbstractSolver):
             raise ConfigError("inside jit/grad/vmap a SplittingComposition needs steps=N (the step count must be "
                               "known before the trace); or call solve on numbers")
         _check_system(system)
+        z0, t0, T = traced_inputs(system, z0, t0, T)
         return TracedSplittingSolution.march(system, self.scheme_name, z0, t0, T, self.steps)
 
 
