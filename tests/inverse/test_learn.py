@@ -182,3 +182,13 @@ def test_bad_input_is_refused_in_one_line_before_training(call, message):
     with pytest.raises(ConfigError, match=message) as err:
         call()
     assert "\n" not in str(err.value)
+
+
+def test_a_fit_no_rule_could_judge_is_not_trusted():
+    """No noise level and nothing held out: neither the noise floor nor the held-out check can run,
+    so the learned H is not called trusted, and the note says what to give."""
+    result = learn_hamiltonian(_guess(), _trajectories(), HNN(steps=50, rate=0.05), held_out=0.0)
+    assert result.held_out_loss is None and not result.trusted
+    assert any("no rule could judge" in note for note in result.notes)
+    judged = learn_hamiltonian(_guess(), _trajectories(), HNN(steps=50, rate=0.05), held_out=0.0, noise=0.01)
+    assert not any("no rule could judge" in note for note in judged.notes)

@@ -342,7 +342,8 @@ def _runtime_message(exc: Exception) -> str:
 def _judge(result: LearnedHamiltonian, floor: float | None) -> LearnedHamiltonian:
     """The trust rules, each a reason not to believe the learned H: a training that stopped early
     or never had a finite loss, a loss far above the noise's own (``floor``, when the noise is
-    given), a held-out loss far above the training loss. The notes that are not reasons (nothing
+    given), a held-out loss far above the training loss, and neither of those two checks possible
+    (a fit no rule could judge is not trusted). The notes that are not reasons (nothing
     held out, no noise given, more weights than data) follow."""
     reasons = []
     interrupted = (result.stopped or "").startswith("interrupted")
@@ -359,6 +360,9 @@ def _judge(result: LearnedHamiltonian, floor: float | None) -> LearnedHamiltonia
         reasons.append(f"the training loss {result.loss:.2g} is {result.loss / floor:.1f}× the noise's own "
                        f"({floor:.2g}): the model or its training falls short; more steps, a larger network, or "
                        "another rate")
+    if floor is None and result.held_out_loss is None:
+        reasons.append("no rule could judge the fit (no noise level given, nothing held out): give noise= or "
+                       "held_out > 0 (the end of each trajectory kept out of training) before trusting it")
     if result.held_out_loss is not None and result.held_out_loss > HELD_OUT_FACTOR * max(result.loss, floor or 0.0):
         ratio = result.held_out_loss / max(result.loss, floor or 0.0)
         reasons.append(f"the held-out loss {result.held_out_loss:.2g} is {ratio:.1f}× the training loss: H_θ does not "
