@@ -246,3 +246,18 @@ def test_a_float32_state_inside_jit_is_told_what_to_do():
             with pytest.raises(ConfigError, match="pass z0 as float64") as info:
                 jax.jit(lambda z, s=solver: solve(HH, z, (0.0, 1.0), solver=s).end_state)(z32)
             assert "64-bit mode" not in str(info.value)
+
+
+def test_the_looped_step_takes_the_written_out_steps_numbers():
+    """The dense output's step (its stages in a loop) and the march's (written out) are one method:
+    the same state to round-off for every scheme, kick-first and drift-first."""
+    from atlasnn.solutions._splitting_step import looped_step
+
+    with jax.enable_x64(True):
+        for name in SPLITTING_SCHEMES:
+            scheme = splitting_scheme(name)
+            st = start_state(HH, jnp.asarray(HH_Z0))
+            a, b = (split_step(HH, scheme, st, jnp.asarray(0.2)), looped_step(HH, scheme, st, jnp.asarray(0.2)))
+            gap = max(float(jnp.abs((x + ex) - (y + ey)).max()) for x, ex, y, ey in
+                      ((a.q, a.eq, b.q, b.eq), (a.p, a.ep, b.p, b.ep)))
+            assert gap < 1e-15, (name, gap)

@@ -140,6 +140,9 @@ def looped_step(system: Any, scheme: SplittingScheme, st: SplitState, h: jax.Arr
     (q, p, eq, ep, F), _ = jax.lax.scan(stage, (q, p, eq, ep, F), coefficients)
     if not first:
         q, eq = _add(q, eq, (a[-1] * h) * velocity(system, q, p))
+        if b[-1] != 0.0:  # an unsymmetric scheme that starts with a drift and ends with a kick
+            F = force(system, q, p)
+            p, ep = _add(p, ep, -(b[-1] * h) * F)
     return SplitState(q, p, eq, ep, F)
 
 
