@@ -261,3 +261,27 @@ def test_the_looped_step_takes_the_written_out_steps_numbers():
             gap = max(float(jnp.abs((x + ex) - (y + ey)).max()) for x, ex, y, ey in
                       ((a.q, a.eq, b.q, b.eq), (a.p, a.ep, b.p, b.ep)))
             assert gap < 1e-15, (name, gap)
+
+
+def test_a_nystrom_scheme_is_refused_where_T_is_not_quadratic():
+    """The Nyström schemes keep their order only for T quadratic in p: on T = Σ cosh p_i the check
+    after the march, which assumes the order, would pass an error above the tolerance; refused."""
+    cosh = HamiltonianSystem(lambda q, p: jnp.sum(jnp.cosh(p)) + jnp.sum(q ** 4) / 4, 2, separable=True,
+                             z0=[0.5, -0.3, 0.2, 0.1])
+    with pytest.raises(ConfigError, match="quadratic in p") as info:
+        solve(cosh, None, (0.0, 1.0), solver=SplittingComposition(scheme="bce_rkn8"))
+    assert "\n" not in str(info.value)
+    sol = solve(HH, HH_Z0, (0.0, 1.0), solver=SplittingComposition(scheme="bce_rkn8", rtol=1e-8))  # T = p²/2
+    assert sol.info["scheme"] == "bce_rkn8"
+
+
+def test_a_mislabelled_non_separable_h_is_stopped_in_one_line_with_what_was_marched():
+    """H declared separable that is not: the check after the march keeps finding the error above
+    the tolerance; after its last try the march stops in one line that asks whether H is separable."""
+    def H(q, p):
+        return 0.5 * jnp.sum(p ** 2) * (1 + 0.1 * jnp.sum(q ** 2)) + 0.5 * jnp.sum(q ** 2)
+
+    wrong = HamiltonianSystem(H, 32, separable=True, z0=np.full(64, 0.1))
+    with pytest.raises(ConfigError, match="is H = T\\(p\\) \\+ V\\(q\\) as declared") as info:
+        solve(wrong, None, (0.0, 1.0), rtol=1e-8)
+    assert "\n" not in str(info.value) and isinstance(info.value.partial, SplittingSolution)
