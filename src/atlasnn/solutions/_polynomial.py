@@ -27,13 +27,13 @@ from typing import Any, Callable, ClassVar
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.solutions._base import AbstractSolution, check_inside, finite_times
+from atlasnn.solutions._base import INTERVAL_SLACK, AbstractSolution, check_inside, finite_times
 from atlasnn.solutions._estimate import ErrorEstimate
 from atlasnn.solutions._solution import check_outside_mode
 from atlasnn.solutions._tableau import gauss_tableau, shifted_legendre
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["PolynomialSolution", "edge_offsets"]
+__all__ = ["PolynomialSolution", "edge_offsets", "CompanionEstimated"]
 
 
 def edge_offsets(edges: np.ndarray, lengths: np.ndarray) -> np.ndarray:
@@ -59,8 +59,38 @@ def _at_least_roundoff(delta: np.ndarray, z: np.ndarray) -> np.ndarray:
         return np.where(np.abs(delta) < floor, np.where(delta < 0, -floor, floor), delta)
 
 
+class CompanionEstimated:
+    """The error estimate of a solution against its companion (the same method on steps or windows
+    half as long, from ``estimator``, computed on first use and kept), for the solvers' solutions:
+    ``companion()`` and ``error_estimate(t)``."""
+
+    def companion(self):
+        """The companion solution of the error estimate (computed on first use and kept)."""
+        kept = self.__dict__.get("_companion")
+        if kept is None:
+            if self.estimator is None:
+                raise ConfigError("this solution has no error estimator (it was built without its solver)")
+            kept = self.__dict__["_companion"] = self.estimator()
+        return kept
+
+    def error_estimate(self, t) -> np.ndarray:
+        """The estimated error z(t) − ẑ(t) at times of the interval (the companion minus this
+        solution, at exactly those times, at least an ulp of ẑ): shape t.shape + (2d,); NaN outside
+        the interval."""
+        arr = finite_times(t)
+        check_inside(self, self.interval, arr.reshape(-1))
+        companion = self.companion()
+        with np.errstate(invalid="ignore"):
+            mine = self(arr)
+            out = _at_least_roundoff(companion(arr) - mine, mine)
+        t0, T = self.interval
+        slack = INTERVAL_SLACK * (T - t0)
+        out[(arr < t0 - slack) | (arr > T + slack)] = np.nan
+        return out
+
+
 @dataclass(eq=False)
-class PolynomialSolution(AbstractSolution):
+class PolynomialSolution(CompanionEstimated, AbstractSolution):
     """A Gauss collocation solution over [t0, T], callable at any times.
 
     Attributes:
@@ -171,15 +201,6 @@ class PolynomialSolution(AbstractSolution):
                                   "with a companion solution")
 
     # ------------------------------------------------------------------ the error estimate
-    def companion(self) -> "PolynomialSolution":
-        """The companion solution of the error estimate (computed on first use and kept)."""
-        kept = self.__dict__.get("_companion")
-        if kept is None:
-            if self.estimator is None:
-                raise ConfigError("this solution has no error estimator (it was built without its solver)")
-            kept = self.__dict__["_companion"] = self.estimator()
-        return kept
-
     def estimate(self, z0: Any = None) -> ErrorEstimate:
         """The a-posteriori error estimate against the companion solution (windows half as long):
         at every window start the difference itself, and for every half window the largest
@@ -224,20 +245,6 @@ class PolynomialSolution(AbstractSolution):
                             converged=True)
         self.__dict__["_estimate"] = est
         return est
-
-    def error_estimate(self, t) -> np.ndarray:
-        """The estimated error z(t) − ẑ(t) at times of the interval (the companion minus this
-        solution, at exactly those times, at least an ulp of ẑ): shape t.shape + (2d,); NaN outside
-        the interval."""
-        arr = np.asarray(t, np.float64)
-        check_inside(self, self.interval, arr.reshape(-1))
-        companion = self.companion()
-        with np.errstate(invalid="ignore"):
-            mine = self(arr)
-            out = _at_least_roundoff(companion(arr) - mine, mine)
-        t0, T = self.interval
-        out[(arr < t0) | (arr > T)] = np.nan
-        return out
 
     # ------------------------------------------------------------------ attributes
     @property

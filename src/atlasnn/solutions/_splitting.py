@@ -25,9 +25,9 @@ import numpy as np
 
 from atlasnn.compile_cache import program_cache
 from atlasnn.errors import ConfigError
-from atlasnn.solutions._base import INTERVAL_SLACK, AbstractSolution, check_inside, finite_times
+from atlasnn.solutions._base import AbstractSolution, check_inside, finite_times
 from atlasnn.solutions._estimate import ErrorEstimate
-from atlasnn.solutions._polynomial import _at_least_roundoff
+from atlasnn.solutions._polynomial import CompanionEstimated, _at_least_roundoff
 from atlasnn.solutions._solution import check_outside_mode
 from atlasnn.solutions._splitting_step import partial_rate, partial_step
 from atlasnn.solutions._splitting_tables import splitting_scheme
@@ -58,7 +58,7 @@ def _dense(system: HamiltonianSystem, scheme: str, kind: str):
 
 
 @dataclass(eq=False)
-class SplittingSolution(AbstractSolution):
+class SplittingSolution(CompanionEstimated, AbstractSolution):
     """An explicit splitting method's solution over [t0, t0 + n·h], callable at any times.
 
     Attributes:
@@ -164,20 +164,10 @@ class SplittingSolution(AbstractSolution):
         return np.where(near & (self.kept[c] == j), c, -1)
 
     def pieces(self) -> list[tuple[Any, float, float, float]]:
-        """The steps between kept states as (None, start, length, 0): there is no model per window."""
-        starts = self.t0 + self.kept[:-1] * self.h
-        return [(None, float(s), float(n * self.h), 0.0) for s, n in zip(starts, np.diff(self.kept))]
+        raise NotImplementedError("a splitting solution has no network pieces; its estimate() compares it with a "
+                                  "companion solution")
 
     # ------------------------------------------------------------------ the error estimate
-    def companion(self) -> "SplittingSolution":
-        """The companion solution (steps half as long), computed on first use and kept."""
-        kept = self.__dict__.get("_companion")
-        if kept is None:
-            if self.estimator is None:
-                raise ConfigError("this splitting solution has no error estimate (no estimator was given)")
-            kept = self.__dict__["_companion"] = self.estimator()
-        return kept
-
     def estimate(self, z0: Any = None) -> ErrorEstimate:
         """The a-posteriori error estimate against the companion: the difference of the two at
         every kept state, at points between them, and at T. ``z0`` is accepted for the common
@@ -195,22 +185,6 @@ class SplittingSolution(AbstractSolution):
                             converged=True)
         self.__dict__["_estimate"] = est
         return est
-
-    def error_estimate(self, t) -> np.ndarray:
-        """The estimated error z(t) − ẑ(t) at times of the interval (the companion minus this
-        solution, at exactly those times, at least an ulp of ẑ): shape t.shape + (2d,); NaN outside."""
-        arr = finite_times(t)
-        check_inside(self, self.interval, arr.reshape(-1))
-        with np.errstate(invalid="ignore"):
-            mine = self(arr)
-            out = _at_least_roundoff(self.companion()(arr) - mine, mine)
-        t0, T = self.interval
-        slack = INTERVAL_SLACK * (T - t0)
-        out[(arr < t0 - slack) | (arr > T + slack)] = np.nan
-        return out
-
-    def _exact_z0(self, z0: Any) -> np.ndarray | None:
-        return self.z0 if z0 is None else np.asarray(z0, np.float64).reshape(-1)
 
     # ------------------------------------------------------------------ attributes
     @property
