@@ -178,6 +178,27 @@ def test_constant_steps_keep_one_length_and_adaptive_ones_follow_the_orbit():
         assert np.abs(sol(t) - kepler_exact(t, 0.9)).max() < 1e-9
 
 
+def test_a_kink_in_h_stops_the_constant_march_in_one_line():
+    # H = p²/2 + |q| from (1, 0): q = 1 − t²/2 until the kink at t = √2, where constant windows would
+    # shrink 10¹⁰-fold and crawl to T; the march stops at once, naming the cause, keeping the part done
+    from atlasnn.systems import HamiltonianSystem
+
+    system = HamiltonianSystem(lambda q, p: 0.5 * p[0] ** 2 + jnp.abs(q[0]), 1, z0=(1.0, 0.0), name="kink")
+    with pytest.raises(AtlasError, match="not smooth there") as info:
+        solve(system, None, (0.0, 10.0))
+    line = str(info.value)
+    assert "\n" not in line and "steps='adaptive'" in line and "1.414" in line
+    part = info.value.partial
+    t = np.linspace(0.0, 1.4, 50)
+    assert np.abs(part(t)[:, 0] - (1 - t ** 2 / 2)).max() < 1e-10
+    # adaptive windows pass the kinks, but not to the tolerance (docs/SOLVER.md, "Non-smooth Hamiltonians")
+    period = 4 * np.sqrt(2.0)
+    adaptive = solve(system, None, (0.0, 2.5 * period), solver=GaussCollocation(steps="adaptive"))
+    assert np.abs(adaptive(period) - [1.0, 0.0]).max() < 1e-8
+    drift = np.abs(adaptive.energy(np.linspace(0.0, 2.5 * period, 1001)) - 1.0).max()
+    assert 1e-7 < drift < 1e-3
+
+
 @pytest.mark.long
 def test_newton_takes_over_where_the_fixed_point_iteration_diverges():
     """A stiff oscillator (ω = 50) with h = 0.2 (hω = 10): the fixed-point iteration cannot contract,

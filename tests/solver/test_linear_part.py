@@ -180,3 +180,35 @@ def test_the_fput_modes_sum_to_h_for_the_linear_chain():
     assert system.dim == 8 and system.params["alpha"] == 0.5
     start = fput_modes(system.z0, 8)
     assert start[0] > 0 and np.all(start[1:] < 1e-25 * start[0])  # Fermi's start: mode 1 alone
+
+
+def _inexact(system):
+    part = system.linear_part
+    return dataclasses.replace(system, linear_part=FourierLinearPart(2 * part.q_symbol, 2 * part.p_symbol),
+                               nonlinear_flow=None)
+
+
+@pytest.mark.long
+def test_the_gradient_with_an_inexact_linear_part_is_right_or_raises(monkeypatch):
+    # a declared S twice H's own: the forward march converges (on shorter windows); the transposed tangent
+    # solve preconditioned by that S does not contract, and 4 096 unknowns are past the dense fallback:
+    # restarted GMRES gives the gradient; where it cannot, the gradient raises in one line, never NaN
+    from atlasnn.solver import _gauss_step
+
+    system = _inexact(nls(points=128, length=32.0))
+    solver, T = GaussCollocation(), 0.25  # 16 stages: 4 096 unknowns a window
+    w = np.random.default_rng(0).normal(size=system.state_dim)
+
+    def gradient(system):
+        return jax.grad(lambda z0: jnp.dot(jnp.asarray(w), atlasnn.solve(system, z0, (0.0, T), solver=solver)(T)))(
+            jnp.asarray(system.z0))
+
+    got = np.asarray(gradient(system))
+    direction, eps = np.random.default_rng(1).normal(size=system.state_dim), 1e-5
+    plus, minus = (w @ atlasnn.solve(system, system.z0 + sign * eps * direction, (0.0, T), solver=solver)(T)
+                   for sign in (1, -1))
+    assert np.all(np.isfinite(got))
+    assert float(got @ direction) == pytest.approx((plus - minus) / (2 * eps), rel=1e-7)
+    monkeypatch.setattr(_gauss_step, "TANGENT_RESIDUAL", -1.0)  # no Krylov solve accepted
+    with pytest.raises(Exception, match="derivative of a window's stage equations did not converge"):
+        np.asarray(gradient(dataclasses.replace(system, name="retraced")))

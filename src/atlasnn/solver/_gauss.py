@@ -58,6 +58,11 @@ NEWTON_AUTO_SIZE = 64
 _CHUNK_BYTES = 4 << 20
 #: window lengths replayed per call of the companion's program
 _REPLAY_CHUNK = 4096
+#: a march of constant lengths stops, naming a non-smooth H, where its length shrank this many-fold
+#: below the longest it took and reaching T at it would take more than COLLAPSE_WINDOWS windows
+#: (Kepler e = 0.99 from pericentre at constant lengths in t shrank them 86-fold; H = p²/2 + |q| at its kink 10¹⁰-fold)
+COLLAPSE = 1e4
+COLLAPSE_WINDOWS = 1e6
 
 
 def stages_for(rtol: float) -> int:
@@ -346,6 +351,9 @@ class GaussCollocation(AbstractSolver):
         if gravitational and self.time_scale in (None, AUTO) and (stopped is not None or failed in (1, 2)):
             remedy = ("a close encounter shortened the windows: time_scale='potential' marches it on windows short "
                       "only there, symplectic (docs/SOLVER.md, 'Close encounters')")
+        elif stopped is not None and stopped.startswith("its constant window"):
+            remedy = ("smooth H there (|q| → √(q² + ε²)) or solve piecewise between the crossings; steps='adaptive' "
+                      "passes a kink, but not to the tolerance (docs/SOLVER.md, 'Non-smooth Hamiltonians')")
         elif stopped is not None:
             remedy = "shorten the interval, loosen the tolerance or give a longer h"
         elif failed == 1:
@@ -381,7 +389,7 @@ class GaussCollocation(AbstractSolver):
         a march not yet done should be one in τ, raises :class:`ScaleVaries`. ``with_newton``: the
         program with Newton's iteration, for the rest of the march once a window needs it."""
         b, t0 = len(z0s), float(np.min(starts))
-        counts, room = np.zeros(b), False  # the memory available: read once a second call is needed
+        counts, room, longest = np.zeros(b), False, np.zeros(b)  # the memory available: read once a second call is needed
         stacked = [initial_state(z, t, self.stage_count) for z, t in zip(z0s, starts)]
         state = GaussState(*(np.array(x) for x in zip(*stacked)))  # not np.stack: its checks, 14 times a call
         args = tuple(np.float64(x) for x in (T, self.rtol, self.atol, self.h or 0.0))
@@ -413,6 +421,9 @@ class GaussCollocation(AbstractSolver):
                 if np.all((t_now >= T) | (failed != 0)):
                     break
                 counts += kept.sum(axis=1)
+                longest = np.maximum(longest, [np.max(x, initial=0.0) for x in rows[-1][1]])
+                if (collapse := self._collapsed(longest, np.asarray(state.h), t_now, T, failed, until)) is not None:
+                    return rows, state, first_call, collapse
                 done = np.clip((t_now - starts) / np.maximum(T - starts, 1e-300), 1e-300, 1.0)
                 projected = float(np.sum(np.where(starts < T, counts / done, 0.0)))
                 room = available_memory() if room is False else room
@@ -421,6 +432,26 @@ class GaussCollocation(AbstractSolver):
                         f"it would need about {projected:.3g} windows ({projected * window_bytes / 2**30:.3g} GiB) "
                         f"to reach T, more than the {room / 2**30:.3g} GiB of memory available")
         return rows, state, first_call, None
+
+    def _collapsed(self, longest: np.ndarray, h: np.ndarray, t: np.ndarray, T: float, failed: np.ndarray,
+                   until: int | None) -> str | None:
+        """Why a march of constant lengths in t should stop now, or None: a member whose length
+        shrank ``COLLAPSE``-fold below the longest it took and that would need more than
+        ``COLLAPSE_WINDOWS`` windows at it to reach T (lengths are only ever shortened: that many at
+        least). A smooth H does not do this outside close encounters; a kink (abs, jnp.where) does,
+        and the length it needed there would otherwise be kept to T."""
+        if self.steps != "constant" or self.h is not None or until is not None:
+            return None
+        going = (t < T) & (failed == 0) & (longest > 0) & (h > 0)
+        fold = np.where(going, longest / np.where(h > 0, h, 1.0), 0.0)
+        need = np.where(going, (T - t) / np.where(h > 0, h, 1.0), 0.0)
+        bad = np.flatnonzero((fold >= COLLAPSE) & (need > COLLAPSE_WINDOWS))
+        if bad.size == 0:
+            return None
+        m = int(bad[0])
+        return (f"its constant window length shrank {fold[m]:.3g}-fold (to {h[m]:.3g}), which would take "
+                f"{need[m]:.3g} more windows: H is probably not smooth there (abs, a kink, jnp.where), or the motion "
+                f"is singular")
 
     # ------------------------------------------------------------------ the solution
     def _solution(self, system, edges, lengths, z, e, L, ratio, info) -> PolynomialSolution:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from typing import Callable, NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -284,8 +285,9 @@ def _linear_iteration(linear: Callable, y: jax.Array, max_iterations: int, preco
     field at the stages an iteration. With ``precondition`` (P⁻¹, P the Newton matrix of a declared
     linear part, or its transpose), x ← x + P⁻¹(y − linear(x)) from x = P⁻¹y: it contracts as the
     Newton iteration of the stages did. Where it does not reach round-off (the window was stiff and
-    solved by Newton), the dense solve for at most DENSE_TANGENT_SIZE unknowns, else NaN — a
-    derivative that is not there says so."""
+    solved by Newton, or a declared linear part far from H's own preconditions it), the dense solve
+    for at most DENSE_TANGENT_SIZE unknowns, else restarted GMRES; a derivative neither finds
+    raises (TANGENT_FAILED), never a silent NaN."""
     scale = jnp.full(y.shape[-1], jnp.maximum(jnp.max(jnp.abs(y)), jnp.finfo(y.dtype).tiny))
     if precondition is None:
         x, _, dmin, dlast = _iterate(lambda x: y + (x - linear(x)), y, scale, max_iterations,
@@ -296,9 +298,30 @@ def _linear_iteration(linear: Callable, y: jax.Array, max_iterations: int, preco
     size = jnp.maximum(jnp.max(jnp.abs(x)), jnp.max(jnp.abs(y)))
     ok = jnp.isfinite(dlast) & (dmin <= FIXED_POINT_FLOOR * size)
     fallback = (lambda: _dense_tangent_solve(linear, y)) if y.size <= DENSE_TANGENT_SIZE \
-        else (lambda: jnp.full_like(y, jnp.nan))
+        else (lambda: _krylov_tangent_solve(linear, y, precondition))
     # a loop that runs once where the iteration failed (under vmap only such members pay for it)
-    return lax.while_loop(lambda c: ~c[1], lambda c: (fallback(), jnp.asarray(True)), (x, ok))[0]
+    x = lax.while_loop(lambda c: ~c[1], lambda c: (fallback(), jnp.asarray(True)), (x, ok))[0]
+    return eqx.error_if(x, ~jnp.all(jnp.isfinite(x)), TANGENT_FAILED)
+
+
+#: the one line a derivative raises when its stage equations' linear solve found no solution
+TANGENT_FAILED = ("solve: the derivative of a window's stage equations did not converge (the stage equations are "
+                  "singular there, or a declared linear_part is far from H's quadratic part: declare the exact S, "
+                  "or none); no gradient was returned")
+
+
+def _krylov_tangent_solve(linear: Callable, y: jax.Array, precondition=None) -> jax.Array:
+    """x with linear(x) = y by restarted GMRES (JAX's), preconditioned as the stationary iteration
+    was: it converges where that one's iteration matrix has eigenvalues outside the unit disc (a
+    declared linear part far from H's own, whose Newton matrix is a poor inverse). NaN where its
+    residual stays above TANGENT_RESIDUAL of y."""
+    x, _ = jax.scipy.sparse.linalg.gmres(linear, y, M=precondition, tol=1e-13, atol=0.0, restart=40, maxiter=20)
+    residual = jnp.max(jnp.abs(linear(x) - y))
+    return jnp.where(residual <= TANGENT_RESIDUAL * jnp.max(jnp.abs(y)), x, jnp.nan)
+
+
+#: the relative residual a Krylov tangent solve must reach to be taken
+TANGENT_RESIDUAL = 1e-10
 
 
 def _tangent_solve(max_iterations: int, tab: dict | None = None, linear=None, z=None, h=None) -> Callable:
