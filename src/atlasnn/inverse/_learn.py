@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+from dataclasses import replace
 import math
 import time
 from typing import Any, Callable, ClassVar
@@ -27,16 +28,17 @@ import numpy as np
 import optax
 
 from atlasnn.errors import ConfigError
-from atlasnn.inverse._learn_data import check_trajectories, rates, segments
+from atlasnn.inverse._learn_checks import FLOW_ACCURACY, NOISE_FACTOR, flow_reasons, noise_reasons, observed_size
+from atlasnn.inverse._learn_data import check_trajectories, continuations, rates, segments
 from atlasnn.solver import GaussCollocation, solve
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["AbstractLearnMethod", "ThroughSolver", "HNN", "LearnedHamiltonian", "learn_hamiltonian"]
 
-#: a loss this many times the noise's own (2σ² for predicted states) is "far above the noise"
-NOISE_FACTOR = 3.0
 #: a held-out loss this many times the training loss (or the noise's) is "does not generalise"
 HELD_OUT_FACTOR = 3.0
+#: the window budget of a held-out part predicted from the last trained start (longer than a segment)
+CONTINUATION_WINDOWS = 1024
 
 
 def _positive_int(owner: str, name: str, value: Any) -> int:
@@ -73,6 +75,16 @@ class AbstractLearnMethod(abc.ABC):
     def noise_loss(self, sigma: float, trajectories: list) -> float:
         """The loss that noise of σ on every observed value gives alone (for the trust rule)."""
 
+    def trust_reasons(self, model: Any, dof: int, trajectories: list, noise: float | None) -> list[str]:
+        """Reasons not to trust the learned ``model`` that its losses cannot show (data too noisy
+        to pin H down)."""
+        return noise_reasons(trajectories, noise, hnn=False)
+
+    def held_out_floor(self, trajectories: list) -> float:
+        """A held-out loss below this is never "does not generalise" (a prediction's accuracy
+        that is enough whatever the training loss reached)."""
+        return 0.0
+
 
 @dataclasses.dataclass(frozen=True)
 class ThroughSolver(AbstractLearnMethod):
@@ -106,20 +118,32 @@ class ThroughSolver(AbstractLearnMethod):
     def losses(self, trajectories, held_out, dof):
         train, test = segments(trajectories, self.ahead, held_out)
         missing = np.nonzero(np.isnan(train.starts))
-        return (self._loss(train, dof, missing), None if test is None else self._loss(test, dof, None),
+        if test is not None:
+            test_loss = self._loss(train, test.times, test.targets, dof, None, pieces=test)
+        elif held_out > 0 and (later := continuations(trajectories, self.ahead, held_out)) is not None:
+            # no held-out state observed whole: the held-out part predicted from the last trained start
+            test_loss = self._loss(train, later.times, later.targets, dof, missing, later.rows,
+                                   replace(self.solver, max_windows=CONTINUATION_WINDOWS))
+        else:
+            test_loss = None
+        return (self._loss(train, train.times, train.targets, dof, missing), test_loss,
                 jnp.asarray(train.guess[missing]))
 
-    def _loss(self, pieces, dof: int, missing) -> Callable:
-        """The masked mean squared error of the segments' predictions; the starts' missing values
-        (at the indices ``missing``) are the loss's second argument."""
-        seen = ~np.isnan(pieces.targets)
-        t0, times = jnp.asarray(pieces.t0), jnp.asarray(pieces.times)
-        targets, weight = jnp.asarray(np.where(seen, pieces.targets, 0.0)), jnp.asarray(seen / seen.sum())
-        starts, solver = jnp.asarray(pieces.guess), self.solver
+    def _loss(self, train, times, targets, dof: int, missing, rows=None, solver=None, pieces=None) -> Callable:
+        """The masked mean squared error of predictions of ``targets`` at ``times`` from the
+        starts of ``pieces`` (default the training segments ``train``, ``rows`` of them where given);
+        the training starts' missing values (at the indices ``missing``) are the loss's second
+        argument."""
+        pieces = train if pieces is None else pieces
+        seen = ~np.isnan(targets)
+        t0, times = jnp.asarray(pieces.t0 if rows is None else pieces.t0[rows]), jnp.asarray(times)
+        targets, weight = jnp.asarray(np.where(seen, targets, 0.0)), jnp.asarray(seen / seen.sum())
+        starts, solver = jnp.asarray(pieces.guess), solver or self.solver
 
         def loss(model, unknown):
             system = HamiltonianSystem(model, dof, name="learned")
             z0 = starts if missing is None or not missing[0].size else starts.at[missing].set(unknown)
+            z0 = z0 if rows is None else z0[rows]
 
             def predict(piece):
                 a, z, ts = piece
@@ -132,6 +156,11 @@ class ThroughSolver(AbstractLearnMethod):
     def noise_loss(self, sigma, trajectories):
         # the target's noise and the start's, carried forward (about σ² each for short segments)
         return 2.0 * sigma ** 2
+
+    def held_out_floor(self, trajectories):
+        # the held-out part predicted from a trained start (positions only) drifts with the start's
+        # fitted momenta: a miss of FLOW_ACCURACY of the data's size is enough
+        return (FLOW_ACCURACY * observed_size(trajectories)) ** 2
 
 
 @dataclasses.dataclass(frozen=True)
@@ -156,6 +185,10 @@ class HNN(AbstractLearnMethod):
         # a central difference (z_{i+1} − z_{i−1}) / Δ carries noise of variance 2σ²/Δ²
         gaps = np.concatenate([traj.t[2:] - traj.t[:-2] for traj in trajectories])
         return float(np.mean(2.0 * sigma ** 2 / gaps ** 2))
+
+    def trust_reasons(self, model, dof, trajectories, noise):
+        # the HNN's loss is against the differences, blind to their error: its flow is checked too
+        return noise_reasons(trajectories, noise, hnn=True) + flow_reasons(model, dof, trajectories, noise)
 
     @staticmethod
     def _loss(pairs, dof: int) -> Callable:
@@ -246,14 +279,14 @@ def learn_hamiltonian(model: Any, trajectories: Any, method: AbstractLearnMethod
         notes = _check_model(model, dof, data)
         train_loss, test_loss, unknown = method.losses(data, float(held_out), dof)
         if test_loss is None:
-            notes.append("nothing was held out (or no held-out segment starts from a state observed whole): whether "
-                         "H_θ generalises is not checked")
+            notes.append("nothing was held out: whether H_θ generalises is not checked")
         if noise is None:
             notes.append("no noise was given: whether the loss is at the noise is not judged (give noise=σ)")
         record = _train(model, unknown, method, train_loss, test_loss, progress)
         floor = None if not noise else method.noise_loss(noise, data)
+        found = [] if not record["curve"] else method.trust_reasons(record["model"], dof, data, noise)
     return _judge(LearnedHamiltonian(dof=dof, method=method.name, noise=noise, notes=notes, trusted=True, **record),
-                  floor)
+                  floor, found, method.held_out_floor(data))
 
 
 def _check_model(model: Any, dof: int, data: list) -> list[str]:
@@ -297,7 +330,7 @@ def _train(model: Any, unknown: jax.Array, method: AbstractLearnMethod, train_lo
         updates, state = opt.update(grads, state, params)
         return optax.apply_updates(params, updates), state, value
 
-    held = None if test_loss is None else eqx.filter_jit(lambda p: test_loss(eqx.combine(p[0], static), None))
+    held = None if test_loss is None else eqx.filter_jit(lambda p: test_loss(eqx.combine(p[0], static), p[1]))
     every = max(1, method.steps // 50)
     state, curve, stopped = opt.init(params), [], None
     best = (math.inf, params, math.inf, None)  # (score, θ, its training loss, its held-out loss)
@@ -339,11 +372,13 @@ def _runtime_message(exc: Exception) -> str:
     return (lines[0] if lines else type(exc).__name__)[:300]
 
 
-def _judge(result: LearnedHamiltonian, floor: float | None) -> LearnedHamiltonian:
+def _judge(result: LearnedHamiltonian, floor: float | None, found: list[str] = (),
+           held_floor: float = 0.0) -> LearnedHamiltonian:
     """The trust rules, each a reason not to believe the learned H: a training that stopped early
     or never had a finite loss, a loss far above the noise's own (``floor``, when the noise is
-    given), a held-out loss far above the training loss, and neither of those two checks possible
-    (a fit no rule could judge is not trusted). The notes that are not reasons (nothing
+    given), a held-out loss far above the training loss (and above ``held_floor``), neither of those
+    two checks possible (a fit no rule could judge is not trusted), and the method's own reasons
+    ``found`` (:meth:`AbstractLearnMethod.trust_reasons`: noisy data, an HNN's flow). The notes that are not reasons (nothing
     held out, no noise given, more weights than data) follow."""
     reasons = []
     interrupted = (result.stopped or "").startswith("interrupted")
@@ -363,7 +398,9 @@ def _judge(result: LearnedHamiltonian, floor: float | None) -> LearnedHamiltonia
     if floor is None and result.held_out_loss is None:
         reasons.append("no rule could judge the fit (no noise level given, nothing held out): give noise= or "
                        "held_out > 0 (the end of each trajectory kept out of training) before trusting it")
-    if result.held_out_loss is not None and result.held_out_loss > HELD_OUT_FACTOR * max(result.loss, floor or 0.0):
+    reasons += list(found)
+    if result.held_out_loss is not None and \
+            result.held_out_loss > HELD_OUT_FACTOR * max(result.loss, floor or 0.0, held_floor):
         ratio = result.held_out_loss / max(result.loss, floor or 0.0)
         reasons.append(f"the held-out loss {result.held_out_loss:.2g} is {ratio:.1f}× the training loss: H_θ does not "
                        "generalise to the held-out part; more or longer trajectories, a smaller network or fewer steps")

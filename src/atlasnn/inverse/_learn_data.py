@@ -15,7 +15,7 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 
-__all__ = ["Trajectory", "check_trajectories", "Segments", "segments", "rates", "split_point"]
+__all__ = ["Trajectory", "check_trajectories", "Segments", "segments", "continuations", "rates", "split_point"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -121,6 +121,39 @@ def segments(trajectories: list[Trajectory], ahead: int, held_out: float) -> tup
                           f"needs {ahead + 1} before the held-out part ({held_out:g} of them); give longer "
                           "trajectories, a smaller ahead or a smaller held_out")
     return _stack(train), (_stack(test) if test else None)
+
+
+@dataclass(frozen=True, eq=False)
+class Continuations:
+    """Each trajectory's held-out part seen from its last training segment: ``rows`` (K,), that
+    segment's index among the training segments (whose start, its missing values trained, is the
+    continuation's start); ``times`` (K, A) and ``targets`` (K, A, 2d), the held-out observations,
+    padded to one length A by repeating the last time with NaN targets."""
+
+    rows: np.ndarray
+    times: np.ndarray
+    targets: np.ndarray
+
+
+def continuations(trajectories: list[Trajectory], ahead: int, held_out: float) -> Continuations | None:
+    """The held-out check where no held-out segment starts from a state observed whole (positions
+    only, say): every held-out observation predicted from its trajectory's last training segment's
+    start, in the order :func:`segments` stacks them (None: nothing is held out)."""
+    rows, times, targets, count = [], [], [], 0
+    for traj in trajectories:
+        cut = split_point(traj, held_out)
+        trained = max(0, cut - ahead)  # the segments i < cut − ahead are trained on
+        if trained and cut < traj.t.size:
+            rows.append(count + trained - 1)
+            times.append(traj.t[cut:])
+            targets.append(traj.z[cut:])
+        count += trained
+    if not rows:
+        return None
+    width = max(t.size for t in times)
+    pad = lambda a, fill: np.concatenate([a, np.repeat(fill, width - a.shape[0], axis=0)])  # noqa: E731
+    return Continuations(np.asarray(rows), np.stack([pad(t, t[-1:]) for t in times]),
+                         np.stack([pad(z, np.full_like(z[:1], np.nan)) for z in targets]))
 
 
 def _stack(pieces: list) -> Segments:
