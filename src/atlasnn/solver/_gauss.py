@@ -259,6 +259,8 @@ class GaussCollocation(AbstractSolver):
                 raise
             parts, stop = exc.partial, exc
         out, problem = transform.solutions(parts, T)
+        if stop is not None and problem is None:
+            problem = transform.stop_line(parts)  # a scale that turned NaN ahead, not H
         for sol in out if chosen else ():
             if sol is not None:
                 sol.info["time_scale_chosen"] = f"'potential': {chosen}"
@@ -351,6 +353,8 @@ class GaussCollocation(AbstractSolver):
         if gravitational and self.time_scale in (None, AUTO) and (stopped is not None or failed in (1, 2)):
             remedy = ("a close encounter shortened the windows: time_scale='potential' marches it on windows short "
                       "only there, symplectic (docs/SOLVER.md, 'Close encounters')")
+        elif stopped is not None and stopped.startswith("t advanced"):
+            remedy = "give a time scale g(q, p) that stays positive, not near 0, wherever the orbit goes"
         elif stopped is not None and stopped.startswith("its constant window"):
             remedy = ("smooth H there (|q| → √(q² + ε²)) or solve piecewise between the crossings; steps='adaptive' "
                       "passes a kink, but not to the tolerance (docs/SOLVER.md, 'Non-smooth Hamiltonians')")
@@ -389,7 +393,7 @@ class GaussCollocation(AbstractSolver):
         a march not yet done should be one in τ, raises :class:`ScaleVaries`. ``with_newton``: the
         program with Newton's iteration, for the rest of the march once a window needs it."""
         b, t0 = len(z0s), float(np.min(starts))
-        counts, room, longest = np.zeros(b), False, np.zeros(b)  # the memory available: read once a second call is needed
+        counts, room, longest, before = np.zeros(b), False, np.zeros(b), np.asarray(starts, np.float64)  # the memory available: read once a second call is needed
         stacked = [initial_state(z, t, self.stage_count) for z, t in zip(z0s, starts)]
         state = GaussState(*(np.array(x) for x in zip(*stacked)))  # not np.stack: its checks, 14 times a call
         args = tuple(np.float64(x) for x in (T, self.rtol, self.atol, self.h or 0.0))
@@ -421,8 +425,13 @@ class GaussCollocation(AbstractSolver):
                 if np.all((t_now >= T) | (failed != 0)):
                     break
                 counts += kept.sum(axis=1)
-                longest = np.maximum(longest, [np.max(x, initial=0.0) for x in rows[-1][1]])
-                if (collapse := self._collapsed(longest, np.asarray(state.h), t_now, T, failed, until)) is not None:
+                if until is None:  # the lengths in t
+                    current = np.asarray(state.h)
+                    longest = np.maximum(longest, [np.max(x, initial=0.0) for x in rows[-1][1]])
+                else:  # in τ: how far t moved per window over this call
+                    current = (t_now - before) / np.maximum(kept.sum(axis=1), 1)
+                    longest, before = np.maximum(longest, current), t_now
+                if (collapse := self._collapsed(longest, current, t_now, T, failed, until)) is not None:
                     return rows, state, first_call, collapse
                 done = np.clip((t_now - starts) / np.maximum(T - starts, 1e-300), 1e-300, 1.0)
                 projected = float(np.sum(np.where(starts < T, counts / done, 0.0)))
@@ -439,16 +448,22 @@ class GaussCollocation(AbstractSolver):
         shrank ``COLLAPSE``-fold below the longest it took and that would need more than
         ``COLLAPSE_WINDOWS`` windows at it to reach T (lengths are only ever shortened: that many at
         least). A smooth H does not do this outside close encounters; a kink (abs, jnp.where) does,
-        and the length it needed there would otherwise be kept to T."""
-        if self.steps != "constant" or self.h is not None or until is not None:
+        and the length it needed there would otherwise be kept to T. In τ (``until``: t's index),
+        ``longest`` and ``h`` are how far t moved per window, best and last call: a time scale g
+        that falls towards 0 stalls t."""
+        if until is None and (self.steps != "constant" or self.h is not None):
             return None
-        going = (t < T) & (failed == 0) & (longest > 0) & (h > 0)
-        fold = np.where(going, longest / np.where(h > 0, h, 1.0), 0.0)
-        need = np.where(going, (T - t) / np.where(h > 0, h, 1.0), 0.0)
+        h = np.maximum(h, 1e-300)  # in τ, t may not have moved at all
+        going = (t < T) & (failed == 0) & (longest > 0)
+        fold = np.where(going, longest / h, 0.0)
+        need = np.where(going, (T - t) / h, 0.0)
         bad = np.flatnonzero((fold >= COLLAPSE) & (need > COLLAPSE_WINDOWS))
         if bad.size == 0:
             return None
         m = int(bad[0])
+        if until is not None:
+            return (f"t advanced {fold[m]:.3g}-fold less per window than it had (g = dt/dτ fell), which would take "
+                    f"{need[m]:.3g} more windows")
         return (f"its constant window length shrank {fold[m]:.3g}-fold (to {h[m]:.3g}), which would take "
                 f"{need[m]:.3g} more windows: H is probably not smooth there (abs, a kink, jnp.where), or the motion "
                 f"is singular")

@@ -256,6 +256,24 @@ class TimeTransform:
         return (f"GaussCollocation time_scale ({self.label}) must be finite and > 0 along the orbit, got g = {g!r} "
                 f"at {where}{hint}; give a scale that stays positive and finite wherever the orbit goes")
 
+    def stop_line(self, parts: list[PolynomialSolution | None]) -> str | None:
+        """Where a march in τ stopped (``parts``: the extended solutions up to the stop) because g
+        is not finite or not positive at the state reached or a little way along the flow from it
+        (a potential V ≥ 0 ahead, say): the line naming the time scale, not H; else None."""
+        for ext in parts:
+            if ext is None or ext.n_windows == 0:
+                continue
+            Z = np.asarray(ext(ext.edges[-1]), np.float64).reshape(1, -1)
+            with jax.enable_x64(True):
+                rate = np.asarray(self.extended.vector_field(Z))
+            steps = np.geomspace(1e-8, 1e-1, 8) * (np.max(np.abs(Z)) + 1e-300) / (np.max(np.abs(rate)) + 1e-300)
+            g = self.rate(np.concatenate([Z, Z + steps[:, None] * rate]))
+            bad = np.flatnonzero(~(np.isfinite(g) & (g > 0)))
+            if bad.size:
+                return self._line(float(g[bad[0]]), f"t = {float(Z[0, self.clock]):.6g}" +
+                                  ("" if bad[0] == 0 else ", just ahead along the flow"))
+        return None
+
     def solutions(self, parts: list[PolynomialSolution | None], T: float
                   ) -> tuple[list[TimeTransformedSolution | None], str | None]:
         """The solutions in physical time on [t0, min(T, the time reached)] from the extended ones
