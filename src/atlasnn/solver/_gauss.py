@@ -16,6 +16,7 @@ import time
 from dataclasses import dataclass, fields
 from typing import Any, Callable, ClassVar
 
+import equinox as eqx
 import jax
 import numpy as np
 
@@ -26,11 +27,11 @@ from atlasnn.solutions import (PolynomialSolution, TimeTransformedSolution, Trac
                                gauss_tableau)
 from atlasnn.solver._base import AbstractSolver, monotone_progress, register_solver, solve_one
 from atlasnn.solver._collocation import require_float64
-from atlasnn.solver._gauss_core import LOOPS, gauss_core
+from atlasnn.solver._gauss_core import FORWARD_NEEDED, LOOPS, gauss_core, traced_inputs
 from atlasnn.solver._gauss_march import (FAILURES, NEWTON_LATER, STEP_MODES, GaussState, ReplayState, clock,
                                          compiled_gauss_march, compiled_gauss_replay, compiled_gauss_windows,
                                          initial_state)
-from atlasnn.solver._gauss_stops import diverging, readable_times
+from atlasnn.solver._gauss_stops import collapsed, diverging, readable_times
 from atlasnn.solver._gauss_time import (AUTO, WATCH_FIRST, ScaleVaries, ScaleWatch, TimeTransform, check_time_scale,
                                         describe_time_scale, march_advice, potential_applies)
 from atlasnn.systems import HamiltonianSystem, require_float64_field
@@ -58,11 +59,6 @@ NEWTON_AUTO_SIZE = 64
 _CHUNK_BYTES = 4 << 20
 #: window lengths replayed per call of the companion's program
 _REPLAY_CHUNK = 4096
-#: a march of constant lengths stops, naming a non-smooth H, where its length shrank this many-fold
-#: below the longest it took and reaching T at it would take more than COLLAPSE_WINDOWS windows
-#: (Kepler e = 0.99 from pericentre at constant lengths in t shrank them 86-fold; H = p²/2 + |q| at its kink 10¹⁰-fold)
-COLLAPSE = 1e4
-COLLAPSE_WINDOWS = 1e6
 
 
 def stages_for(rtol: float) -> int:
@@ -219,11 +215,19 @@ class GaussCollocation(AbstractSolver):
             raise ConfigError(f"GaussCollocation max_windows = {self.max_windows} keeps about {need / 2**30:.3g} GiB "
                               f"for one traced solve ((s + 3)·2d·8 bytes a window, 2d = {n}), more than the "
                               f"{room / 2**30:.3g} GiB available; lower max_windows")
-        return gauss_core(system, z0, t0, T, stages=self.stage_count, steps=self.steps, rtol=self.rtol,
-                          atol=self.atol, h=self.h, max_windows=self.max_windows,
-                          differentiation=self.differentiation, max_iterations=self.max_iterations,
-                          newton=self.newton_for(n), growth=self.growth, safety=self.safety, warmup=self.warmup,
-                          max_rejects=self.max_rejects)
+        settings = dict(stages=self.stage_count, steps=self.steps, rtol=self.rtol, atol=self.atol, h=self.h,
+                        max_windows=self.max_windows, differentiation=self.differentiation,
+                        max_iterations=self.max_iterations, newton=self.newton_for(n), growth=self.growth,
+                        safety=self.safety, warmup=self.warmup, max_rejects=self.max_rejects)
+        z0, t0, T = traced_inputs(system, z0, t0, T)  # refused here, in one line, before any trace
+        if system.traced:  # H closes over traced values: they cannot be a compiled program's constants
+            return gauss_core(system, z0, t0, T, **settings)
+        try:
+            return _compiled_core(system, z0, t0, T, tuple(sorted(settings.items())))
+        except TypeError as exc:  # jax.jvp of the program: met where the program is differentiated
+            if "forward-mode" not in str(exc):
+                raise
+            raise ConfigError(FORWARD_NEEDED) from None
 
     def solve_batch(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float, *,
                     progress: Callable[[float], None] | None = None
@@ -431,7 +435,8 @@ class GaussCollocation(AbstractSolver):
                 else:  # in τ: how far t moved per window over this call
                     current = (t_now - before) / np.maximum(kept.sum(axis=1), 1)
                     longest, before = np.maximum(longest, current), t_now
-                if (collapse := self._collapsed(longest, current, t_now, T, failed, until)) is not None:
+                if (collapse := collapsed(longest, current, t_now, T, failed, until,
+                                          constant=self.steps == "constant" and self.h is None)) is not None:
                     return rows, state, first_call, collapse
                 done = np.clip((t_now - starts) / np.maximum(T - starts, 1e-300), 1e-300, 1.0)
                 projected = float(np.sum(np.where(starts < T, counts / done, 0.0)))
@@ -441,32 +446,6 @@ class GaussCollocation(AbstractSolver):
                         f"it would need about {projected:.3g} windows ({projected * window_bytes / 2**30:.3g} GiB) "
                         f"to reach T, more than the {room / 2**30:.3g} GiB of memory available")
         return rows, state, first_call, None
-
-    def _collapsed(self, longest: np.ndarray, h: np.ndarray, t: np.ndarray, T: float, failed: np.ndarray,
-                   until: int | None) -> str | None:
-        """Why a march of constant lengths in t should stop now, or None: a member whose length
-        shrank ``COLLAPSE``-fold below the longest it took and that would need more than
-        ``COLLAPSE_WINDOWS`` windows at it to reach T (lengths are only ever shortened: that many at
-        least). A smooth H does not do this outside close encounters; a kink (abs, jnp.where) does,
-        and the length it needed there would otherwise be kept to T. In τ (``until``: t's index),
-        ``longest`` and ``h`` are how far t moved per window, best and last call: a time scale g
-        that falls towards 0 stalls t."""
-        if until is None and (self.steps != "constant" or self.h is not None):
-            return None
-        h = np.maximum(h, 1e-300)  # in τ, t may not have moved at all
-        going = (t < T) & (failed == 0) & (longest > 0)
-        fold = np.where(going, longest / h, 0.0)
-        need = np.where(going, (T - t) / h, 0.0)
-        bad = np.flatnonzero((fold >= COLLAPSE) & (need > COLLAPSE_WINDOWS))
-        if bad.size == 0:
-            return None
-        m = int(bad[0])
-        if until is not None:
-            return (f"t advanced {fold[m]:.3g}-fold less per window than it had (g = dt/dτ fell), which would take "
-                    f"{need[m]:.3g} more windows")
-        return (f"its constant window length shrank {fold[m]:.3g}-fold (to {h[m]:.3g}), which would take "
-                f"{need[m]:.3g} more windows: H is probably not smooth there (abs, a kink, jnp.where), or the motion "
-                f"is singular")
 
     # ------------------------------------------------------------------ the solution
     def _solution(self, system, edges, lengths, z, e, L, ratio, info) -> PolynomialSolution:
@@ -523,3 +502,12 @@ class GaussCollocation(AbstractSolver):
                                   self.stage_count, None, {"companion_of": sol.info.get("solver")}, outside="allow",
                                   resolve=None if keep else self.resolver(sol.system),
                                   offsets=sol.offsets[0] + edge_offsets(edges, halves))
+
+
+@eqx.filter_jit
+def _compiled_core(system: HamiltonianSystem, z0, t0, T, settings: tuple) -> Any:
+    """The traceable core compiled once per system and settings (``system`` and ``settings`` are
+    static, hashed by identity and value): ``jax.grad`` or ``jax.vmap`` of a solve without an outer
+    ``jax.jit`` reuses it, and its derivative programs, instead of tracing the march every call (as
+    Diffrax's ``diffeqsolve`` does); inside an outer ``jax.jit`` it is inlined."""
+    return gauss_core(system, z0, t0, T, **dict(settings))

@@ -35,8 +35,11 @@ from atlasnn.solver._gauss_march import FAILURES, GaussState, started, marching,
 from atlasnn.solver._gauss_step import solved_step, tableau_arrays
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["gauss_core", "LOOPS", "traced_inputs"]
+__all__ = ["gauss_core", "FORWARD_NEEDED", "LOOPS", "traced_inputs"]
 
+#: the line a jax.jvp of the reverse-mode core raises
+FORWARD_NEEDED = ("jax.jvp/jax.jacfwd through solve need GaussCollocation(differentiation='forward') (the default, "
+                  "'reverse', serves jax.grad/jax.vjp)")
 #: GaussCollocation.differentiation → how (module docstring)
 LOOPS = {"reverse": "the march's adjoint", "forward": "through the loop"}
 
@@ -199,8 +202,7 @@ def gauss_core(system: HamiltonianSystem, z0: Any, t0: Any, T: Any, *, stages: i
         except TypeError as exc:
             if "forward-mode" not in str(exc):
                 raise
-            raise ConfigError("jax.jvp/jax.jacfwd through solve need GaussCollocation(differentiation='forward') "
-                              "(the default, 'reverse', serves jax.grad/jax.vjp)") from None
+            raise ConfigError(FORWARD_NEEDED) from None
     return _solution(system, stages, t0, T, out)
 
 

@@ -1,5 +1,6 @@
-"""The words for a Gauss march that stopped: whether the field is what stopped it, and times
-written with as many digits as tell them apart (used by :mod:`._gauss`)."""
+"""The words for a Gauss march that stopped: whether the field is what stopped it, whether its
+windows collapsed (a kink in H, a time scale falling to 0), and times written with as many digits
+as tell them apart (used by :mod:`._gauss`)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["diverging", "readable_times"]
+__all__ = ["COLLAPSE", "COLLAPSE_WINDOWS", "collapsed", "diverging", "readable_times"]
 
 
 def diverging(system: HamiltonianSystem, z0: np.ndarray, z: np.ndarray) -> str | None:
@@ -40,3 +41,37 @@ def readable_times(*values: float) -> list[str]:
         if len(set(out)) == len(set(float(v) for v in values)):
             return out
     return [repr(float(v)) for v in values]
+
+
+#: a march of constant lengths stops, naming a non-smooth H, where its length shrank this many-fold
+#: below the longest it took and reaching T at it would take more than COLLAPSE_WINDOWS windows
+#: (Kepler e = 0.99 from pericentre at constant lengths in t shrank them 86-fold; H = p²/2 + |q| at its kink 10¹⁰-fold)
+COLLAPSE = 1e4
+COLLAPSE_WINDOWS = 1e6
+
+
+def collapsed(longest: np.ndarray, h: np.ndarray, t: np.ndarray, T: float, failed: np.ndarray, until: int | None,
+              constant: bool) -> str | None:
+    """Why a march in t of constant lengths it found (``constant``) should stop now, or None: a
+    member whose length shrank ``COLLAPSE``-fold below the longest it took and that would need more
+    than ``COLLAPSE_WINDOWS`` windows at it to reach T (lengths are only ever shortened: that many
+    at least). A smooth H does not do this outside close encounters; a kink (abs, jnp.where) does,
+    and the length it needed there would otherwise be kept to T. In τ (``until``: t's index),
+    ``longest`` and ``h`` are how far t moved per window, best and last call: a time scale g
+    that falls towards 0 stalls t."""
+    if until is None and not constant:
+        return None
+    h = np.maximum(h, 1e-300)  # in τ, t may not have moved at all
+    going = (t < T) & (failed == 0) & (longest > 0)
+    fold = np.where(going, longest / h, 0.0)
+    need = np.where(going, (T - t) / h, 0.0)
+    bad = np.flatnonzero((fold >= COLLAPSE) & (need > COLLAPSE_WINDOWS))
+    if bad.size == 0:
+        return None
+    m = int(bad[0])
+    if until is not None:
+        return (f"t advanced {fold[m]:.3g}-fold less per window than it had (g = dt/dτ fell), which would take "
+                f"{need[m]:.3g} more windows")
+    return (f"its constant window length shrank {fold[m]:.3g}-fold (to {h[m]:.3g}), which would take "
+            f"{need[m]:.3g} more windows: H is probably not smooth there (abs, a kink, jnp.where), or the motion "
+            f"is singular")

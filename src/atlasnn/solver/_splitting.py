@@ -18,6 +18,7 @@ import time
 from dataclasses import dataclass, fields
 from typing import Any, Callable, ClassVar
 
+import equinox as eqx
 import jax
 import numpy as np
 
@@ -277,7 +278,16 @@ class SplittingComposition(AbstractSolver):
                               "known before the trace); or call solve on numbers")
         _check_system(system)
         z0, t0, T = traced_inputs(system, z0, t0, T)
-        return TracedSplittingSolution.march(system, self.scheme_name, z0, t0, T, self.steps)
+        if system.traced:  # H closes over traced values: they cannot be a compiled program's constants
+            return TracedSplittingSolution.march(system, self.scheme_name, z0, t0, T, self.steps)
+        return _compiled_march(system, self.scheme_name, z0, t0, T, self.steps)
+
+
+@eqx.filter_jit
+def _compiled_march(system: HamiltonianSystem, scheme: str, z0, t0, T, steps: int) -> TracedSplittingSolution:
+    """The traced march compiled once per system, scheme and step count (static): ``jax.grad`` or
+    ``jax.vmap`` without an outer ``jax.jit`` reuse it; inside one it is inlined."""
+    return TracedSplittingSolution.march(system, scheme, z0, t0, T, steps)
 
 
 def march(program, z0s: np.ndarray, h: float, steps: int, every: int, chunk: int,
