@@ -3,7 +3,8 @@ cost, against the host ``solve``, ``solve_batch`` and Diffrax (one core, compile
 ``--repeats`` after a first call).
 
 1. Kepler e = 0.6 over 10 periods at the defaults (rtol 1e-11): the host solve; the jitted core;
-   ``jax.grad`` of q2(T) (reverse mode) and ``jax.jvp`` (forward mode) through it; Diffrax's
+   ``jax.grad`` of q2(T) (reverse mode; jitted, and called with no outer ``jax.jit``) and
+   ``jax.jvp`` (forward mode) through it; Diffrax's
    ``diffeqsolve`` with atlasnn's ``GaussLegendre`` (same s, PID controller at the same rtol/atol)
    and with Dopri8 at rtol 1e-12, forward and ``jax.grad`` through its RecursiveCheckpointAdjoint;
    each one's error at T against the exact orbit. Gradients compared on fixed windows (h = 2⁻⁴, T
@@ -68,6 +69,9 @@ def kepler_gradients(repeats: int) -> dict:
     record("atlasnn solve, jitted core", lambda: core(z0), lambda z: z)
     grad = jax.jit(jax.grad(lambda z: solve(system, z, (0.0, T), solver=solver)(T)[1]))
     record("atlasnn jax.grad (reverse)", lambda: grad(z0))
+    # the same gradient with no outer jax.jit: the core's compiled program is reused call after call
+    eager = jax.grad(lambda z: solve(system, z, (0.0, T), solver=solver)(T)[1])
+    record("atlasnn jax.grad, no outer jit", lambda: eager(z0))
     jvp = jax.jit(lambda z: jax.jvp(lambda y: solve(system, y, (0.0, T), solver=forward)(T), (z,), (jnp.ones(4),)))
     record("atlasnn jax.jvp (forward)", lambda: jvp(z0))
 

@@ -16,7 +16,6 @@ import time
 from dataclasses import dataclass, fields
 from typing import Any, Callable, ClassVar
 
-import equinox as eqx
 import jax
 import numpy as np
 
@@ -27,7 +26,7 @@ from atlasnn.solutions import (PolynomialSolution, TimeTransformedSolution, Trac
                                gauss_tableau)
 from atlasnn.solver._base import AbstractSolver, monotone_progress, register_solver, solve_one
 from atlasnn.solver._collocation import require_float64
-from atlasnn.solver._gauss_core import FORWARD_NEEDED, LOOPS, gauss_core, traced_inputs
+from atlasnn.solver._gauss_core import LOOPS, compiled_gauss_core, gauss_core, traced_inputs
 from atlasnn.solver._gauss_march import (FAILURES, NEWTON_LATER, STEP_MODES, GaussState, ReplayState, clock,
                                          compiled_gauss_march, compiled_gauss_replay, compiled_gauss_windows,
                                          initial_state)
@@ -222,12 +221,7 @@ class GaussCollocation(AbstractSolver):
         z0, t0, T = traced_inputs(system, z0, t0, T)  # refused here, in one line, before any trace
         if system.traced:  # H closes over traced values: they cannot be a compiled program's constants
             return gauss_core(system, z0, t0, T, **settings)
-        try:
-            return _compiled_core(system, z0, t0, T, tuple(sorted(settings.items())))
-        except TypeError as exc:  # jax.jvp of the program: met where the program is differentiated
-            if "forward-mode" not in str(exc):
-                raise
-            raise ConfigError(FORWARD_NEEDED) from None
+        return compiled_gauss_core(system, z0, t0, T, **settings)
 
     def solve_batch(self, system: HamiltonianSystem, z0s: np.ndarray, t0: float, T: float, *,
                     progress: Callable[[float], None] | None = None
@@ -503,11 +497,3 @@ class GaussCollocation(AbstractSolver):
                                   resolve=None if keep else self.resolver(sol.system),
                                   offsets=sol.offsets[0] + edge_offsets(edges, halves))
 
-
-@eqx.filter_jit
-def _compiled_core(system: HamiltonianSystem, z0, t0, T, settings: tuple) -> Any:
-    """The traceable core compiled once per system and settings (``system`` and ``settings`` are
-    static, hashed by identity and value): ``jax.grad`` or ``jax.vmap`` of a solve without an outer
-    ``jax.jit`` reuses it, and its derivative programs, instead of tracing the march every call (as
-    Diffrax's ``diffeqsolve`` does); inside an outer ``jax.jit`` it is inlined."""
-    return gauss_core(system, z0, t0, T, **dict(settings))

@@ -35,7 +35,7 @@ from atlasnn.solver._gauss_march import FAILURES, GaussState, started, marching,
 from atlasnn.solver._gauss_step import solved_step, tableau_arrays
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["gauss_core", "FORWARD_NEEDED", "LOOPS", "traced_inputs"]
+__all__ = ["compiled_gauss_core", "gauss_core", "FORWARD_NEEDED", "LOOPS", "traced_inputs"]
 
 #: the line a jax.jvp of the reverse-mode core raises
 FORWARD_NEEDED = ("jax.jvp/jax.jacfwd through solve need GaussCollocation(differentiation='forward') (the default, "
@@ -204,6 +204,25 @@ def gauss_core(system: HamiltonianSystem, z0: Any, t0: Any, T: Any, *, stages: i
                 raise
             raise ConfigError(FORWARD_NEEDED) from None
     return _solution(system, stages, t0, T, out)
+
+
+def compiled_gauss_core(system: HamiltonianSystem, z0: Any, t0: Any, T: Any, **settings: Any) -> TracedSolution:
+    """:func:`gauss_core` compiled once per system and settings (static, hashed by identity and
+    value): ``jax.grad`` or ``jax.vmap`` of a solve without an outer ``jax.jit`` reuse it and its
+    derivative programs instead of tracing the march every call (as Diffrax's ``diffeqsolve``
+    does); inside an outer ``jax.jit`` it is inlined. For a system whose H closes over no traced
+    value (those cannot be a program's constants)."""
+    try:
+        return _compiled_core(system, z0, t0, T, tuple(sorted(settings.items())))
+    except TypeError as exc:  # jax.jvp of the program: met where the program is differentiated
+        if "forward-mode" not in str(exc):
+            raise
+        raise ConfigError(FORWARD_NEEDED) from None
+
+
+@eqx.filter_jit
+def _compiled_core(system: HamiltonianSystem, z0, t0, T, settings: tuple) -> TracedSolution:
+    return gauss_core(system, z0, t0, T, **dict(settings))
 
 
 def _solution(system: HamiltonianSystem, stages: int, t0, T, out: _Carry) -> TracedSolution:
