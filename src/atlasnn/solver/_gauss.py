@@ -44,17 +44,14 @@ KEEP_BYTES = 1 << 30
 #: reaches. Measured (benchmarks/gauss_orders.py: Hénon–Heiles, Kepler e = 0.6, the double
 #: pendulum, an FPUT-β chain; s = 2 … 16, the fastest at each rtol): s = 8 on three of the four at
 #: rtol 1e-5, 12 on two at 1e-7 (8 and 16 one each), 16 on three at 1e-9 and on all four below.
-#: Lower orders won nowhere there; they do on a large chain whose windows the iteration's reach
-#: sets (docs/SOLVER.md, "At size").
 STAGES_BY_TOLERANCE = ((1e-6, 8), (1e-8, 12), (0.0, 16))
 #: the largest state (2d components) that gets the Newton fallback by default: past it the Jacobian
 #: (n field derivatives) and s/2 complex LU factorisations of n × n cost more than the shorter
 #: fixed-point windows that replace a failed one (benchmarks/gauss_scaling.py)
 NEWTON_AUTO_SIZE = 64
 #: the most memory one call's buffers take across the members of a batch: the program fills, returns
-#: and copies them whole, so a large buffer is a fixed cost (256 copies of Hénon–Heiles, d = 1 024,
-#: 13 windows: 67 ms a solve with 64 MiB, 28 ms with 4 MiB, best of six); more calls cost
-#: little (1 024 members, 120 windows each: the same time)
+#: and copies them whole, so a large buffer is a fixed cost (256 copies of Hénon–Heiles, d = 1 024:
+#: 67 ms a solve with 64 MiB, 28 ms with 4 MiB); more calls cost little
 _CHUNK_BYTES = 4 << 20
 #: window lengths replayed per call of the companion's program
 _REPLAY_CHUNK = 4096
@@ -386,10 +383,10 @@ class GaussCollocation(AbstractSolver):
         """Call the compiled program until every member reaches T (its time, or component ``until``
         of its state) or fails: the accepted windows per call (each (B, ...) cut to the member's
         count), the final state, the first call's time, and why the march was stopped early (None:
-        it was not) — when the windows it would take to reach T, projected from the part done,
-        would not fit in the memory available. ``watch`` sees each call's window starts and, where
-        a march not yet done should be one in τ, raises :class:`ScaleVaries`. ``with_newton``: the
-        program with Newton's iteration, for the rest of the march once a window needs it."""
+        it was not) — windows that collapsed (:func:`collapsed`) or would not fit in memory.
+        ``watch`` sees each call's window starts and, where a march not yet done should be one in
+        τ, raises :class:`ScaleVaries`. ``with_newton``: the program with Newton's iteration, for
+        the rest of the march once a window needs it."""
         b, t0 = len(z0s), float(np.min(starts))
         counts, room, longest, before = np.zeros(b), False, np.zeros(b), np.asarray(starts, np.float64)  # the memory available: read once a second call is needed
         stacked = [initial_state(z, t, self.stage_count) for z, t in zip(z0s, starts)]
@@ -410,6 +407,10 @@ class GaussCollocation(AbstractSolver):
                 kept = np.asarray(out.kept, bool)
                 rows.append([[np.asarray(x)[m][kept[m]] for m in range(b)] for x in out[1:-1]])
                 t_now, failed = np.asarray(clock(state, until)), np.asarray(state.failed)
+                if watch is not None and np.any(failed[:len(watch.off)] == 5):
+                    # a close approach in t: the march in τ takes it without Newton (and its program in t)
+                    raise ScaleVaries(f"a window in t near t = {readable_times(float(t_now.min()))[0]} needed Newton's "
+                                      "iteration (a close approach)")
                 if with_newton is not None and np.any(failed == 5):  # a window needs Newton: the program with it
                     program, with_newton, failed = with_newton(), None, np.where(failed == 5, 0, failed)
                     state = state._replace(failed=failed.astype(state.failed.dtype))
