@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import functools
 from dataclasses import replace
 import math
 import time
@@ -30,7 +31,7 @@ import optax
 from atlasnn.errors import ConfigError
 from atlasnn.inverse._learn_checks import FLOW_ACCURACY, NOISE_FACTOR, flow_reasons, noise_reasons, observed_size
 from atlasnn.inverse._learn_data import check_trajectories, continuations, rates, segments
-from atlasnn.solver import GaussCollocation, solve
+from atlasnn.solver import GaussCollocation, SplittingComposition, solve
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["AbstractLearnMethod", "ThroughSolver", "HNN", "LearnedHamiltonian", "learn_hamiltonian"]
@@ -75,6 +76,11 @@ class AbstractLearnMethod(abc.ABC):
     def noise_loss(self, sigma: float, trajectories: list) -> float:
         """The loss that noise of σ on every observed value gives alone (for the trust rule)."""
 
+    @property
+    def separable(self) -> bool:
+        """Whether the method needs a separable model H_θ = T(p) + V(q)."""
+        return False
+
     def trust_reasons(self, model: Any, dof: int, trajectories: list, noise: float | None) -> list[str]:
         """Reasons not to trust the learned ``model`` that its losses cannot show (data too noisy
         to pin H down)."""
@@ -98,9 +104,13 @@ class ThroughSolver(AbstractLearnMethod):
             in θ; long ones carry the start's noise further).
         steps: Adam steps.
         rate: Adam's learning rate.
-        solver: the solve differentiated through: a loose tolerance (the noise is far larger than
-            any solver error), few stages and a small window budget (the arrays each prediction
-            carries).
+        solver: the solve differentiated through: a ``GaussCollocation`` with a loose tolerance
+            (the noise is far larger than any solver error), few stages and a small window budget
+            (the arrays each prediction carries); or, for a separable model H_θ = T(p) + V(q), a
+            ``SplittingComposition(steps=N)``: N explicit steps over each segment (a scan: a
+            training step costs a few field evaluations per step), learning the H whose flow the
+            scheme at that step reproduces (its modified Hamiltonian, close to the true one where
+            the steps are short against the motion).
     """
 
     ahead: int = 5
@@ -112,8 +122,18 @@ class ThroughSolver(AbstractLearnMethod):
     def __post_init__(self) -> None:
         super().__post_init__()
         _positive_int("ThroughSolver", "ahead", self.ahead)
-        if not isinstance(self.solver, GaussCollocation):
-            raise ConfigError(f"ThroughSolver solver must be a GaussCollocation, got {type(self.solver).__name__}")
+        if isinstance(self.solver, SplittingComposition):
+            if self.solver.steps is None:
+                raise ConfigError("ThroughSolver with a SplittingComposition needs its steps=N (the steps over each "
+                                  "segment of `ahead` observations)")
+        elif not isinstance(self.solver, GaussCollocation):
+            raise ConfigError("ThroughSolver solver must be a GaussCollocation or a SplittingComposition(steps=N), got "
+                              f"{type(self.solver).__name__}")
+
+    @property
+    def separable(self) -> bool:
+        """Whether the model must be separable (a splitting is trained through)."""
+        return isinstance(self.solver, SplittingComposition)
 
     def losses(self, trajectories, held_out, dof):
         train, test = segments(trajectories, self.ahead, held_out)
@@ -123,11 +143,20 @@ class ThroughSolver(AbstractLearnMethod):
         elif held_out > 0 and (later := continuations(trajectories, self.ahead, held_out)) is not None:
             # no held-out state observed whole: the held-out part predicted from the last trained start
             test_loss = self._loss(train, later.times, later.targets, dof, missing, later.rows,
-                                   replace(self.solver, max_windows=CONTINUATION_WINDOWS))
+                                   self._longer(train, later))
         else:
             test_loss = None
         return (self._loss(train, train.times, train.targets, dof, missing), test_loss,
                 jnp.asarray(train.guess[missing]))
+
+    def _longer(self, train, later) -> Any:
+        """The solver of the held-out part's longer predictions: more windows, or at least as many
+        steps per unit time as over a training segment."""
+        if not self.separable:
+            return replace(self.solver, max_windows=CONTINUATION_WINDOWS)
+        span = float(np.max(later.times[:, -1] - train.t0[later.rows]))
+        segment = float(np.min(train.times[:, -1] - train.t0))
+        return replace(self.solver, steps=self.solver.steps * max(1, math.ceil(span / segment)))
 
     def _loss(self, train, times, targets, dof: int, missing, rows=None, solver=None, pieces=None) -> Callable:
         """The masked mean squared error of predictions of ``targets`` at ``times`` from the
@@ -141,7 +170,7 @@ class ThroughSolver(AbstractLearnMethod):
         starts, solver = jnp.asarray(pieces.guess), solver or self.solver
 
         def loss(model, unknown):
-            system = HamiltonianSystem(model, dof, name="learned")
+            system = HamiltonianSystem(model, dof, name="learned", separable=self.separable)
             z0 = starts if missing is None or not missing[0].size else starts.at[missing].set(unknown)
             z0 = z0 if rows is None else z0[rows]
 
@@ -149,7 +178,10 @@ class ThroughSolver(AbstractLearnMethod):
                 a, z, ts = piece
                 return solve(system, z, (a, ts[-1]), solver=solver)(ts)
 
-            return jnp.sum(weight * (jax.lax.map(predict, (t0, z0, times)) - targets) ** 2)
+            # a splitting's fixed steps march every segment in lock step (one batched scan); the Gauss
+            # solver's windows differ per segment, which one after the other costs less
+            batched = jax.vmap(predict) if self.separable else functools.partial(jax.lax.map, predict)
+            return jnp.sum(weight * (batched((t0, z0, times)) - targets) ** 2)
 
         return loss
 
@@ -276,7 +308,7 @@ def learn_hamiltonian(model: Any, trajectories: Any, method: AbstractLearnMethod
         if 2 * dof != width:
             raise ConfigError(f"dof = {dof} needs states of {2 * dof} components, the trajectories have {width}")
         model = jax.tree_util.tree_map(lambda x: x.astype(jnp.float64) if eqx.is_inexact_array(x) else x, model)
-        notes = _check_model(model, dof, data)
+        notes = _check_model(model, dof, data, method.separable)
         train_loss, test_loss, unknown = method.losses(data, float(held_out), dof)
         if test_loss is None:
             notes.append("nothing was held out: whether H_θ generalises is not checked")
@@ -289,9 +321,10 @@ def learn_hamiltonian(model: Any, trajectories: Any, method: AbstractLearnMethod
                   floor, found, method.held_out_floor(data))
 
 
-def _check_model(model: Any, dof: int, data: list) -> list[str]:
-    """Refuse, before training, a model with nothing to train or whose H is affine in (q, p) for
-    its θ and a perturbed θ (its flow a constant drift whatever θ); the notes to keep."""
+def _check_model(model: Any, dof: int, data: list, separable: bool = False) -> list[str]:
+    """Refuse, before training, a model with nothing to train, whose H is affine in (q, p) for
+    its θ and a perturbed θ (its flow a constant drift whatever θ), or (``separable``: the method
+    splits H) whose H couples q and p; the notes to keep."""
     params, static = eqx.partition(model, eqx.is_inexact_array)
     count = sum(int(np.size(x)) for x in jax.tree_util.tree_leaves(params))
     if count == 0:
@@ -305,9 +338,14 @@ def _check_model(model: Any, dof: int, data: list) -> list[str]:
         h = eqx.combine(p, static)
         return jax.hessian(lambda x: h(x[:dof], x[dof:]))(z)
 
-    if not np.any(np.asarray(hessian(params))) and not np.any(np.asarray(hessian(nudged))):
+    first = np.asarray(hessian(params))
+    if not np.any(first) and not np.any(np.asarray(hessian(nudged))):
         raise ConfigError("H_θ is affine in (q, p) (its Hessian is zero), so its flow is a constant drift that cannot "
                           "follow an orbit that turns: give the network a nonlinear activation and a hidden layer")
+    mixed = np.abs(first[:dof, dof:]).max(initial=0.0)
+    if separable and mixed > 1e-12 * max(np.abs(first).max(), 1e-300):
+        raise ConfigError(f"a splitting needs a separable H_θ = T(p) + V(q), but ∂²H_θ/∂q∂p reaches {mixed:.3g} at the "
+                          "first observed state: build the model as T_θ(p) + V_θ(q), or train through GaussCollocation")
     observed = sum(traj.z.size for traj in data)
     if count > observed:
         return [f"θ has {count} numbers and the data {observed}: the held-out loss is the check that H_θ did not "
