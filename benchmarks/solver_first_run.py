@@ -1,9 +1,10 @@
 """What a first `atlasnn.solve` costs in a fresh process: with the compilation cache off (cold), with
-an empty one (the first run ever: it also exports the program to disk) and with it warm,
-Hénon–Heiles [0, 24π] at the defaults. Each run is its own Python process; it reports
-the import, the first solve (of which the first call of the compiled program: compilation or cache
-load, tracing, and the march itself), the first evaluation at 2 000 times and a second solve with
-its evaluation (the warm cost).
+an empty one (the first run ever: it also exports the program to disk) and with it warm, on
+Hénon–Heiles [0, 24π] at the defaults; and cold only on the Pythagorean three-body problem
+[0, 70], the outer solar system over 10⁶ days and the NLS on 512 points over [0, 1]. Each run is
+its own Python process; it reports the import, the first solve (of which the first call of the
+compiled program: compilation or cache load, tracing, and the march itself), the first evaluation
+at 2 000 times and a second solve with its evaluation (the warm cost).
 
     python -m benchmarks.solver_first_run --out docs/benchmarks/solver_first_run.json
 """
@@ -19,13 +20,23 @@ import tempfile
 from pathlib import Path
 
 CHILD = r"""
-import json, time
+import json, sys, time
 t0 = time.perf_counter()
 import numpy as np
 from atlasnn import solve
-from atlasnn.systems import henon_heiles
+from atlasnn.systems import henon_heiles, nls
 t1 = time.perf_counter()
-s, z0, T = henon_heiles(), [0.3, -0.3, 0.3, 0.15], 24 * np.pi
+which = sys.argv[1]
+if which == "henon-heiles":
+    s, z0, T = henon_heiles(), [0.3, -0.3, 0.3, 0.15], 24 * np.pi
+elif which == "pythagorean":
+    from benchmarks.problems import pythagorean_system
+    s, z0, T = pythagorean_system(), None, 70.0
+elif which == "outer-solar":
+    from benchmarks.outer_solar import outer_solar_system
+    s, z0, T = outer_solar_system(), None, 1e6
+else:
+    s, z0, T = nls(points=512), None, 1.0
 t = np.linspace(0.0, T, 2000)
 sol = solve(s, z0, (0.0, T))
 t2 = time.perf_counter()
@@ -38,11 +49,13 @@ print(json.dumps({"import": t1 - t0, "first_solve": t2 - t1, "first_program_call
 """
 
 
-def run(cache: str) -> dict:
+def run(cache: str, problem: str = "henon-heiles") -> dict:
     """One fresh process with the cache in ``cache`` (a directory, or "off")."""
     env = dict(os.environ)
     env["ATLASNN_CACHE_DIR"] = cache
-    out = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, check=True)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(Path(__file__).resolve().parent.parent),
+                                                      env.get("PYTHONPATH")]))
+    out = subprocess.run([sys.executable, "-c", CHILD, problem], env=env, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -54,7 +67,8 @@ def main(argv=None):
         run(warm)  # fills this cache (not recorded)
         rows = {"cold (cache off)": [run("off") for _ in range(2)],
                 "first ever (empty cache: compiles, exports and stores)": [run(tempfile.mkdtemp()) for _ in range(2)],
-                "warm cache": [run(warm) for _ in range(3)]}
+                "warm cache": [run(warm) for _ in range(3)],
+                **{f"cold (cache off), {name}": [run("off", name)] for name in ("pythagorean", "outer-solar", "nls")}}
     for k, v in rows.items():
         for r in v:
             print(k, {a: round(b, 3) for a, b in r.items()})

@@ -187,7 +187,9 @@ def first_run(record: dict) -> str:
         med = {k: statistics.median(r[k] for r in runs) for k in runs[0]}
         rows.append(f"| {kind} | {med['import']:.2f} s | {med['first_solve']:.2f} s | {med['first_program_call']:.2f} s "
                     f"| {med['second_solve_and_evaluation'] * 1e3:.1f} ms |")
-    return "\n".join(rows) + f"\n\nMedians of {len(next(iter(record['runs'].values())))} or more fresh processes each."
+    counts = sorted({len(runs) for runs in record["runs"].values()})
+    many = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}–{counts[-1]}"
+    return "\n".join(rows) + f"\n\nEach row: the median of {many} fresh processes; Hénon–Heiles unless the row names a problem."
 
 
 def stages(record: dict) -> str:
