@@ -397,6 +397,24 @@ def test_every_page_is_in_the_site_nav():
     assert listed - pages == set(), f"nav entries with no page: {sorted(listed - pages)}"
 
 
+#: a private name of atlasnn in a code span: a dotted or slashed path with a part that starts with
+#: "_", or a bare name that does (not one glued to a placeholder, as `<model>_seed<k>.json`)
+_PRIVATE = re.compile(r"atlasnn[./](?:\w+[./])*_[a-z]\w*|(?<![\w<>/.])_[a-z][a-z0-9_]*\b")
+
+
+def test_the_pages_name_no_private_module_or_function():
+    """Users read public names: a page that points at a private module or function (its path, or
+    `_name`) points at what may change without notice. The changelog is history and is left out."""
+    found = []
+    for page in PAGES:
+        if page.name == "CHANGELOG.md":
+            continue
+        text = re.sub(r"<!--.*?-->", "", page.read_text(encoding="utf-8"), flags=re.S)
+        found += [f"{page.relative_to(ROOT)}: `{span}`" for span in re.findall(r"`([^`\n]+)`", text)
+                  if _PRIVATE.search(span)]
+    assert not found, "pages naming private code: " + "; ".join(found)
+
+
 def test_the_citation_names_the_paper_as_the_references_do():
     """CITATION.cff is valid YAML with the Citation File Format's required keys, and its preferred
     citation is the paper docs/REFERENCES.md cites, with the same authors."""
