@@ -290,6 +290,10 @@ def _compiled_march(system: HamiltonianSystem, scheme: str, z0, t0, T, steps: in
     return TracedSplittingSolution.march(system, scheme, z0, t0, T, steps)
 
 
+#: a march keeping more than this many bytes first checks the memory left
+_READ_MEMORY_ABOVE = 64 << 20
+
+
 def march(program, z0s: np.ndarray, h: float, steps: int, every: int, chunk: int,
           progress: Callable[[float], None] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``steps`` steps of h from the states ``z0s`` (B, 2d) by the compiled ``program``, keeping the
@@ -297,8 +301,9 @@ def march(program, z0s: np.ndarray, h: float, steps: int, every: int, chunk: int
     and their step indices (K,)."""
     z, e = z0s, np.zeros_like(z0s)
     zs, es, kept, done = [z0s[None]], [e[None]], [0], 0
-    room = available_memory()
-    if room is not None and (steps // every + 2) * z0s.nbytes * 2 > room:
+    need = (steps // every + 2) * z0s.nbytes * 2
+    # the memory left is read only for a large march (reading it costs ~0.2 ms, a tenth of a small solve)
+    if need > _READ_MEMORY_ABOVE and (room := available_memory()) is not None and need > room:
         raise ConfigError(f"the splitting march would keep {steps // every} states of {z0s.nbytes} bytes, more "
                           "than the memory available; loosen the tolerance or shorten the interval")
     with jax.enable_x64(True):
