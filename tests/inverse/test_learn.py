@@ -265,3 +265,25 @@ def test_through_a_splitting_recovers_a_separable_form_and_refuses_a_coupled_one
         learn_hamiltonian(Coupled(jnp.array(1.2), jnp.array(0.1)), _trajectories(), method)
     with pytest.raises(ConfigError, match=r"needs its steps=N"):
         ThroughSolver(solver=SplittingComposition(scheme="leapfrog"))
+
+
+def test_a_splittings_observations_on_its_steps_are_read_from_the_march(monkeypatch):
+    """With N steps over each segment of uniformly spaced observations, every observation is a step's
+    end: the loss reads the marched states (no partial step), equal to evaluating the solution there;
+    end-to-end segments (stride = ahead) predict each observation once."""
+    from atlasnn.inverse import _learn
+    from atlasnn.inverse._learn_data import check_trajectories
+    from atlasnn.solver import SplittingComposition
+
+    data = check_trajectories(_trajectories())
+    method = ThroughSolver(ahead=5, stride=5, solver=SplittingComposition(scheme="leapfrog", steps=10))
+    t0 = np.array([0.0, 2.0])
+    times = t0[:, None] + np.array([0.1, 0.2, 0.3, 0.4, 0.5])
+    assert _learn._on_steps(method.solver, t0, times).tolist() == [[2, 4, 6, 8, 10]] * 2  # 10 steps of 0.05
+    assert _learn._on_steps(SplittingComposition(scheme="leapfrog", steps=7), t0, times) is None
+    model = Stiffness(jnp.array(1.7))
+    with jax.enable_x64(True):
+        direct = float(method.losses(data, 0.2, 1)[0](model, jnp.zeros(0)))
+        monkeypatch.setattr(_learn, "_on_steps", lambda *args: None)
+        evaluated = float(method.losses(data, 0.2, 1)[0](model, jnp.zeros(0)))
+    assert direct == pytest.approx(evaluated, rel=1e-10) and direct > 0

@@ -102,6 +102,9 @@ class ThroughSolver(AbstractLearnMethod):
     Attributes:
         ahead: observations predicted from each observed state (short segments keep the loss smooth
             in θ; long ones carry the start's noise further).
+        stride: a segment starts at every ``stride``-th observation (1: at each, the segments
+            overlapping ``ahead``-fold; ``ahead``: end to end, each observation predicted once, a
+            training step that many times cheaper).
         steps: Adam steps.
         rate: Adam's learning rate.
         solver: the solve differentiated through: a ``GaussCollocation`` with a loose tolerance
@@ -114,6 +117,7 @@ class ThroughSolver(AbstractLearnMethod):
     """
 
     ahead: int = 5
+    stride: int = 1
     steps: int = 1000
     rate: float = 3e-3
     solver: GaussCollocation = GaussCollocation(stages=4, rtol=1e-7, atol=1e-9, max_windows=64)
@@ -122,6 +126,7 @@ class ThroughSolver(AbstractLearnMethod):
     def __post_init__(self) -> None:
         super().__post_init__()
         _positive_int("ThroughSolver", "ahead", self.ahead)
+        _positive_int("ThroughSolver", "stride", self.stride)
         if isinstance(self.solver, SplittingComposition):
             if self.solver.steps is None:
                 raise ConfigError("ThroughSolver with a SplittingComposition needs its steps=N (the steps over each "
@@ -136,11 +141,12 @@ class ThroughSolver(AbstractLearnMethod):
         return isinstance(self.solver, SplittingComposition)
 
     def losses(self, trajectories, held_out, dof):
-        train, test = segments(trajectories, self.ahead, held_out)
+        train, test = segments(trajectories, self.ahead, held_out, self.stride)
         missing = np.nonzero(np.isnan(train.starts))
         if test is not None:
             test_loss = self._loss(train, test.times, test.targets, dof, None, pieces=test)
-        elif held_out > 0 and (later := continuations(trajectories, self.ahead, held_out)) is not None:
+        elif held_out > 0 and (later := continuations(trajectories, self.ahead, held_out,
+                                                      self.stride)) is not None:
             # no held-out state observed whole: the held-out part predicted from the last trained start
             test_loss = self._loss(train, later.times, later.targets, dof, missing, later.rows,
                                    self._longer(train, later))
@@ -168,6 +174,8 @@ class ThroughSolver(AbstractLearnMethod):
         t0, times = jnp.asarray(pieces.t0 if rows is None else pieces.t0[rows]), jnp.asarray(times)
         targets, weight = jnp.asarray(np.where(seen, targets, 0.0)), jnp.asarray(seen / seen.sum())
         starts, solver = jnp.asarray(pieces.guess), solver or self.solver
+        step_index = _on_steps(solver, np.asarray(pieces.t0 if rows is None else pieces.t0[rows]), np.asarray(times))
+        index = jnp.zeros(times.shape, jnp.int32) if step_index is None else jnp.asarray(step_index)
 
         def loss(model, unknown):
             system = HamiltonianSystem(model, dof, name="learned", separable=self.separable)
@@ -175,13 +183,15 @@ class ThroughSolver(AbstractLearnMethod):
             z0 = z0 if rows is None else z0[rows]
 
             def predict(piece):
-                a, z, ts = piece
-                return solve(system, z, (a, ts[-1]), solver=solver)(ts)
+                a, z, ts, at = piece
+                sol = solve(system, z, (a, ts[-1]), solver=solver)
+                # observations on the steps' ends: the marched states themselves (no partial step)
+                return sol(ts) if step_index is None else sol.z[at] + sol.e[at]
 
             # a splitting's fixed steps march every segment in lock step (one batched scan); the Gauss
             # solver's windows differ per segment, which one after the other costs less
             batched = jax.vmap(predict) if self.separable else functools.partial(jax.lax.map, predict)
-            return jnp.sum(weight * (batched((t0, z0, times)) - targets) ** 2)
+            return jnp.sum(weight * (batched((t0, z0, times, index)) - targets) ** 2)
 
         return loss
 
@@ -319,6 +329,18 @@ def learn_hamiltonian(model: Any, trajectories: Any, method: AbstractLearnMethod
         found = [] if not record["curve"] else method.trust_reasons(record["model"], dof, data, noise)
     return _judge(LearnedHamiltonian(dof=dof, method=method.name, noise=noise, notes=notes, trusted=True, **record),
                   floor, found, method.held_out_floor(data))
+
+
+def _on_steps(solver: Any, t0: np.ndarray, times: np.ndarray) -> np.ndarray | None:
+    """For a splitting of N steps over each segment [t0, its last time]: the step index of every
+    time (segments, A) where each falls on a step's end to round-off, else None (or for the Gauss
+    solver)."""
+    if not isinstance(solver, SplittingComposition):
+        return None
+    h = (times[:, -1] - t0) / solver.steps
+    position = (times - t0[:, None]) / h[:, None]
+    index = np.rint(position)
+    return index.astype(np.int32) if np.all(np.abs(position - index) <= 1e-9 * solver.steps) else None
 
 
 def _check_model(model: Any, dof: int, data: list, separable: bool = False) -> list[str]:

@@ -102,14 +102,15 @@ class Segments:
     guess: np.ndarray
 
 
-def segments(trajectories: list[Trajectory], ahead: int, held_out: float) -> tuple[Segments, Segments | None]:
-    """(training, held-out) segments: from every observed state, the next ``ahead`` observations
-    of the same trajectory; a segment is held out when it starts in the held-out part, and trained
-    on when it ends before it. Refuses data with no training segment."""
+def segments(trajectories: list[Trajectory], ahead: int, held_out: float,
+             stride: int = 1) -> tuple[Segments, Segments | None]:
+    """(training, held-out) segments: from every ``stride``-th observed state, the next ``ahead``
+    observations of the same trajectory; a segment is held out when it starts in the held-out
+    part, and trained on when it ends before it. Refuses data with no training segment."""
     train, test = [], []
     for traj in trajectories:
         cut, filled = split_point(traj, held_out), traj.filled()
-        for i in range(traj.t.size - ahead):
+        for i in range(0, traj.t.size - ahead, stride):
             piece = (traj.t[i], traj.z[i], traj.t[i + 1:i + ahead + 1], traj.z[i + 1:i + ahead + 1], filled[i])
             if i + ahead < cut:
                 train.append(piece)
@@ -135,14 +136,15 @@ class Continuations:
     targets: np.ndarray
 
 
-def continuations(trajectories: list[Trajectory], ahead: int, held_out: float) -> Continuations | None:
+def continuations(trajectories: list[Trajectory], ahead: int, held_out: float,
+                  stride: int = 1) -> Continuations | None:
     """The held-out check where no held-out segment starts from a state observed whole (positions
     only, say): every held-out observation predicted from its trajectory's last training segment's
     start, in the order :func:`segments` stacks them (None: nothing is held out)."""
     rows, times, targets, count = [], [], [], 0
     for traj in trajectories:
         cut = split_point(traj, held_out)
-        trained = max(0, cut - ahead)  # the segments i < cut − ahead are trained on
+        trained = len(range(0, max(0, cut - ahead), stride))  # the segments i < cut − ahead are trained on
         if trained and cut < traj.t.size:
             rows.append(count + trained - 1)
             times.append(traj.t[cut:])
