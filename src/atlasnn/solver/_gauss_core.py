@@ -153,7 +153,7 @@ def _forward(f1, static, linear, consts, z0, t0, T):
 def _primal(f1, static: _Static, linear, consts, z0, t0, T) -> _Carry:
     """The march of the adjoint's forward pass; under ``jax.vmap`` on a CPU its members marched
     one after the other (a loop over them, as ``solve_batch`` does there: in lock step every member
-    pays for the longest one's windows and its batched loop, 4–6× slower), on an accelerator in
+    pays for the longest one's windows and its batched loop: 4–10× slower measured), on an accelerator in
     lock step. (The custom batching sits inside the custom VJP, which differentiates it.)"""
 
     def run(consts, z0, t0, T):
