@@ -197,6 +197,10 @@ def test_a_kink_in_h_stops_the_constant_march_in_one_line():
     assert np.abs(adaptive(period) - [1.0, 0.0]).max() < 1e-8
     drift = np.abs(adaptive.energy(np.linspace(0.0, 2.5 * period, 1001)) - 1.0).max()
     assert 1e-7 < drift < 1e-3
+    # inside jax.jit the traced core spends its window budget at the kink, and says why
+    traced = jax.jit(lambda z: solve(system, z, (0.0, 10.0), solver=GaussCollocation(max_windows=512))(10.0))
+    with jax.enable_x64(True), pytest.raises(Exception, match="spent on windows that shrank .* not smooth there"):
+        jax.block_until_ready(traced(jnp.asarray([1.0, 0.0], jnp.float64)))
 
 
 @pytest.mark.long

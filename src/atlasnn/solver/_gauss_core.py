@@ -33,6 +33,7 @@ from atlasnn.errors import ConfigError
 from atlasnn.solutions import TracedSolution, gauss_tableau
 from atlasnn.solver._gauss_march import FAILURES, GaussState, started, marching, try_window
 from atlasnn.solver._gauss_step import solved_step, tableau_arrays
+from atlasnn.solver._gauss_stops import COLLAPSE
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["compiled_gauss_core", "gauss_core", "FORWARD_NEEDED", "LOOPS", "traced_inputs"]
@@ -248,10 +249,17 @@ def _solution(system: HamiltonianSystem, stages: int, t0, T, out: _Carry) -> Tra
     order = jnp.nonzero(accepted, size=budget, fill_value=0)[0]  # the accepted rows, in order
     count = jnp.sum(accepted)
     st = out.st
-    code = jnp.where(st.failed > 0, st.failed, jnp.where(st.t < T, _BUDGET, 0))
+    # a budget spent on windows that shrank COLLAPSE-fold below the longest (a kink in H) is said so
+    kept = jnp.where(accepted, length, 0.0)
+    last = length[order[jnp.maximum(count - 1, 0)]]
+    collapsed = (count > 0) & (last * COLLAPSE <= jnp.max(kept))
+    code = jnp.where(st.failed > 0, st.failed, jnp.where(st.t < T, jnp.where(collapsed, _BUDGET + 1, _BUDGET), 0))
     messages = ["", *(f"solve (traced core): {FAILURES[k]}" for k in sorted(FAILURES)),
                 f"solve (traced core): the window budget, GaussCollocation(max_windows={budget}), was spent before T: "
-                "raise max_windows or loosen the tolerance"]
+                "raise max_windows or loosen the tolerance",
+                f"solve (traced core): the window budget, GaussCollocation(max_windows={budget}), was spent on windows "
+                f"that shrank {COLLAPSE:.0e}-fold or more: H is probably not smooth there (abs, a kink, jnp.where); "
+                "smooth it (docs/SOLVER.md, 'Non-smooth Hamiltonians')"]
     starts = eqx.branched_error_if(jnp.where(position < count, start[order], jnp.inf), code > 0, code, messages)
     # the offsets of the starts' float64 numbers (edge_offsets): 0 in exact arithmetic, so no derivative
     gaps = jnp.where(position[1:] < count, length[order][:-1] - (start[order][1:] - start[order][:-1]), 0.0)
