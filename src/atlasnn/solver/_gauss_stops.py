@@ -9,7 +9,7 @@ import numpy as np
 
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["COLLAPSE", "COLLAPSE_WINDOWS", "collapsed", "diverging", "readable_times"]
+__all__ = ["COLLAPSE", "COLLAPSE_WINDOWS", "collapsed", "diverging", "readable_times", "states_ahead"]
 
 
 def diverging(system: HamiltonianSystem, z0: np.ndarray, z: np.ndarray) -> str | None:
@@ -21,9 +21,7 @@ def diverging(system: HamiltonianSystem, z0: np.ndarray, z: np.ndarray) -> str |
         f_end = f(z)
         if not np.all(np.isfinite(f_end)):
             return "the vector field J∇H is not finite at the state reached"
-        scale = np.max(np.abs(z)) + 1e-300
-        steps = np.geomspace(1e-8, 1e-1, 8) * scale / (np.max(np.abs(f_end)) + 1e-300)
-        ahead = f(z[None, :] + steps[:, None] * f_end[0][None, :])
+        ahead = f(states_ahead(z, f_end[0]))
         if not np.all(np.isfinite(ahead)):
             return "the vector field J∇H is not finite just ahead along the flow (a NaN or an infinity in H there)"
         grown = np.max(np.abs(f_end)) / (np.max(np.abs(f(z0))) + 1e-300)
@@ -31,6 +29,13 @@ def diverging(system: HamiltonianSystem, z0: np.ndarray, z: np.ndarray) -> str |
             return (f"the field grew {grown:.1e}-fold from z0 to the state reached (a singularity of H, or a solution "
                     "that blows up in finite time)")
     return None
+
+
+def states_ahead(z: np.ndarray, rate: np.ndarray) -> np.ndarray:
+    """States a little way along the flow from z (its rate ``rate``): 8 steps from 1e-8 to 1e-1 of
+    |z| / |rate|, where a stopped march's next window put its stages (8, n)."""
+    steps = np.geomspace(1e-8, 1e-1, 8) * (np.max(np.abs(z)) + 1e-300) / (np.max(np.abs(rate)) + 1e-300)
+    return z[None, :] + steps[:, None] * rate[None, :]
 
 
 def readable_times(*values: float) -> list[str]:

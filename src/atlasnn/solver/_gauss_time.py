@@ -44,6 +44,7 @@ import numpy as np
 from atlasnn.compile_cache import program_cache
 from atlasnn.errors import ConfigError
 from atlasnn.solutions import PolynomialSolution, TimeTransformedSolution
+from atlasnn.solver._gauss_stops import states_ahead
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["AUTO", "SCALE_VARIATION", "ScaleVaries", "ScaleWatch", "TIME_SCALES", "TimeTransform", "WATCH_FIRST",
@@ -266,8 +267,7 @@ class TimeTransform:
             Z = np.asarray(ext(ext.edges[-1]), np.float64).reshape(1, -1)
             with jax.enable_x64(True):
                 rate = np.asarray(self.extended.vector_field(Z))
-            steps = np.geomspace(1e-8, 1e-1, 8) * (np.max(np.abs(Z)) + 1e-300) / (np.max(np.abs(rate)) + 1e-300)
-            g = self.rate(np.concatenate([Z, Z + steps[:, None] * rate]))
+            g = self.rate(np.concatenate([Z, states_ahead(Z[0], rate[0])]))
             bad = np.flatnonzero(~(np.isfinite(g) & (g > 0)))
             if bad.size:
                 return self._line(float(g[bad[0]]), f"t = {float(Z[0, self.clock]):.6g}" +
