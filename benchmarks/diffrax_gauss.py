@@ -408,7 +408,7 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--periods", type=int, default=10_000, help="periods of the energy run")
     ap.add_argument("--parts", nargs="*", default=list(PARTS), choices=PARTS)
-    ap.add_argument("--doc", default="docs/FROM_DIFFRAX.md", help="the page whose tables are written ('' for none)")
+    ap.add_argument("--doc", default="docs/DIFFRAX_MEASURED.md", help="the page whose tables are written ('' for none)")
     ap.add_argument("--doc-only", action="store_true", help="rewrite the page's tables from --out")
     args = ap.parse_args(argv)
     if args.doc_only:

@@ -1,4 +1,4 @@
-"""The measured tables of docs/howto/PDE.md (made by ``scripts/solver_doc.py``, which owns the
+"""The measured tables of docs/PDE_MEASURED.md (made by ``scripts/solver_doc.py``, which owns the
 blocks, the pages and the check): ``pde``, ``pde_scaling`` and ``pde_long`` from
 docs/benchmarks/nls_pde.json, nls_pde_scaling.json and nls_pde_long.json (``python -m
 benchmarks.nls_pde``), ``sine_gordon`` from docs/benchmarks/sine_gordon_pde.json (``python -m benchmarks.sine_gordon_pde``),
@@ -91,7 +91,7 @@ def pde_scaling(record: dict) -> str:
                     f"{r['us_per_iteration']:.3g} | {r['us_per_window']:.3g} | {r['first_call_seconds']:.1f} s |")
     return "\n".join(rows) + ("\n\nThe NLS soliton over t ∈ [0, 2] in windows of 0.05 (`GaussCollocation(h=0.05, stages=16)`: "
                               "the same windows at every size; the coarse grids under-resolve the soliton).\n\n"
-                              "![Time per iteration against M](../benchmarks/nls_pde_scaling.png)")
+                              "![Time per iteration against M](benchmarks/nls_pde_scaling.png)")
 
 
 def _fput_line(record: dict) -> str:
@@ -112,18 +112,18 @@ def pde_long(record: dict) -> str:
                     f"{r['energy_drift_max']:.0e} |")
     return (f"The soliton over t ∈ [0, {record['T']:g}] (M = {record['points']}: it travels {record['travel']:.0f} "
             f"widths), mass and energy at {len(record['times'])} times:\n\n" + "\n".join(rows)
-            + "\n\n![Mass and energy over the long run](../benchmarks/nls_pde_long.png)")
+            + "\n\n![Mass and energy over the long run](benchmarks/nls_pde_long.png)")
 
 
 def fput(record: dict) -> str:
     text = ("FPUT-α, N = 32, α = 0.25, Fermi's start, " + _fput_line(record) + ".\n\n"
-            "![The energies of modes 1–5 over the recurrence](../runs/fput/recurrence.png)")
+            "![The energies of modes 1–5 over the recurrence](runs/fput/recurrence.png)")
     long = ROOT / "docs" / "runs" / "fput" / "long.json"
     if long.is_file():
         record = json.loads(long.read_text(encoding="utf-8"))
         text += ("\n\nThe same chain " + _fput_line(record) + " — the returns of mode 1 themselves come and go: the "
                  "super-recurrence (`" + record["command"] + "`).\n\n"
-                 "![Mode energies over 10⁶ time units](../runs/fput/long.png)")
+                 "![Mode energies over 10⁶ time units](runs/fput/long.png)")
     return text
 
 

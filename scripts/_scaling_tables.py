@@ -1,4 +1,4 @@
-"""The tables of docs/SOLVER.md's "At size" (made by ``scripts/solver_doc.py``, which owns the blocks,
+"""The tables of docs/SOLVER_MEASURED.md's "At size" (made by ``scripts/solver_doc.py``, which owns the blocks,
 the pages and the check), from docs/benchmarks/gauss_scaling.json (``python -m
 benchmarks.gauss_scaling``): ``scaling`` (µs per window against d; FPUT chains against Diffrax) and
 ``orders_at_size`` (the stage count on large systems, with the field's evaluations)."""

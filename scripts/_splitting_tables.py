@@ -1,4 +1,4 @@
-"""The measured tables of docs/SPLITTING.md (made by ``scripts/solver_doc.py``, which owns the
+"""The measured tables of docs/SPLITTING_MEASURED.md (made by ``scripts/solver_doc.py``, which owns the
 blocks, the pages and the check): ``splitting`` from docs/benchmarks/splitting_workprecision.json
 (``python -m benchmarks.splitting_workprecision``), ``splitting_nls`` from
 docs/benchmarks/splitting_nls.json (``python -m benchmarks.splitting_nls``), ``splitting_long`` from

@@ -1,4 +1,4 @@
-"""The measured tables of docs/SOLVER.md and docs/CHOOSING.md, made from the committed records.
+"""The measured tables of the Benchmarks pages (docs/SOLVER_MEASURED.md, docs/BENCHMARKS.md, …), made from the committed records.
 
 Each table sits between ``<!-- solver-doc: NAME -->`` and ``<!-- /solver-doc -->`` in a page; this
 script rewrites what is between them from the record it names (tests/solver/test_solver_doc.py checks that
@@ -19,9 +19,9 @@ the pages hold what it makes, so no number on them can drift from its record):
 * ``time_transform``: docs/benchmarks/time_transform.json (``python -m benchmarks.time_transform``);
 * ``rebound``: docs/benchmarks/rebound_anchor.json (``python -m benchmarks.rebound_anchor``);
 * ``gradients``: docs/benchmarks/gauss_gradients.json (``python -m benchmarks.gauss_gradients``, docs/JAX.md);
-* ``learned``: docs/benchmarks/learned_h.json (``python -m benchmarks.learned_h``, docs/howto/LEARN_H.md);
-* ``pde`` and ``fput``: docs/howto/PDE.md (``scripts/_pde_tables.py``).
-* ``splitting``, ``splitting_nls``, ``splitting_long``: docs/SPLITTING.md (``scripts/_splitting_tables.py``).
+* ``learned`` and ``learned_regimes``: docs/LEARNED_H_MEASURED.md (``scripts/_learned_tables.py``);
+* ``pde`` and ``fput``: docs/PDE_MEASURED.md (``scripts/_pde_tables.py``).
+* ``splitting``, ``splitting_nls``, ``splitting_long``: docs/SPLITTING_MEASURED.md (``scripts/_splitting_tables.py``).
 
 The prose around the tables is written by hand; a few of its key numbers (and the machines
 PERFORMANCE.md names) are checked against their records all the same (``PROSE`` below): each check
@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import re
 import statistics
 import sys
@@ -45,12 +44,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import _pde_tables as pde_tables  # noqa: E402  (the PDE page's tables, beside this script)
-import _scaling_tables as scaling_tables  # noqa: E402  (the tables of SOLVER.md's "At size")
-import _splitting_tables as splitting_tables  # noqa: E402  (the tables of SPLITTING.md)
+import _scaling_tables as scaling_tables  # noqa: E402  (the tables of SOLVER_MEASURED.md's "At size")
+import _learned_tables as learned_tables  # noqa: E402  (the tables of LEARNED_H_MEASURED.md)
+import _splitting_tables as splitting_tables  # noqa: E402  (the tables of SPLITTING_MEASURED.md)
 from _doc_format import milliseconds as _ms  # noqa: E402
 
-PAGES = [ROOT / "docs" / "SOLVER.md", ROOT / "docs" / "CHOOSING.md", ROOT / "docs" / "JAX.md",
-         ROOT / "docs" / "howto" / "LEARN_H.md", ROOT / "docs" / "howto" / "PDE.md", ROOT / "docs" / "SPLITTING.md"]
+PAGES = [ROOT / "docs" / "SOLVER_MEASURED.md", ROOT / "docs" / "BENCHMARKS.md", ROOT / "docs" / "JAX.md",
+         ROOT / "docs" / "LEARNED_H_MEASURED.md", ROOT / "docs" / "PDE_MEASURED.md", ROOT / "docs" / "SPLITTING_MEASURED.md"]
 RECORDS = {
     "suite": "docs/runs/solver/suite.json",
     "workprecision": "docs/benchmarks/solver_workprecision.json",
@@ -65,10 +65,10 @@ RECORDS = {
     "time_transform": "docs/benchmarks/time_transform.json",
     "rebound": "docs/benchmarks/rebound_anchor.json",
     "gradients": "docs/benchmarks/gauss_gradients.json",
-    "learned": "docs/benchmarks/learned_h.json",
     **pde_tables.RECORDS,
     **scaling_tables.RECORDS,
     **splitting_tables.RECORDS,
+    **learned_tables.RECORDS,
 }
 METHODS = [("gauss-adaptive", "Gauss, adaptive"), ("diffrax-dopri8", "Diffrax Dopri8"),
            ("diffrax-tsit5", "Diffrax Tsit5"), ("dop853", "SciPy DOP853"), ("yoshida4", "Yoshida-4"),
@@ -311,45 +311,11 @@ def gradients(record: dict) -> str:
                    f"{record['vmap'][0]['max_windows']}`:\n\n" + "\n".join(rows))
 
 
-def learned(record: dict) -> str:
-    methods = list(dict.fromkeys(r["method"] for r in record["rows"]))
-    cell = lambda r: ("failed" if not math.isfinite(r["state_error"])  # noqa: E731
-                      else f"{r['state_error']:.1e} / {r['energy_error']:.1e}")
-    rows = ["| system | σ | " + " | ".join(f"{m}: state / energy error" for m in methods) + " |",
-            "|---|---|" + "---|" * len(methods)]
-    for key in dict.fromkeys((r["system"], r["sigma"]) for r in record["rows"]):
-        hit = {r["method"]: r for r in record["rows"] if (r["system"], r["sigma"]) == key}
-        best = min(hit.values(), key=lambda r: r["state_error"])["method"]
-        rows.append(f"| {key[0]} | {key[1]:g} | " + " | ".join(
-            (f"**{cell(hit[m])}**" if m == best else cell(hit[m])) if m in hit else "—" for m in methods) + " |")
-    seconds = {m: statistics.median(r["train_seconds"] for r in record["rows"] if r["method"] == m) for m in methods}
-    two_body = {r["method"]: r["energy_mse"] for r in record["rows"] if r["system"] == "two-body" and r["sigma"] == 0}
-    ahead = [r for r in record["rows"] if r["method"] == methods[0]]
-    wins = sum(1 for r in ahead for h in record["rows"] if h["method"] == "HNN" and (h["system"], h["sigma"]) ==
-               (r["system"], r["sigma"]) and r["state_error"] * 10 <= h["state_error"]
-               and r["energy_error"] * 10 <= h["energy_error"])
-    text = "\n".join(rows) + (
-        f"\n\nEach cell: the held-out state error (the largest over [0, {record['horizon']:g}]) / the true energy's "
-        f"median relative error along the prediction, each the median over three held-out states; bold: the smallest "
-        f"state error of the row. {record['steps']} Adam steps each (rate {record['rate']:g}), one core; median "
-        "training time " + ", ".join(f"{m} {seconds[m]:.0f} s" for m in methods) + ". "
-        f"{methods[0].capitalize()} is 10× below the HNN on both errors in {wins} of {len(ahead)} cases. "
-        "Figure: [learned_h.png](../benchmarks/learned_h.png).")
-    if two_body:
-        text += ("\n\nGreydanus et al. (2019, Table 1) report, for their two-body task, an energy MSE along rollouts of "
-                 "6.3e-2 for their baseline network and 3.9e-5 for the HNN. The same quantity here (the true energy's "
-                 "mean squared error along the held-out predictions, σ = 0): " + ", ".join(
-                     f"{m} {v:.1e}" for m, v in two_body.items()) +
-                 "; their data, network and horizon differ from these, so the numbers are beside each other, not "
-                 "a like-for-like comparison.")
-    return text
-
-
-MAKERS = {"learned": learned, "gradients": gradients, "suite": suite, "workprecision": workprecision, "energy": energy, "step_modes": step_modes, "batch": batch,
+MAKERS = {"gradients": gradients, "suite": suite, "workprecision": workprecision, "energy": energy, "step_modes": step_modes, "batch": batch,
           "first_run": first_run, "stages": stages,
           "roundoff": roundoff, "orders": orders, "everyday": everyday,
           "rebound": rebound, "time_transform": time_transform, **pde_tables.MAKERS, **scaling_tables.MAKERS,
-          **splitting_tables.MAKERS}
+          **splitting_tables.MAKERS, **learned_tables.MAKERS}
 
 
 # ------------------------------------------------------------------ key numbers of the prose
@@ -458,9 +424,10 @@ def _choosing_limits() -> list[str]:
 
 #: page → the words it must hold, each made from a record
 PROSE = {
-    "docs/CHOOSING.md": [_choosing_trajectory, _choosing_diffrax, _choosing_limits],
-    "docs/FROM_DIFFRAX.md": [_from_diffrax],
-    "docs/SOLVER.md": [_solver_suite],
+    "docs/BENCHMARKS.md": [_choosing_trajectory, _choosing_diffrax],
+    "docs/LIMITATIONS.md": [_choosing_limits],
+    "docs/DIFFRAX_MEASURED.md": [_from_diffrax],
+    "docs/SOLVER_MEASURED.md": [_solver_suite],
     "docs/PERFORMANCE.md": [_performance_machines],
 }
 

@@ -345,9 +345,29 @@ def test_every_block_has_a_known_language():
     assert not unknown, f"fence languages must be one of {sorted(KNOWN_LANGS)} (text for output samples): {unknown}"
 
 
-@pytest.mark.parametrize("block", [pytest.param(b, marks=m) for b, m in zip(CODE_BLOCKS, _tier_marks(CODE_BLOCKS))],
-                         ids=[b.id for b in CODE_BLOCKS])
+#: pages whose blocks run from another test file (tests/test_docs_pages_1.py, ..._2.py): the
+#: suite runs under pytest-xdist's ``--dist loadfile``, one file to a worker, so the slowest pages
+#: are spread over three files to keep this one from being the suite's longest run
+SHARDS = {"docs/GALLERY.md": 1, "docs/howto/BUNDLES.md": 1, "docs/JAX.md": 1, "docs/SCALE.md": 1,
+          "docs/howto/YOUR_SYSTEM.md": 2, "docs/howto/LEARN_H.md": 2, "docs/howto/FIT.md": 2,
+          "docs/howto/REPRODUCE.md": 2}
+
+
+def block_params(shard: int) -> list:
+    """The code blocks of the pages in ``shard`` (0: every page SHARDS does not name), with their
+    tier marks and ids."""
+    return [pytest.param(b, marks=m, id=b.id) for b, m in zip(CODE_BLOCKS, _tier_marks(CODE_BLOCKS))
+            if SHARDS.get(b.page, 0) == shard]
+
+
+@pytest.mark.parametrize("block", block_params(0))
 def test_block(block: Block, workspaces, epoch_cap, monkeypatch):
+    check_block(block, workspaces, monkeypatch)
+
+
+def check_block(block: Block, workspaces, monkeypatch) -> None:
+    """Run one block as its page says (or check it, where it is marked skip or needs a module that
+    is not installed)."""
     if block.lang not in KNOWN_LANGS:
         pytest.fail(f"{block.id}: unknown fence language {block.lang or '(none)'!r}")
     if block.skip is not None:
@@ -396,6 +416,49 @@ def test_every_page_is_in_the_site_nav():
     assert pages - listed == set(), f"pages missing from mkdocs.yml's nav: {sorted(pages - listed)}"
     assert listed - pages == set(), f"nav entries with no page: {sorted(listed - pages)}"
 
+
+
+#: nav sections whose pages are records or reference, allowed past PAGE_MAX_LINES
+LONG_SECTIONS = ("Benchmarks", "Reference")
+PAGE_MAX_LINES = 250
+
+
+def _nav_sections() -> dict[str, str]:
+    """Each page of mkdocs.yml's nav → the top-level section it is listed under (or its own title)."""
+    out, section = {}, ""
+    for line in (ROOT / "mkdocs.yml").read_text(encoding="utf-8").split("nav:", 1)[1].splitlines():
+        top = re.match(r"^  - ([^:]+):\s*(\S*)\s*$", line)
+        if top:
+            section = top.group(1)
+        page = re.search(r":\s*([\w/.-]+\.md)\s*$", line)
+        if page:
+            out[page.group(1)] = section
+    return out
+
+
+def test_how_to_pages_are_short():
+    """A page a user reads to do something (outside Benchmarks and Reference) stays within
+    PAGE_MAX_LINES lines: the measurements go to a Benchmarks page, the details to Reference."""
+    sections = _nav_sections()
+    assert sections, "no nav found in mkdocs.yml"
+    long = [f"{page} ({n} lines)" for page, section in sections.items() if section not in LONG_SECTIONS
+            and (n := len((ROOT / "docs" / page).read_text(encoding="utf-8").splitlines())) > PAGE_MAX_LINES]
+    assert not long, f"pages over {PAGE_MAX_LINES} lines outside {LONG_SECTIONS}: {long}"
+
+
+def test_the_api_page_lists_every_public_name():
+    """docs/api/index.md, the API's landing page, names every name atlasnn exports and every object
+    the reference pages document, each linked to its page."""
+    import atlasnn
+
+    landing = (ROOT / "docs" / "api" / "index.md").read_text(encoding="utf-8")
+    missing = [n for n in atlasnn.__all__ if f"`{n}`" not in landing and f"`atlasnn.{n}`" not in landing]
+    for page in sorted((ROOT / "docs" / "api").glob("*.md")):
+        for full in re.findall(r"^::: (\S+)", page.read_text(encoding="utf-8"), flags=re.M):
+            short = full.rsplit(".", 1)[1]
+            if f"]({page.name}#{full})" not in landing:
+                missing.append(f"{full} (documented on {page.name}; as `atlasnn.{short}` or `{full}`)")
+    assert not missing, f"docs/api/index.md does not list: {missing}"
 
 #: a private name of atlasnn in a code span: a dotted or slashed path with a part that starts with
 #: "_", or a bare name that does (not one glued to a placeholder, as `<model>_seed<k>.json`)

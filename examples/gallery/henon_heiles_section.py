@@ -19,6 +19,7 @@ from atlasnn import builtin_system
 E = 1.0 / 8.0
 
 
+# --8<-- [start:section]
 def crossings(sol, T: float, dt: float = 0.05) -> np.ndarray:
     """The states where x passes 0 upwards (p_x > 0) along a solution, to round-off."""
     t = np.arange(0.0, T, dt)
@@ -31,18 +32,27 @@ def crossings(sol, T: float, dt: float = 0.05) -> np.ndarray:
     return sol(tc)
 
 
+hh = builtin_system("henon_heiles")
+
+
+def section(orbits: int, T: float) -> list[np.ndarray]:
+    """Each orbit's crossings, the orbits started on x = 0 with p_y = 0, y evenly spaced, and p_x
+    from the energy; marched together by solve_batch."""
+    y0 = np.linspace(-0.3, 0.45, orbits)
+    px0 = np.sqrt(2 * E - y0 ** 2 + 2 * y0 ** 3 / 3)  # H = E at x = 0, p_y = 0
+    starts = np.stack([np.zeros_like(y0), y0, px0, np.zeros_like(y0)], axis=1)
+    sols = atlasnn.solve_batch(hh, starts, (0.0, T))
+    return [crossings(sol, T) for sol in sols]
+# --8<-- [end:section]
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--orbits", type=int, default=12)
     parser.add_argument("--T", type=float, default=500.0)
     parser.add_argument("--figure", default="henon_heiles_section.png")
     args = parser.parse_args(argv)
-    hh = builtin_system("henon_heiles")
-    y0 = np.linspace(-0.3, 0.45, args.orbits)
-    px0 = np.sqrt(2 * E - y0 ** 2 + 2 * y0 ** 3 / 3)  # H = E at x = 0, p_y = 0
-    starts = np.stack([np.zeros_like(y0), y0, px0, np.zeros_like(y0)], axis=1)
-    sols = atlasnn.solve_batch(hh, starts, (0.0, args.T))
-    points = [crossings(sol, args.T) for sol in sols]
+    points = section(args.orbits, args.T)
     worst = max(np.max(np.abs(hh.energy64(p) - E)) for p in points)
     on_section = max(np.max(np.abs(p[:, 0])) for p in points)
     print(f"{args.orbits} orbits to t = {args.T:g}: {sum(len(p) for p in points)} crossings, |x| ≤ {on_section:.1e} "

@@ -19,18 +19,26 @@ jax.config.update("jax_enable_x64", True)
 T = 10.0
 
 
+# --8<-- [start:gradient]
+pendulum = atlasnn.HamiltonianSystem(lambda q, p: 0.5 * jnp.sum(p ** 2) - jnp.sum(jnp.cos(q)), 1, name="pendulum")
+
+
+def angle(q0):
+    """q(T) of the pendulum released from rest at q0: a JAX function of q0."""
+    return atlasnn.solve(pendulum, jnp.stack([q0, 0.0 * q0]), (0.0, T))(T)[0]
+
+
+angle_and_slope = jax.jit(jax.vmap(jax.value_and_grad(angle)))  # q(T) and ∂q(T)/∂q0 at many q0 at once
+# --8<-- [end:gradient]
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--points", type=int, default=12)
     parser.add_argument("--figure", default="pendulum_gradient.png")
     args = parser.parse_args(argv)
-    pendulum = atlasnn.HamiltonianSystem(lambda q, p: 0.5 * jnp.sum(p ** 2) - jnp.sum(jnp.cos(q)), 1, name="pendulum")
-
-    def angle(q0):  # q(T) from (q0, 0): a JAX function of q0
-        return atlasnn.solve(pendulum, jnp.stack([q0, 0.0 * q0]), (0.0, T))(T)[0]
-
     q0s = np.linspace(0.2, 3.0, args.points)
-    value, slope = jax.jit(jax.vmap(jax.value_and_grad(angle)))(jnp.asarray(q0s))
+    value, slope = angle_and_slope(jnp.asarray(q0s))
     eps = 1e-6
     host = lambda q0: atlasnn.solve(pendulum, [q0, 0.0], (0.0, T))(T)[0]  # noqa: E731
     central = np.array([(host(q + eps) - host(q - eps)) / (2 * eps) for q in q0s])

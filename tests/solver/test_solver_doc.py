@@ -1,7 +1,8 @@
-"""The measured tables of docs/SOLVER.md and docs/CHOOSING.md are what scripts/solver_doc.py makes
-from the committed records: no number there can drift from its record. The key numbers of the prose
-around them (SOLVER, CHOOSING, FROM_DIFFRAX) and the machines PERFORMANCE.md names are checked against
-their records by the same script."""
+"""The measured tables of the Benchmarks pages (SOLVER_MEASURED, SPLITTING_MEASURED, PDE_MEASURED,
+BENCHMARKS, …) are what scripts/solver_doc.py makes from the committed records: no number there can
+drift from its record. The key numbers of the prose around them (BENCHMARKS, LIMITATIONS,
+DIFFRAX_MEASURED, SOLVER_MEASURED) and the machines PERFORMANCE.md names are checked against their
+records by the same script."""
 
 from __future__ import annotations
 

@@ -38,7 +38,7 @@ The rules and their thresholds (named constants below):
 5. **A loss that rose.** ``returned loss ≥ LOSS_RISE_FACTOR`` (100) × the lowest finite loss of
    the run: suspect (an unstable run whose returned parameters are far from its best ones).
 6. **γ collapse.** A softplus-parametrised rate (``m`` of tanh, ``alpha`` of the rational-exp
-   scaling) that underflowed to 0 makes f ≡ 0 and ẑ ≡ z0 (docs/TROUBLESHOOTING.md). Both
+   scaling) that underflowed to 0 makes f ≡ 0 and ẑ ≡ z0 (docs/TRAINING_TROUBLES.md). Both
    scalings satisfy 0 ≤ f(t) ≤ γ·t, so ``γ·(T − t0) < GAMMA_COLLAPSED`` (0.01) means f < 1 % on
    the whole interval: failed; a non-finite γ too. β of the rational-exp scaling is not checked:
    β → 0 is a legitimate limit (f → 1 − e^{−αt}).
@@ -279,7 +279,7 @@ def _advice(kinds: set[str], key: str, lr: float | None, epochs: int | None, est
     if _ESTIMATE in kinds and kinds <= {_ESTIMATE, _MORE_EPOCHS}:
         text = estimate_advice or (f"train longer ({key}.epochs) or, on a long interval, march with adaptive "
                                    "windows ([march] window = \"auto\")")
-        return text[0].upper() + text[1:] + "; see docs/TROUBLESHOOTING.md (a training judged suspect or failed)."
+        return text[0].upper() + text[1:] + "; see docs/TRAINING_TROUBLES.md (a training judged suspect or failed)."
     parts = []
     if _LOWER_LR in kinds:
         now = f" (now {lr:g}, e.g. {lr / 5:g})" if lr else ""
@@ -290,7 +290,7 @@ def _advice(kinds: set[str], key: str, lr: float | None, epochs: int | None, est
     if not parts:
         return ""
     text = " and ".join(parts)
-    return text[0].upper() + text[1:] + "; see docs/TROUBLESHOOTING.md (a training judged suspect or failed)."
+    return text[0].upper() + text[1:] + "; see docs/TRAINING_TROUBLES.md (a training judged suspect or failed)."
 
 
 def judge_training(

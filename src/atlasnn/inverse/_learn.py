@@ -29,8 +29,10 @@ import numpy as np
 import optax
 
 from atlasnn.errors import ConfigError
-from atlasnn.inverse._learn_checks import FLOW_ACCURACY, NOISE_FACTOR, flow_reasons, noise_reasons, observed_size
-from atlasnn.inverse._learn_data import check_trajectories, continuations, rates, segments
+from atlasnn.inverse._learn_checks import (FLOW_ACCURACY, NOISE_FACTOR, flow_reasons, modified_reasons, noise_reasons,
+                                          observed_size)
+from atlasnn.inverse._learn_data import _on_steps, check_trajectories, continuations, rates, segments
+from atlasnn.inverse._learn_errors import standard_errors
 from atlasnn.solver import GaussCollocation, SplittingComposition, solve
 from atlasnn.systems import HamiltonianSystem
 
@@ -71,6 +73,12 @@ class AbstractLearnMethod(abc.ABC):
         """(training loss, held-out loss or None, the unknown start values' first guess): each loss
         a function of (the model, the unknown start values: the components of the training
         segments' starts that were not observed, trained with it)."""
+
+    def residuals(self, trajectories: list, held_out: float, dof: int) -> tuple[Callable, float] | None:
+        """The training loss as weighted residuals, r(model, unknown) with loss = Σ r², and the
+        correlation factor of those residuals (how many times each observation enters them), for
+        the parameters' standard errors; None where the method has none."""
+        return None
 
     @abc.abstractmethod
     def noise_loss(self, sigma: float, trajectories: list) -> float:
@@ -164,11 +172,21 @@ class ThroughSolver(AbstractLearnMethod):
         segment = float(np.min(train.times[:, -1] - train.t0))
         return replace(self.solver, steps=self.solver.steps * max(1, math.ceil(span / segment)))
 
+    def residuals(self, trajectories, held_out, dof):
+        train, _ = segments(trajectories, self.ahead, held_out, self.stride)
+        missing = np.nonzero(np.isnan(train.starts))
+        return self._residual(train, train.times, train.targets, dof, missing), self.ahead / self.stride
+
     def _loss(self, train, times, targets, dof: int, missing, rows=None, solver=None, pieces=None) -> Callable:
         """The masked mean squared error of predictions of ``targets`` at ``times`` from the
         starts of ``pieces`` (default the training segments ``train``, ``rows`` of them where given);
         the training starts' missing values (at the indices ``missing``) are the loss's second
         argument."""
+        residual = self._residual(train, times, targets, dof, missing, rows, solver, pieces)
+        return lambda model, unknown: jnp.sum(residual(model, unknown) ** 2)
+
+    def _residual(self, train, times, targets, dof: int, missing, rows=None, solver=None, pieces=None) -> Callable:
+        """The residuals of ``_loss``, each weighted by the square root of its share of the mean."""
         pieces = train if pieces is None else pieces
         seen = ~np.isnan(targets)
         t0, times = jnp.asarray(pieces.t0 if rows is None else pieces.t0[rows]), jnp.asarray(times)
@@ -177,7 +195,7 @@ class ThroughSolver(AbstractLearnMethod):
         step_index = _on_steps(solver, np.asarray(pieces.t0 if rows is None else pieces.t0[rows]), np.asarray(times))
         index = jnp.zeros(times.shape, jnp.int32) if step_index is None else jnp.asarray(step_index)
 
-        def loss(model, unknown):
+        def residual(model, unknown):
             system = HamiltonianSystem(model, dof, name="learned", separable=self.separable)
             z0 = starts if missing is None or not missing[0].size else starts.at[missing].set(unknown)
             z0 = z0 if rows is None else z0[rows]
@@ -191,13 +209,21 @@ class ThroughSolver(AbstractLearnMethod):
             # a splitting's fixed steps march every segment in lock step (one batched scan); the Gauss
             # solver's windows differ per segment, which one after the other costs less
             batched = jax.vmap(predict) if self.separable else functools.partial(jax.lax.map, predict)
-            return jnp.sum(weight * (batched((t0, z0, times, index)) - targets) ** 2)
+            return (jnp.sqrt(weight) * (batched((t0, z0, times, index)) - targets)).ravel()
 
-        return loss
+        return residual
 
     def noise_loss(self, sigma, trajectories):
-        # the target's noise and the start's, carried forward (about σ² each for short segments)
-        return 2.0 * sigma ** 2
+        # the target's noise and the start's, carried forward (about σ² each for short segments); on
+        # exact or nearly exact data, predictions within FLOW_ACCURACY of the data's size
+        return max(2.0 * sigma ** 2, (FLOW_ACCURACY * observed_size(trajectories)) ** 2 / NOISE_FACTOR)
+
+    def trust_reasons(self, model, dof, trajectories, noise):
+        reasons = super().trust_reasons(model, dof, trajectories, noise)
+        if self.separable:  # fixed explicit steps: what it learned may hold only through them
+            reasons += modified_reasons(model, dof, trajectories, noise, self.solver.scheme or "the splitting",
+                                        self.solver.steps)
+        return reasons
 
     def held_out_floor(self, trajectories):
         # the held-out part predicted from a trained start (positions only) drifts with the start's
@@ -260,6 +286,9 @@ class LearnedHamiltonian:
         stopped: why training stopped early (interrupted, a non-finite loss, the solver failing), or None.
         notes: the reasons behind ``trusted``, each with what to do.
         trusted: False when a rule found a reason not to believe the learned H.
+        std: the standard error of each of θ's values (flattened in the model's order), from the
+            residuals' Jacobian at the result (the unknown start values profiled out), for a model
+            of at most a few dozen values trained through the solver; None otherwise.
     """
 
     model: Any
@@ -274,6 +303,7 @@ class LearnedHamiltonian:
     stopped: str | None
     notes: list
     trusted: bool
+    std: np.ndarray | None = None
 
     @property
     def system(self) -> HamiltonianSystem:
@@ -324,23 +354,19 @@ def learn_hamiltonian(model: Any, trajectories: Any, method: AbstractLearnMethod
             notes.append("nothing was held out: whether H_θ generalises is not checked")
         if noise is None:
             notes.append("no noise was given: whether the loss is at the noise is not judged (give noise=σ)")
+        if all(np.all(np.isnan(traj.z[:, dof:])) for traj in data):
+            notes.append("the momenta were never observed: positions fix H only up to a change of the momenta "
+                         "(p → φ(p)), so H_θ's p are its own; to predict from a measured p, give T(p) a known form "
+                         "(the masses)")
         record = _train(model, unknown, method, train_loss, test_loss, progress)
-        floor = None if not noise else method.noise_loss(noise, data)
+        kept_unknown = record.pop("unknown")
+        std, vague = (None, []) if not record["curve"] else standard_errors(
+            method.residuals(data, float(held_out), dof), record["model"], kept_unknown)
+        floor = None if noise is None else method.noise_loss(noise, data)
+        floor = None if floor == 0.0 else floor  # an HNN on exact data: its flow judges it
         found = [] if not record["curve"] else method.trust_reasons(record["model"], dof, data, noise)
-    return _judge(LearnedHamiltonian(dof=dof, method=method.name, noise=noise, notes=notes, trusted=True, **record),
-                  floor, found, method.held_out_floor(data))
-
-
-def _on_steps(solver: Any, t0: np.ndarray, times: np.ndarray) -> np.ndarray | None:
-    """For a splitting of N steps over each segment [t0, its last time]: the step index of every
-    time (segments, A) where each falls on a step's end to round-off, else None (or for the Gauss
-    solver)."""
-    if not isinstance(solver, SplittingComposition):
-        return None
-    h = (times[:, -1] - t0) / solver.steps
-    position = (times - t0[:, None]) / h[:, None]
-    index = np.rint(position)
-    return index.astype(np.int32) if np.all(np.abs(position - index) <= 1e-9 * solver.steps) else None
+    return _judge(LearnedHamiltonian(dof=dof, method=method.name, noise=noise, notes=notes, trusted=True, std=std,
+                                     **record), floor, found + vague, method.held_out_floor(data))
 
 
 def _check_model(model: Any, dof: int, data: list, separable: bool = False) -> list[str]:
@@ -419,8 +445,8 @@ def _train(model: Any, unknown: jax.Array, method: AbstractLearnMethod, train_lo
             stopped = f"the solve failed at step {k + 1}: {_runtime_message(exc)}"
             break
     _, kept, loss, held_loss = best
-    return {"model": eqx.combine(kept[0], static), "loss": loss, "held_out_loss": held_loss, "steps": len(curve),
-            "curve": curve, "seconds": time.perf_counter() - started, "stopped": stopped}
+    return {"model": eqx.combine(kept[0], static), "unknown": kept[1], "loss": loss, "held_out_loss": held_loss,
+            "steps": len(curve), "curve": curve, "seconds": time.perf_counter() - started, "stopped": stopped}
 
 
 def _runtime_message(exc: Exception) -> str:

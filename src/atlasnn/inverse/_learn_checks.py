@@ -17,13 +17,20 @@ from atlasnn.inverse._learn_data import Trajectory
 from atlasnn.solver import GaussCollocation, solve
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["flow_reasons", "noise_reasons", "observed_size", "FLOW_ACCURACY", "NOISE_FACTOR", "NOISY_DATA", "NOISY_RATES"]
+__all__ = ["flow_miss", "flow_reasons", "modified_reasons", "noise_reasons", "observed_size", "FLOW_ACCURACY", "FLOW_AHEAD", "PROPAGATION",
+           "NOISE_FACTOR", "NOISY_DATA", "NOISY_RATES"]
 
 #: a loss this many times the noise's own (2σ² for predicted states) is "far above the noise"
 NOISE_FACTOR = 3.0
-#: H_θ's flow over one observation interval may miss the observations by this part of their rms
-#: size (beyond the noise): about a 1 % error in a frequency over a few intervals
+#: H_θ's flow may miss the observations it is checked against by this part of their rms size
+#: (beyond the noise): about a 1 % error in a frequency over a few intervals
 FLOW_ACCURACY = 1e-2
+#: how many observations ahead the learned H's flow is checked against (a flow that is right over one
+#: spacing may drift off over a few: an HNN's H whose frequency is a few per cent off)
+FLOW_AHEAD = 5
+#: how much more than σ² per component the flow may carry of a start's noise (a flow that is not an
+#: isometry: a spring of ω = √2 carries up to 1.25σ² per component)
+PROPAGATION = 0.5
 #: noise of this part of the observed values' spread (rms about their mean) or more: the data
 #: cannot pin H down
 NOISY_DATA = 0.2
@@ -41,6 +48,8 @@ def observed_size(trajectories: list[Trajectory]) -> float:
 def observed_spread(trajectories: list[Trajectory]) -> float:
     """The observed values' rms about each component's mean."""
     z = np.concatenate([traj.z for traj in trajectories])
+    seen = ~np.all(np.isnan(z), axis=0)  # a component never observed (positions only) has no mean
+    z = z[:, seen]
     return float(np.sqrt(np.nanmean((z - np.nanmean(z, axis=0)) ** 2)))
 
 
@@ -67,36 +76,62 @@ def noise_reasons(trajectories: list[Trajectory], noise: float | None, hnn: bool
     return reasons
 
 
-def flow_reasons(model: Any, dof: int, trajectories: list[Trajectory], noise: float | None) -> list[str]:
-    """H_θ's flow from every observed state to the next observation against that observation: a
-    miss beyond what noise of σ (none where not given) and FLOW_ACCURACY of the values' size explain
-    says that the learned H's flow is not the data's — for an HNN, central differences too coarse
-    for the spacing (their error is fitted as if it were the rate)."""
+def flow_miss(model: Any, dof: int, trajectories: list[Trajectory], noise: float | None) -> str | None:
+    """H_θ's flow, solved accurately, from every observed state to each of the next FLOW_AHEAD
+    observations against them (a wrong frequency's miss grows along the way): None where it is within what noise of σ (none where not given) and
+    FLOW_ACCURACY of the values' size explain; otherwise what it misses by, in words."""
     starts, ends, t0, t1 = [], [], [], []
     for traj in trajectories:
         whole = ~np.any(np.isnan(traj.z), axis=1)
-        pair = whole[:-1] & whole[1:]
-        starts.append(traj.z[:-1][pair]), ends.append(traj.z[1:][pair])
-        t0.append(traj.t[:-1][pair]), t1.append(traj.t[1:][pair])
+        for k in range(1, min(FLOW_AHEAD, len(traj.t) - 1) + 1):  # to each of the next FLOW_AHEAD observations
+            pair = whole[:-k] & whole[k:]
+            starts.append(traj.z[:-k][pair]), ends.append(traj.z[k:][pair])
+            t0.append(traj.t[:-k][pair]), t1.append(traj.t[k:][pair])
     starts, ends, t0, t1 = (np.concatenate(x) for x in (starts, ends, t0, t1))
     if not starts.size:
-        return []
+        return None
     system = HamiltonianSystem(model, dof, name="learned")
     with jax.enable_x64(True):
         flow = jax.jit(jax.vmap(lambda z, a, b: solve(system, z, (a, b), solver=_FLOW_SOLVER)(b)))
         try:
             predicted = np.asarray(flow(*(jnp.asarray(x) for x in (starts, t0, t1))))
         except Exception as exc:  # noqa: BLE001 (a learned H that cannot be solved is a reason itself)
-            return [f"H_θ's flow could not be solved from the observed states ({type(exc).__name__}): it is not "
-                    "a usable H"]
-    miss = float(np.sqrt(np.mean((predicted - ends) ** 2)))
-    # a flow from a noisy state to a noisy one misses by √2·σ rms: NOISE_FACTOR times that in squares
-    allowed = np.sqrt(NOISE_FACTOR * 2.0) * (noise or 0.0) + FLOW_ACCURACY * observed_size(trajectories)
-    if np.isfinite(miss) and miss <= allowed:
-        return []
-    spacing = float(np.median(t1 - t0))
+            return f"could not be solved from the observed states ({type(exc).__name__})"
+    squares = (predicted - ends) ** 2
+    miss = float(np.sqrt(np.mean(squares)))
+    # a flow from a noisy state to a noisy one misses by about √2·σ rms (the start's noise carried by
+    # the flow, up to PROPAGATION·σ² more, and the end's): what is beyond that, by more than the mean's
+    # own scatter (NOISE_FACTOR standard errors) and FLOW_ACCURACY of the data's size, is H_θ's
+    sigma2 = (noise or 0.0) ** 2
+    excess = float(np.mean(squares)) - 2.0 * sigma2
+    allowed = ((2.0 * NOISE_FACTOR * np.sqrt(2.0 / squares.size) + PROPAGATION) * sigma2
+               + (FLOW_ACCURACY * observed_size(trajectories)) ** 2)
+    if np.isfinite(miss) and excess <= allowed:
+        return None
     said = f"noise of σ = {noise:g}" if noise else "no noise (none was given)"
-    return [f"H_θ's flow misses the next observation by rms {miss:.3g}, more than {said} and "
-            f"{FLOW_ACCURACY:.0%} of the data's size explain ({allowed:.3g}): central differences over Δt = "
-            f"{spacing:.3g} are too coarse (or the data noisier than said); learn through the solver "
-            "(ThroughSolver()), or give noise=σ if the data are noisy"]
+    spacing = float(np.median(np.concatenate([traj.t[1:] - traj.t[:-1] for traj in trajectories])))
+    return (f"misses the next {FLOW_AHEAD} observations (Δt = {spacing:.3g}) by rms {miss:.3g}, more than {said} "
+            f"and {FLOW_ACCURACY:.0%} of the data's size explain ({np.sqrt(2.0 * sigma2 + allowed):.3g})")
+
+
+def flow_reasons(model: Any, dof: int, trajectories: list[Trajectory], noise: float | None) -> list[str]:
+    """An HNN's learned H judged by its flow (``flow_miss``): a miss says that the central
+    differences were too coarse for the spacing (their error is fitted as if it were the rate)."""
+    miss = flow_miss(model, dof, trajectories, noise)
+    if miss is None:
+        return []
+    return [f"H_θ's flow {miss}: central differences are too coarse for this spacing (or the data noisier than "
+            "said); learn through the solver (ThroughSolver()), or give noise=σ if the data are noisy"]
+
+
+def modified_reasons(model: Any, dof: int, trajectories: list[Trajectory], noise: float | None,
+                     scheme: str, steps: int) -> list[str]:
+    """H_θ trained through a splitting at a fixed step reproduces the data through that scheme and
+    step: it may be the scheme's modified Hamiltonian rather than the true one. Judged by its flow
+    solved accurately (``flow_miss``)."""
+    miss = flow_miss(model, dof, trajectories, noise)
+    if miss is None:
+        return []
+    return [f"H_θ is the modified Hamiltonian of {scheme} at its step ({steps} steps a segment): solved accurately, "
+            f"its flow {miss}; to learn the true H, train with more steps (SplittingComposition(steps=…)) until "
+            "the result no longer changes — or predict with the same scheme and step"]

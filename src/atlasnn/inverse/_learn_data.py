@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from atlasnn.errors import ConfigError
+from atlasnn.solver import SplittingComposition
 
 __all__ = ["Trajectory", "check_trajectories", "Segments", "segments", "continuations", "rates", "split_point"]
 
@@ -179,3 +180,15 @@ def rates(trajectories: list[Trajectory], held_out: float) -> tuple[tuple[np.nda
         raise ConfigError("no training rate: each trajectory needs 3 observations before its held-out part")
     stack = lambda ps: (np.stack([p[0] for p in ps]), np.stack([p[1] for p in ps]))  # noqa: E731
     return stack(train), (stack(test) if test else None)
+
+
+def _on_steps(solver: Any, t0: np.ndarray, times: np.ndarray) -> np.ndarray | None:
+    """For a splitting of N steps over each segment [t0, its last time]: the step index of every
+    time (segments, A) where each falls on a step's end to round-off, else None (or for the Gauss
+    solver)."""
+    if not isinstance(solver, SplittingComposition):
+        return None
+    h = (times[:, -1] - t0) / solver.steps
+    position = (times - t0[:, None]) / h[:, None]
+    index = np.rint(position)
+    return index.astype(np.int32) if np.all(np.abs(position - index) <= 1e-9 * solver.steps) else None

@@ -116,7 +116,7 @@ class GaussCollocation(AbstractSolver):
             encounters and eccentric orbits): a function g(q, p) > 0, small where the motion is
             fast, or ``"potential"``: g = (−V(q))^(−3/2) for a separable H whose potential is
             negative (gravitational N-body problems); ``h`` and the lengths recorded are then in τ
-            (``_gauss_time``; docs/SOLVER.md, "Close encounters"). None: march in t. ``"auto"``
+            (``_gauss_time``; docs/howto/CLOSE_ENCOUNTERS.md). None: march in t. ``"auto"``
             (the default): march in t, and for a system ``"potential"`` suits (separable, V < 0
             and homogeneous of degree −1, as gravity's) march in τ with it instead once a march of
             constant lengths in t finds g varying 20-fold over its windows after a chunk, or is
@@ -347,7 +347,7 @@ class GaussCollocation(AbstractSolver):
         default_iterations = type(self).__dataclass_fields__["max_iterations"].default
         if gravitational and self.time_scale in (None, AUTO) and (stopped is not None or failed in (1, 2)):
             remedy = ("a close encounter shortened the windows: time_scale='potential' marches it on windows short "
-                      "only there, symplectic (docs/SOLVER.md, 'Close encounters')")
+                      "only there, symplectic (docs/howto/CLOSE_ENCOUNTERS.md)")
         elif stopped is not None and stopped.startswith("t advanced"):
             remedy = "give a time scale g(q, p) that stays positive, not near 0, wherever the orbit goes"
         elif stopped is not None and stopped.startswith("its constant window"):

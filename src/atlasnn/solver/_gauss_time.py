@@ -19,8 +19,7 @@ by g. The extended system is marched in τ by the same Gauss method on windows o
 (found over the warm-up, only ever shortened): a symplectic map of the extended space, whatever g
 does, until the physical time — a component of the extended state — reaches T
 (:mod:`._gauss_march`, ``until``). Its energy error is K/g: bounded, as the error of a symplectic
-method's invariant is, but multiplied by 1/g during an encounter (docs/SOLVER.md, "Close
-encounters").
+method's invariant is, but multiplied by 1/g during an encounter (docs/howto/CLOSE_ENCOUNTERS.md).
 
 ``time_scale="potential"``: g = (−V(q))^(−3/2), V(q) = H(q, 0) the potential of a separable H
 (H = T(p) + V(q), T(0) = 0) that is negative everywhere and vanishes far away — gravitational
@@ -166,8 +165,8 @@ def march_advice(system: HamiltonianSystem, length: np.ndarray, z: np.ndarray, w
         fold = float(scale_fold(g.min(), g.max()))
         if fold >= SCALE_VARIATION:
             return (f"the time scale (−V)^(−3/2) varies {fold:.0f}-fold over the windows: "
-                    "time_scale='potential' would take fewer windows, symplectic (docs/SOLVER.md, "
-                    "'Close encounters')")
+                    "time_scale='potential' would take fewer windows, symplectic "
+                    "(docs/howto/CLOSE_ENCOUNTERS.md)")
         return None
     kept = length[warmup:-1]
     if kept.size < 2 or kept.max() <= 8 * kept.min():

@@ -1,0 +1,235 @@
+"""Learned Hamiltonians by regime: observation spacing, noise, and positions only — where training
+through a solver pays against an HNN.
+
+For each system, trajectories observed at spacings Δt ∈ {0.1, 0.5, 1} (in units of the fastest
+period / 2π, 1/ω_max), 31 observations each, with Gaussian noise of σ ∈ {0, 1 %, 5 %} of each
+component's rms over the data, on every component or on the positions only. The same separable
+network H_θ = T_θ(p) + V_θ(q) (two MLPs, softplus, the same initial weights) and the same Adam
+steps and rate for every method:
+
+* ``HNN`` — ``learn_hamiltonian(..., HNN())``: J∇H_θ against central differences of the data;
+* ``HNN, smoothed`` — the same on the data smoothed first (a Savitzky–Golay filter of 7 points,
+  cubic, each component; SciPy), the usual remedy for noisy differences;
+* ``through leapfrog`` — ``ThroughSolver(solver=SplittingComposition(scheme="leapfrog", steps=4·ahead))``:
+  every segment of ``ahead`` = 5 observations predicted by four leapfrog steps per interval, all
+  segments in one batched scan, the loss on the predicted observations.
+
+From the positions alone H is fixed only up to a change of the momenta, so a network's H there has
+momenta of its own; what positions do determine is a known form's parameters with the masses given:
+the pendulum's g in p²/2 − g·cos q, the chain's k and β in Σ p²/2 + Σ (k s²/2 + β s⁴/4), learned
+through leapfrog on end-to-end segments of 10 observations, each segment's starting momentum an
+unknown (the HNN needs every component), at Adam's rate 0.05. Their relative error and standard
+errors are recorded beside the held-out errors.
+
+Each learned H is solved (``atlasnn.solve``, defaults) from held-out initial states over ten times
+the training span, against the true H's solution: the largest state error over the output relative
+to the state's range (median over the held-out states) and the median relative energy error.
+Training wall time and its time per Adam step are recorded.
+
+    python -m benchmarks.learned_h_regimes --out docs/benchmarks/learned_h_regimes.json
+    python -m benchmarks.learned_h_regimes --systems pendulum --spacings 0.5 --sigmas 0.01 --steps 100  # quick
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import atlasnn
+from atlasnn import learn_hamiltonian
+from atlasnn.inverse import HNN, ThroughSolver
+from atlasnn.solver import SplittingComposition
+
+from benchmarks.common import machine_info, write_result
+
+jax.config.update("jax_enable_x64", True)
+
+OBSERVATIONS, HORIZON_FACTOR, AHEAD, LEAPFROG_PER_INTERVAL = 31, 10, 5, 4
+#: positions only: segments of this many observations end to end (each segment's momentum is fitted:
+#: short overlapping segments would let the fitted momenta absorb the force)
+POSITION_AHEAD = 10
+#: Adam's rate for the known forms (a few parameters of order 1; the networks' rate would leave them short)
+KNOWN_RATE = 0.05
+CHAIN = 10
+
+
+def _chain(q, p):
+    """Ten unit masses between fixed walls, linear springs of unit stiffness, a quartic part (FPUT-β)."""
+    stretch = jnp.diff(jnp.concatenate([jnp.zeros(1), q, jnp.zeros(1)]))
+    return jnp.sum(p ** 2) / 2 + jnp.sum(stretch ** 2) / 2 + jnp.sum(stretch ** 4) / 4
+
+
+def _chain_starts(seed: int, count: int) -> list:
+    rng = np.random.default_rng(seed)
+    return [np.concatenate([0.4 * rng.standard_normal(CHAIN), 0.4 * rng.standard_normal(CHAIN)]) for _ in range(count)]
+
+
+#: name -> (true H, degrees of freedom, ω_max (the fastest linear frequency), training starts, held-out starts)
+SYSTEMS = {
+    "pendulum": (lambda q, p: p[0] ** 2 / 2 - jnp.cos(q[0]), 1, 1.0,
+                 [[1.0, 0.0], [0.0, 1.2], [-0.5, -0.6]], [[0.7, -0.4], [-1.2, 0.3], [0.2, 0.9]]),
+    "spring-chain": (_chain, CHAIN, 2 * np.sin(np.pi * CHAIN / (2 * (CHAIN + 1))),
+                     _chain_starts(1, 6), _chain_starts(2, 3)),
+}
+
+
+class KnownForm(eqx.Module):
+    """The true H's form with its parameters unknown: g of the pendulum, k and β of the chain."""
+
+    name: str = eqx.field(static=True)
+    theta: jax.Array
+
+    def __call__(self, q, p):
+        if self.name == "pendulum":
+            return p[0] ** 2 / 2 - self.theta[0] * jnp.cos(q[0])
+        stretch = jnp.diff(jnp.concatenate([jnp.zeros(1), q, jnp.zeros(1)]))
+        return jnp.sum(p ** 2) / 2 + self.theta[0] * jnp.sum(stretch ** 2) / 2 + self.theta[1] * jnp.sum(stretch ** 4) / 4
+
+
+#: the known forms' true parameters and the guess every training starts from
+TRUE_PARAMETERS = {"pendulum": [1.0], "spring-chain": [1.0, 1.0]}
+GUESS = 0.6
+
+
+class SeparableH(eqx.Module):
+    """H_θ(q, p) = T_θ(p) + V_θ(q), two MLPs."""
+
+    kinetic: eqx.nn.MLP
+    potential: eqx.nn.MLP
+
+    def __call__(self, q, p):
+        return self.kinetic(p)[0] + self.potential(q)[0]
+
+
+def network(dof: int, seed: int) -> SeparableH:
+    width = 32 if dof == 1 else 64
+    k1, k2 = jax.random.split(jax.random.PRNGKey(seed))
+    net = SeparableH(eqx.nn.MLP(dof, 1, width, 2, activation=jax.nn.softplus, key=k1),
+                     eqx.nn.MLP(dof, 1, width, 2, activation=jax.nn.softplus, key=k2))
+    return jax.tree_util.tree_map(lambda x: x.astype(jnp.float64) if eqx.is_inexact_array(x) else x, net)
+
+
+def observations(name: str, spacing: float, sigma: float, seed: int) -> tuple[list, float]:
+    """Noisy trajectories (times, states) and the noise's absolute size (σ × the data's rms)."""
+    H, dof, omega, starts, _ = SYSTEMS[name]
+    truth = atlasnn.HamiltonianSystem(H, dof, name=name)
+    dt = spacing / omega
+    times = dt * np.arange(OBSERVATIONS)
+    clean = [atlasnn.solve(truth, z, (0.0, times[-1]))(times) for z in starts]
+    rms = np.sqrt(np.mean(np.concatenate(clean) ** 2, axis=0))
+    rng = np.random.default_rng(seed)
+    noisy = [(times, z + sigma * rms * rng.standard_normal(z.shape)) for z in clean]
+    return noisy, float(sigma * np.sqrt(np.mean(rms ** 2)))
+
+
+def smoothed(trajectories: list) -> list:
+    from scipy.signal import savgol_filter
+
+    return [(t, savgol_filter(z, 7, 3, axis=0, mode="interp")) for t, z in trajectories]
+
+
+def positions_only(trajectories: list, dof: int) -> list:
+    return [(t, np.concatenate([z[:, :dof], np.full((t.size, dof), np.nan)], axis=1)) for t, z in trajectories]
+
+
+def held_out(name: str, model, span: float) -> dict:
+    H, dof, _, _, starts = SYSTEMS[name]
+    truth = atlasnn.HamiltonianSystem(H, dof, name=name)
+    learned = atlasnn.HamiltonianSystem(model, dof, name="learned", separable=True)
+    horizon = HORIZON_FACTOR * span
+    t = np.linspace(0.0, horizon, 601)
+    states, energies, failures = [], [], []
+    for z in np.asarray(starts, np.float64):
+        ref = atlasnn.solve(truth, z, (0.0, horizon))(t)
+        try:
+            got = atlasnn.solve(learned, z, (0.0, horizon))(t)
+        except atlasnn.AtlasError as exc:  # a learned H whose orbit leaves the data's region
+            failures.append(str(exc)[:160])
+            states.append(np.inf)
+            energies.append(np.inf)
+            continue
+        e0, along = float(truth.energy64(z)), truth.energy64(got)
+        states.append(float(np.abs(got - ref).max() / np.ptp(ref, axis=0).max()))
+        energies.append(float(np.median(np.abs(along - e0)) / abs(e0)))
+    return {"state_error": statistics.median(states), "energy_error": statistics.median(energies),
+            "per_state": states, "failures": failures}
+
+
+def methods(steps: int, rate: float, observed: str) -> dict:
+    through = ThroughSolver(steps=steps, rate=rate, ahead=AHEAD,
+                            solver=SplittingComposition(scheme="leapfrog", steps=LEAPFROG_PER_INTERVAL * AHEAD))
+    if observed == "positions":  # end-to-end segments of POSITION_AHEAD: one fitted momentum per segment
+        return {"through leapfrog": ThroughSolver(
+            steps=steps, rate=KNOWN_RATE, ahead=POSITION_AHEAD, stride=POSITION_AHEAD,
+            solver=SplittingComposition(scheme="leapfrog", steps=LEAPFROG_PER_INTERVAL * POSITION_AHEAD))}
+    return {"HNN": HNN(steps=steps, rate=rate), "HNN, smoothed": HNN(steps=steps, rate=rate),
+            "through leapfrog": through}
+
+
+def run(name: str, spacing: float, sigma: float, observed: str, steps: int, rate: float, seed: int) -> list[dict]:
+    dof = SYSTEMS[name][1]
+    data, noise = observations(name, spacing, sigma, seed)
+    span = float(data[0][0][-1])
+    rows = []
+    for label, method in methods(steps, rate, observed).items():
+        given = smoothed(data) if label == "HNN, smoothed" else data
+        if observed == "positions":
+            given = positions_only(given, dof)
+            model = KnownForm(name, jnp.full(len(TRUE_PARAMETERS[name]), GUESS))
+        else:
+            model = network(dof, seed)
+        result = learn_hamiltonian(model, given, method, noise=None if label == "HNN, smoothed" else noise)
+        extra = {}
+        if observed == "positions":
+            truth = np.asarray(TRUE_PARAMETERS[name])
+            extra = {"parameters": np.asarray(result.model.theta).tolist(),
+                     "std": None if result.std is None else np.asarray(result.std).tolist(),
+                     "parameter_error": float(np.max(np.abs(np.asarray(result.model.theta) / truth - 1)))}
+        row = {"system": name, "spacing": spacing, "sigma": sigma, "observed": observed, "method": label,
+               "loss": result.loss, "train_seconds": result.seconds, "seconds_per_step": result.seconds / result.steps,
+               "trusted": result.trusted, "notes": list(result.notes), **extra,
+               **held_out(name, result.model, span)}
+        print(f"{name:13s} Δt {spacing:<4g} σ {sigma:<5g} {observed:9s} {label:17s} {result.seconds:6.1f} s "
+              f"({1e3 * row['seconds_per_step']:.2f} ms/step)  held-out state {row['state_error']:.2e}, energy "
+              f"{row['energy_error']:.2e}, trusted {result.trusted}"
+              + (f", parameters off by {extra['parameter_error']:.1e}" if extra else ""), flush=True)
+        rows.append(row)
+    return rows
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--systems", nargs="+", default=list(SYSTEMS), choices=list(SYSTEMS))
+    ap.add_argument("--spacings", nargs="+", type=float, default=[0.1, 0.5, 1.0])
+    ap.add_argument("--sigmas", nargs="+", type=float, default=[0.0, 0.01, 0.05])
+    ap.add_argument("--observed", nargs="+", default=["all", "positions"], choices=["all", "positions"])
+    ap.add_argument("--steps", type=int, default=1500)
+    ap.add_argument("--rate", type=float, default=3e-3)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out")
+    args = ap.parse_args(argv)
+    started = time.perf_counter()
+    rows = [row for name in args.systems for spacing in args.spacings for sigma in args.sigmas
+            for observed in args.observed
+            for row in run(name, spacing, sigma, observed, args.steps, args.rate, args.seed)]
+    command = "python -m benchmarks.learned_h_regimes " + " ".join(
+        f"--{k} {' '.join(map(str, v)) if isinstance(v, list) else v}" for k, v in vars(args).items() if v is not None)
+    print(f"{len(rows)} trainings in {time.perf_counter() - started:.0f} s")
+    if args.out:
+        write_result(args.out, {"command": command, "machine": machine_info(), "observations": OBSERVATIONS,
+                                "horizon_factor": HORIZON_FACTOR, "ahead": AHEAD,
+                                "leapfrog_per_interval": LEAPFROG_PER_INTERVAL, "position_ahead": POSITION_AHEAD,
+                                "known_rate": KNOWN_RATE,
+                                "steps": args.steps,
+                                "rate": args.rate, "network": "T_θ(p) + V_θ(q), two MLPs d → w → w → 1, softplus "
+                                "(w = 32 for one degree of freedom, 64 for the chain)", "rows": rows})
+
+
+if __name__ == "__main__":
+    main()
