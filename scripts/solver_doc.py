@@ -391,7 +391,8 @@ def _solver_suite() -> list[str]:
     assert all(r["error_rel"] <= 1e-10 for r in rest), "suite.json: a problem above 1e-10 of the range"
     return [f"within 1e-10 of the range, all at {_suite_range(rest)}",
             f"Kepler e = 0.99 (not built in) is at {_e(e099['error_rel'])}, and the estimate, "
-            f"{e099['effectivity']:.2g}× above it"]
+            + (f"{e099['effectivity']:.2g}× above it" if e099["effectivity"] >= 1
+               else f"{e099['effectivity']:.2g} of it")]
 
 
 def _machine(path: str) -> tuple[str, int]:

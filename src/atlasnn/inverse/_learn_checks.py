@@ -108,7 +108,8 @@ def flow_miss(model: Any, dof: int, trajectories: list[Trajectory], noise: float
                + (FLOW_ACCURACY * observed_size(trajectories)) ** 2)
     if np.isfinite(miss) and excess <= allowed:
         return None
-    said = f"noise of σ = {noise:g}" if noise else "no noise (none was given)"
+    said = ("no noise (none was given)" if noise is None else "exact data (noise=0)" if not noise
+            else f"noise of σ = {noise:g}")
     spacing = float(np.median(np.concatenate([traj.t[1:] - traj.t[:-1] for traj in trajectories])))
     return (f"misses the next {FLOW_AHEAD} observations (Δt = {spacing:.3g}) by rms {miss:.3g}, more than {said} "
             f"and {FLOW_ACCURACY:.0%} of the data's size explain ({np.sqrt(2.0 * sigma2 + allowed):.3g})")
