@@ -59,7 +59,7 @@ def connect_dask(address: str):
         from distributed import Client
     except ImportError:
         raise ConfigError(f"scheduler {address}: the Dask executor needs the distributed package "
-                          "(pip install 'atlasnn[dask]')") from None
+                          "(pip install distributed, or in atlasnn's source folder pip install -e '.[dask]')") from None
     timeout = dask.utils.parse_timedelta(dask.config.get("distributed.comm.timeouts.connect"))
     try:
         # a plain connection first, in its own thread and event loop: a Client that fails to

@@ -17,8 +17,8 @@ from atlasnn.inverse._learn_data import Trajectory
 from atlasnn.solver import GaussCollocation, solve
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["flow_miss", "flow_reasons", "modified_reasons", "noise_reasons", "observed_size", "FLOW_ACCURACY", "FLOW_AHEAD", "PROPAGATION",
-           "NOISE_FACTOR", "NOISY_DATA", "NOISY_RATES"]
+__all__ = ["flow_miss", "flow_reasons", "modified_reasons", "noise_reasons", "observed_size", "FLOW_ACCURACY",
+           "FLOW_AHEAD", "PROPAGATION", "NOISE_FACTOR", "NOISY_DATA", "NOISY_RATES"]
 
 #: a loss this many times the noise's own (2σ² for predicted states) is "far above the noise"
 NOISE_FACTOR = 3.0
@@ -78,8 +78,9 @@ def noise_reasons(trajectories: list[Trajectory], noise: float | None, hnn: bool
 
 def flow_miss(model: Any, dof: int, trajectories: list[Trajectory], noise: float | None) -> str | None:
     """H_θ's flow, solved accurately, from every observed state to each of the next FLOW_AHEAD
-    observations against them (a wrong frequency's miss grows along the way): None where it is within what noise of σ (none where not given) and
-    FLOW_ACCURACY of the values' size explain; otherwise what it misses by, in words."""
+    observations, against them (a wrong frequency's miss grows along the way): None where what it
+    adds to the noise's own share (σ where given) is within the scatter of that share and
+    FLOW_ACCURACY of the values' size; otherwise what it misses by, in words."""
     starts, ends, t0, t1 = [], [], [], []
     for traj in trajectories:
         whole = ~np.any(np.isnan(traj.z), axis=1)

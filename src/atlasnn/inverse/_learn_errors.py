@@ -35,7 +35,8 @@ SHORT = 5e-3
 
 
 def standard_errors(residuals: tuple[Callable, float] | None, model, unknown) -> tuple[np.ndarray | None, list[str]]:
-    """(θ's standard errors or None, the reasons a parameter is not determined by the data)."""
+    """(θ's standard errors or None, the reasons not to trust them: a parameter the data do not
+    determine, or a training that stopped short of the loss's minimum)."""
     if residuals is None:
         return None, []
     residual, overlap = residuals

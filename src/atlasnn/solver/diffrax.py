@@ -36,7 +36,8 @@ from typing import Any, ClassVar, NamedTuple
 try:
     import diffrax
 except ImportError:  # the optional extra
-    raise ImportError("atlasnn.solver.diffrax needs Diffrax: pip install 'atlasnn[diffrax]'") from None
+    raise ImportError("atlasnn.solver.diffrax needs Diffrax: pip install diffrax (or, in atlasnn's source folder, "
+                      "pip install -e '.[diffrax]')") from None
 import equinox as eqx
 import equinox.internal as eqxi
 import jax
