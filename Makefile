@@ -19,7 +19,7 @@ quick: $(BIN)/atlasnn
 # or slow; `make test-long` the tests marked long (5 s or more each here). CI runs both in one run
 # (`make test-all`); the times are in CONTRIBUTING.md.
 TEST_WORKERS ?= 2
-PYTEST = $(BIN)/python -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile)
+PYTEST = $(BIN)/python -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder)
 test: $(BIN)/atlasnn
 	$(PYTEST) -m "not slow and not long"
 

@@ -34,3 +34,18 @@ def _drop_compiled_programs():
     crashed inside XLA near the end of the suite."""
     yield
     clear_programs()
+
+
+#: the test files of minutes each (the docs' blocks): first in the run, so that under pytest-xdist's
+#: ``--dist loadfile --no-loadscope-reorder`` (what ``make test-all`` runs) the workers start on them
+#: and the short files fill in the end, instead of a worker running a long file alone at the end
+LONG_FILES = ("test_docs.py", "test_docs_pages_1.py", "test_docs_pages_2.py")
+
+
+def pytest_collection_modifyitems(items):
+    """The long files first, then the others by their number of tests (most first, as xdist's own
+    reordering would); each file's tests keep their order."""
+    count: dict = {}
+    for item in items:
+        count[item.path] = count.get(item.path, 0) + 1
+    items.sort(key=lambda item: (item.path.name not in LONG_FILES, -count[item.path]))
