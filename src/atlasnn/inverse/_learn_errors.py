@@ -49,11 +49,16 @@ def standard_errors(residuals: tuple[Callable, float] | None, model, unknown) ->
         x = jnp.concatenate([flat, unknown.ravel()])
         split = lambda x: (eqx.combine(unravel(x[:flat.size]), static), x[flat.size:].reshape(unknown.shape))  # noqa: E731
         function = lambda x: residual(*split(x))  # noqa: E731
-        try:  # forward mode: one pass per parameter
-            jac = np.asarray(jax.jacfwd(function)(x))
-        except TypeError:  # a solve with a custom reverse rule only (the Gauss core): one pass per residual
-            jac = np.asarray(jax.jacrev(function)(x))
-        r = np.asarray(residual(*split(x)))
+        try:
+            try:  # forward mode: one pass per parameter
+                jac = np.asarray(jax.jacfwd(function)(x))
+            except TypeError:  # a solve with a custom reverse rule only (the Gauss core): one pass per residual
+                jac = np.asarray(jax.jacrev(function)(x))
+            r = np.asarray(function(x))
+        except (jax.errors.JaxRuntimeError, eqx.EquinoxRuntimeError):  # a solve that fails there: the
+            return None, []  # trained result is kept without standard errors
+    if not (np.all(np.isfinite(jac)) and np.all(np.isfinite(r))):
+        return None, []
     used = np.any(jac != 0, axis=1) | (r != 0)  # the residuals of observed values (the others are 0)
     count, size = int(used.sum()), x.size
     if count <= size:
