@@ -191,12 +191,14 @@ def test_a_kink_in_h_stops_the_constant_march_in_one_line():
     part = info.value.partial
     t = np.linspace(0.0, 1.4, 50)
     assert np.abs(part(t)[:, 0] - (1 - t ** 2 / 2)).max() < 1e-10
-    # adaptive windows pass the kinks, but not to the tolerance (docs/SOLVER.md, "Non-smooth Hamiltonians")
+    # adaptive windows pass the kinks, but not to the tolerance (docs/SOLVER.md, "Non-smooth Hamiltonians"):
+    # whether a kink falls where the check cannot see it depends on the last bits of the lengths (an
+    # energy drift of 5e-5 on an AVX2 machine, 2e-11 on an AVX-512 one), so only its bound is asserted
     period = 4 * np.sqrt(2.0)
     adaptive = solve(system, None, (0.0, 2.5 * period), solver=GaussCollocation(steps="adaptive"))
     assert np.abs(adaptive(period) - [1.0, 0.0]).max() < 1e-8
     drift = np.abs(adaptive.energy(np.linspace(0.0, 2.5 * period, 1001)) - 1.0).max()
-    assert 1e-7 < drift < 1e-3
+    assert drift < 1e-3
     # inside jax.jit the traced core spends its window budget at the kink, and says why
     traced = jax.jit(lambda z: solve(system, z, (0.0, 10.0), solver=GaussCollocation(max_windows=512))(10.0))
     with jax.enable_x64(True), pytest.raises(Exception, match="spent on windows that shrank .* not smooth there"):

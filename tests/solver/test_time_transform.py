@@ -74,6 +74,24 @@ def test_the_physical_time_is_recovered(e, periods, bound):
     assert 0 < estimate < bound
 
 
+def test_the_estimate_carries_the_rounding_of_the_energy_the_march_keeps():
+    """Kepler e = 0.99 from pericentre, two periods, the default: the march in τ keeps H at −p_t =
+    H(z0) as float64 computed it (99.5 − 100, some 40 ulps of −0.5 lost), and that energy's period
+    puts the pericentre at T ~3e-9 off, at any tolerance. A companion from the same p_t shares the
+    error (it read 3e-11); the estimate must cover it without a wild over-read."""
+    e, T = 0.99, 4 * np.pi
+    system = kepler_system(e)
+    sol = solve(system, None, (0.0, T))
+    assert isinstance(sol, TimeTransformedSolution)
+    t = np.linspace(0.0, T, 2001)
+    error = np.abs(sol(t) - kepler_exact(t, e)).max()
+    estimate = sol.estimate().max_abs
+    assert error > 1e-10  # the case is one where the rounding of H(z0) shows
+    assert error <= estimate <= 30 * error
+    shift = sol.companion().extended.z0[-1] - sol.extended.z0[-1]
+    assert shift == pytest.approx(-sol.energy_rounding()) and 0 < sol.energy_rounding() < 1e-12
+
+
 def test_windows_are_few_on_an_eccentric_orbit():
     """Ten periods of Kepler e = 0.99: tens of windows (constant lengths in t take tens of
     thousands: docs/SOLVER.md, 'Window lengths')."""

@@ -87,7 +87,7 @@ def polynomial_from(p: str, arrays: Mapping[str, np.ndarray], meta: Mapping[str,
         sol = PolynomialSolution(sys_, edges, z, e, L, stages, arrays.get("poly_check"), info,
                                  resolve=None if L is not None else solver.resolver(sys_),
                                  offsets=arrays.get("poly_offsets"))
-        sol.estimator = lambda: solver.companion(sol)
+        sol.estimator = lambda start=None: solver.companion(sol, start)
         return sol
     except CheckpointError:
         raise

@@ -77,7 +77,7 @@ def load_transformed(path: str | os.PathLike, system: HamiltonianSystem | None =
         L = arrays.get("poly_L")
         ext = PolynomialSolution(extended, edges, z, e, L, stages, arrays.get("poly_check"), ext_info,
                                  resolve=None if L is not None else solver.resolver(extended), offsets=offsets)
-        ext.estimator = lambda: solver.companion(ext)
+        ext.estimator = lambda start=None: solver.companion(ext, start)
         info.update({"path": p, "content_sha256": meta["content_sha256"], "extra": meta.get("extra") or {}})
         return TimeTransformedSolution(sys_, ext, end, info)
     except CheckpointError:

@@ -106,7 +106,8 @@ class PolynomialSolution(CompanionEstimated, AbstractSolution):
         check: every window's error check over its tolerance (≤ 1 for a window the solver
             accepted; None when not recorded).
         info: the solver's record (settings, tolerance, counts, times).
-        estimator: a function returning the companion solution of the error estimate.
+        estimator: ``estimator(start=None)``, the companion solution of the error estimate (from
+            ``start`` in place of z0 where given).
         resolve: ``resolve(z, e, h) -> L`` for windows whose L is not kept.
         outside: what evaluating outside [t0, T] does (as for [`Solution`][atlasnn.solutions.Solution]).
     """
@@ -121,7 +122,7 @@ class PolynomialSolution(CompanionEstimated, AbstractSolution):
     stages: int
     check: np.ndarray | None = None
     info: dict[str, Any] = field(default_factory=dict)
-    estimator: Callable[[], "PolynomialSolution"] | None = field(default=None, repr=False)
+    estimator: Callable[..., "PolynomialSolution"] | None = field(default=None, repr=False)
     resolve: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = field(default=None, repr=False)
     outside: str = "warn"
     offsets: np.ndarray | None = None

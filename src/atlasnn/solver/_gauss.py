@@ -447,7 +447,7 @@ class GaussCollocation(AbstractSolver):
         keep = self.keep if self.keep is not None else L.nbytes <= KEEP_BYTES
         sol = PolynomialSolution(system, edges, z, e, L if keep else None, self.stage_count, ratio, info,
                                  resolve=None if keep else self.resolver(system), offsets=edge_offsets(edges, lengths))
-        sol.estimator = lambda: self.companion(sol)
+        sol.estimator = lambda start=None: self.companion(sol, start)
         return sol
 
     def resolver(self, system):
@@ -469,15 +469,15 @@ class GaussCollocation(AbstractSolver):
 
         return resolve
 
-    def companion(self, sol: PolynomialSolution) -> PolynomialSolution:
-        """The same method over the same interval on windows half as long: the reference of the
-        error estimate (module docstring of ``atlasnn.solutions._polynomial``)."""
+    def companion(self, sol: PolynomialSolution, start: np.ndarray | None = None) -> PolynomialSolution:
+        """The same method over the same interval on windows half as long, from ``start`` (default
+        sol.z0): the reference of the error estimate (``atlasnn.solutions._polynomial``)."""
         starts, lengths = sol.edges[:-1] + sol.offsets[:-1], sol.lengths
         halves = np.repeat(0.5 * lengths, 2)
         edges = np.append(np.stack([starts, starts + 0.5 * lengths], axis=1).reshape(-1), sol.edges[-1])
         replay = compiled_gauss_replay(sol.system, stages=self.stage_count, max_iterations=self.max_iterations,
                                        newton=self.newton_for(sol.system.state_dim))
-        z0 = sol.z0
+        z0 = sol.z0 if start is None else np.asarray(start, np.float64)
         state = ReplayState(z0, np.zeros_like(z0), np.float64(0.0), np.zeros((self.stage_count, z0.size)), np.int64(0))
         zs, es, Ls = [], [], []
         with jax.enable_x64(True):

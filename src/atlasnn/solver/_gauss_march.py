@@ -48,8 +48,8 @@ from atlasnn.compile_cache import cpu_loop_options, program_cache
 from atlasnn.precision import trace_settings
 from atlasnn.solutions import gauss_tableau
 from atlasnn.solver._exported import exported_program
-from atlasnn.solver._gauss_step import (compensated_add, continued_stages, gauss_step, local_error, stage_share,
-                                        tableau_arrays)
+from atlasnn.solver._gauss_step import (FIXED_POINT_UNROLL, compensated_add, continued_stages, fixed_point_unroll,
+                                        gauss_step, local_error, stage_share, tableau_arrays)
 
 __all__ = ["GaussState", "GaussChunk", "ReplayState", "clock", "marching", "started", "try_window",
            "compiled_gauss_march", "compiled_gauss_replay", "compiled_gauss_windows", "initial_state", "FAILURES",
@@ -130,9 +130,8 @@ def started(system, tab, st: GaussState, T, h_given, until: int | None = None) -
     window (FAILURES[4])."""
 
     def start(st):
-        f0 = system.vector_field(st.z[None])[0]
+        omega, f0 = _frequency(system, st.z)
         span = T - st.t if until is None else (T - clock(st, until)) / jnp.maximum(jnp.abs(f0[until]), 1e-300)
-        omega = _frequency(system, st.z)
         h0 = jnp.where(omega > 0, 1.0 / jnp.where(omega > 0, omega, 1.0), span)
         h0 = jnp.minimum(span, h0)
         h0 = lax.stop_gradient(jnp.where(h_given > 0, h_given, h0))
@@ -168,14 +167,15 @@ _POWER_PRODUCTS = 12
 
 
 def _frequency(system, z):
-    """ω with ω² ≈ the spectral radius of A², A the field's Jacobian at z (for H = T(p) + V(q), A²'s
-    eigenvalues are −ω² of the linearised motion whatever the masses and units): power iterations
-    of A² as pairs of products A·v, each a central difference of the field at z ± δv (one
-    evaluation at two states: one place in the program that evaluates the field, where
+    """(ω, f(z)): ω² ≈ the spectral radius of A², A the field's Jacobian at z (for H = T(p) + V(q),
+    A²'s eigenvalues are −ω² of the linearised motion whatever the masses and units), by power
+    iterations of A² as pairs of products A·v, each a central difference of the field at z ± δv,
+    from a start that has a part along every component; and the field at z itself, evaluated with
+    them (one evaluation at three states: one place in the program that evaluates the field, where
     Jacobian–vector products traced it twice more and took a quarter of the solar system's
-    compile), from a start that has a part along every component. ω only sets the first window's
-    length, which the warm-up then adapts: a few digits suffice. With a declared linear part, A is
-    the Jacobian of the rest of the field."""
+    compile, and f(z) apart one more copy). ω only sets the first window's length, which the
+    warm-up then adapts: a few digits suffice. With a declared linear part, A is the Jacobian of
+    the rest of the field."""
     field = system.vector_field
     linear = getattr(system, "linear_part", None)
     if linear is not None:
@@ -188,16 +188,19 @@ def _frequency(system, z):
     delta = jnp.finfo(z.dtype).eps ** (1 / 3) * (1.0 + jnp.sqrt(jnp.sum(z ** 2)))
 
     def body(_, carry):
-        v, last, growth = carry
+        v, last, growth, _ = carry
         norm = jnp.sqrt(jnp.sum(v ** 2))
         v = v / jnp.where(norm > 0, norm, 1.0)
-        f = field(jnp.stack([z + delta * v, z - delta * v]))
-        w = (f[0] - f[1]) / (2 * delta)
+        f = field(jnp.stack([z, z + delta * v, z - delta * v]))
+        w = (f[1] - f[2]) / (2 * delta)
         size = jnp.sqrt(jnp.sum(w ** 2))
-        return w, size, last * size  # |A²u| = |Av|·|A(Av/|Av|)|: the last two products' sizes
+        return w, size, last * size, f[0]  # |A²u| = |Av|·|A(Av/|Av|)|: the last two products' sizes
 
-    _, _, growth = lax.fori_loop(0, _POWER_PRODUCTS, body, (v, jnp.zeros((), z.dtype), jnp.zeros((), z.dtype)))
-    return jnp.where(jnp.isfinite(growth), jnp.sqrt(growth), 0.0)
+    zero = jnp.zeros((), z.dtype)
+    _, _, growth, f0 = lax.fori_loop(0, _POWER_PRODUCTS, body, (v, zero, zero, jnp.zeros_like(z)))
+    if linear is not None:
+        f0 = f0 + linear.field(z)
+    return jnp.where(jnp.isfinite(growth), jnp.sqrt(growth), 0.0), f0
 
 
 def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
@@ -221,7 +224,7 @@ def _window(system, tab, settings, st: GaussState, T, rtol, atol, h_given):
     enough = 0.0 if settings["until"] is not None else jnp.where(h_given > 0, 0.0, stage_share(rtol, windows))
     r = gauss_step(field, jac, tab, st.z, st.e, h, Y0, max_iterations=settings["max_iterations"],
                    implicit_gradients=settings.get("implicit", False), linear=getattr(system, "linear_part", None),
-                   enough=lax.stop_gradient(enough))
+                   enough=lax.stop_gradient(enough), unroll=settings.get("unroll", FIXED_POINT_UNROLL))
     # the check only steers the lengths, which carry no derivative (below): kept out of gradients
     zc, ec, hc, Lc, z1 = lax.stop_gradient((st.z, st.e, h, r.L, r.z))
     end, dense = local_error(field, tab, zc, ec, hc, Lc)
@@ -294,7 +297,8 @@ def _cached(system, stages, steps, chunk, max_iterations, newton, growth, safety
             settings_key):
     tab = tableau_arrays(gauss_tableau(stages))  # NumPy float64: constants of the program (traced in x64)
     settings = {"steps": steps, "max_iterations": max_iterations, "newton": newton, "growth": growth,
-                "safety": safety, "warmup": warmup, "until": until, "max_rejects": max_rejects}
+                "safety": safety, "warmup": warmup, "until": until, "max_rejects": max_rejects,
+                "unroll": fixed_point_unroll(system)}
 
     def attempt(st, streak, T, rtol, atol, h_given):
         return try_window(system, tab, settings, st, streak, T, rtol, atol, h_given)
@@ -426,7 +430,7 @@ def _cached_replay(system, stages, max_iterations, newton, settings_key):
             hh = jnp.where(active, h, st.h_prev)
             Y0 = continued_stages(tab, st.z, st.e, st.L_prev, hh / st.h_prev)
             r = gauss_step(system.vector_field, jac, tab, st.z, st.e, hh, Y0, max_iterations=max_iterations,
-                           linear=getattr(system, "linear_part", None))
+                           linear=getattr(system, "linear_part", None), unroll=fixed_point_unroll(system))
             keep = lambda new, old: jnp.where(active, new, old)  # noqa: E731
             bad = (active & ~(r.converged & jnp.all(jnp.isfinite(r.z)))).astype(st.failed.dtype)
             new = ReplayState(keep(r.z, st.z), keep(r.e, st.e), keep(hh, st.h_prev), keep(r.L, st.L_prev),
@@ -455,7 +459,7 @@ def _cached_windows(system, stages, max_iterations, newton, settings_key):
     def one(z, e, h):
         Y0 = z + (e + h * tab["c"][:, None] * system.vector_field(z[None])[0][None, :])
         r = gauss_step(system.vector_field, jac, tab, z, e, h, Y0, max_iterations=max_iterations,
-                       linear=getattr(system, "linear_part", None))
+                       linear=getattr(system, "linear_part", None), unroll=fixed_point_unroll(system))
         return r.L
 
     return jax.jit(jax.vmap(one))

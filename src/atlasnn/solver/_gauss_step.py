@@ -19,6 +19,8 @@ by the eigenvectors of diag(b) μ (:func:`_newton`).
 
 from __future__ import annotations
 
+import functools
+
 from typing import Callable, NamedTuple
 
 import equinox as eqx
@@ -30,11 +32,38 @@ from jax import lax
 from atlasnn.solutions import shifted_legendre
 
 __all__ = ["StepResult", "gauss_step", "solved_step", "solve_stages", "compensated_add", "small_matmul", "continued_stages",
-           "local_error", "tableau_arrays", "FIXED_POINT_FLOOR", "stage_share"]
+           "local_error", "tableau_arrays", "FIXED_POINT_FLOOR", "stage_share",
+           "fixed_point_unroll"]
 
 #: fixed-point iterations per trip of the loop (measured on Hénon–Heiles, s = 12: 6.1 µs a window
 #: with 1, 4.1 µs with 3)
 FIXED_POINT_UNROLL = 3
+#: a field traced to more operations than this is iterated once per trip: each unrolled iteration
+#: is another copy of it to trace and compile, and a trip's overhead is small beside it (the outer
+#: solar system as an expression, 778 operations: a cold first solve 4.7 → 3.9 s, the march as fast;
+#: Hénon–Heiles 67, FPUT and NLS on arrays 63 and 106, the Pythagorean problem's expression 166)
+LARGE_FIELD = 150
+
+
+@functools.lru_cache(maxsize=64)
+def fixed_point_unroll(system) -> int:
+    """The fixed-point iterations per trip of the loop for ``system``'s field: FIXED_POINT_UNROLL,
+    or 1 where the field is large (LARGE_FIELD operations, counted on its trace for one state)."""
+    with jax.enable_x64(True):
+        jaxpr = jax.make_jaxpr(system.vector_field)(jax.ShapeDtypeStruct((1, system.state_dim), jnp.float64))
+    return 1 if _operations(jaxpr.jaxpr) > LARGE_FIELD else FIXED_POINT_UNROLL
+
+
+def _operations(jaxpr) -> int:
+    """The equations of a jaxpr, those of the jaxprs inside its equations included."""
+    n = 0
+    for eqn in jaxpr.eqns:
+        n += 1
+        for param in eqn.params.values():
+            inner = getattr(param, "jaxpr", None)
+            if inner is not None:
+                n += _operations(getattr(inner, "jaxpr", inner))
+    return n
 #: the fixed-point iteration counts as converged when its smallest update is at most this times
 #: max|L| (round-off of the stages, with room for a vector field that loses a few digits)
 FIXED_POINT_FLOOR = 1e-12
@@ -145,14 +174,14 @@ def _scale(z, L0):
     return jnp.maximum(w, jnp.finfo(w.dtype).tiny)
 
 
-def _fixed_point(field, tab, z, e, hb, L0, max_iterations, enough=0.0):
+def _fixed_point(field, tab, z, e, hb, L0, max_iterations, enough=0.0, unroll=FIXED_POINT_UNROLL):
     """L by fixed-point iteration from L0 = hb ⊙ f(Y0), Y0 the stage guess: (L, iterations counting
     L0's evaluation, whether it reached round-off — or, with ``enough`` > 0, an update whose largest
     entry relative to its component's size is at most ``enough``)."""
     mu = tab["mu"]
     scale = _scale(z, L0)
     L, k, dmin, dlast = _iterate(lambda L: hb[:, None] * field(z + (e + small_matmul(mu, L))), L0,
-                                 scale, max_iterations, unroll=FIXED_POINT_UNROLL, enough=enough)
+                                 scale, max_iterations, unroll=unroll, enough=enough)
     return L, k + 1, _solved(L, L0, dmin, dlast, enough * jnp.max(scale))
 
 
@@ -230,14 +259,15 @@ def _solved(L, L0, dmin, dlast, noise=0.0):
 
 
 def solve_stages(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Array, e: jax.Array, hb: jax.Array,
-                 L0: jax.Array, max_iterations: int, linear=None,
-                 enough=0.0) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+                 L0: jax.Array, max_iterations: int, linear=None, enough=0.0,
+                 unroll: int = FIXED_POINT_UNROLL) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     """The stage equations L = hb ⊙ f(z + (e + μL)) solved from L0 = hb ⊙ f(Y0): by fixed-point
     iteration, and by simplified Newton where that fails and ``jacobian`` is given; with a
     ``linear`` part (:class:`atlasnn.systems.LinearPart`), by simplified Newton with it as the
     matrix from the start (the fixed-point iteration would not contract on its stiff modes).
     ``enough``: the fixed-point iteration may stop above round-off, at an update of at most this
-    relative to each component's size (:func:`stage_share`; 0: round-off). Returns (L, iterations,
+    relative to each component's size (:func:`stage_share`; 0: round-off); ``unroll``: its
+    iterations per trip of the loop (:func:`fixed_point_unroll`). Returns (L, iterations,
     whether it reached round-off or ``enough``, whether Newton was used). Forward only:
     its loops cannot be differentiated in reverse (:func:`gauss_step` with ``implicit_gradients``)."""
     if linear is not None:
@@ -247,7 +277,7 @@ def solve_stages(field: Callable, jacobian: Callable | None, tab: dict, z: jax.A
         L, k, ok = _newton(field, lambda _, shifts: linear.factor(shifts), tab, z, e, hb, L0, max_iterations,
                            GLOBAL_FLOOR, noise)
         return L, k, ok, jnp.asarray(True)
-    L, k, ok = _fixed_point(field, tab, z, e, hb, L0, max_iterations, enough)
+    L, k, ok = _fixed_point(field, tab, z, e, hb, L0, max_iterations, enough, unroll)
     used_newton = jnp.asarray(False)
     if jacobian is not None:
         # a loop that runs once when the fixed-point iteration failed and not at all otherwise: in a
@@ -351,7 +381,7 @@ def _tangent_solve(max_iterations: int, tab: dict | None = None, linear=None, z=
 
 def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Array, e: jax.Array, h, Y0: jax.Array,
                *, max_iterations: int = 100, implicit_gradients: bool = False, linear=None,
-               enough=0.0) -> StepResult:
+               enough=0.0, unroll: int = FIXED_POINT_UNROLL) -> StepResult:
     """One window of length ``h`` from (z, e) with the stage guess Y0 (s, n).
 
     ``field`` maps stage values (s, n) to f(Y) (s, n); ``jacobian`` maps a state (n,) to A(z)
@@ -375,13 +405,13 @@ def gauss_step(field: Callable, jacobian: Callable | None, tab: dict, z: jax.Arr
         def solve(_, guess):
             # the counts travel as floats: custom_root gives its auxiliary outputs zero tangents of their
             # own dtype, which JAX refuses for integers and booleans (their tangents must be float0)
-            L, k, ok, used = solve_stages(field, jacobian, tab, z, e, hb, guess, max_iterations, linear, enough)
+            L, k, ok, used = solve_stages(field, jacobian, tab, z, e, hb, guess, max_iterations, linear, enough, unroll)
             return L, jnp.stack([k, ok, used]).astype(L.dtype)
 
         L, aux = lax.custom_root(residual, L0, solve, _tangent_solve(max_iterations, tab, linear, z, h), has_aux=True)
         k, ok, used_newton = aux[0].astype(jnp.int32), aux[1] > 0, aux[2] > 0
     else:
-        L, k, ok, used_newton = solve_stages(field, jacobian, tab, z, e, hb, L0, max_iterations, linear, enough)
+        L, k, ok, used_newton = solve_stages(field, jacobian, tab, z, e, hb, L0, max_iterations, linear, enough, unroll)
     z1, e1 = compensated_add(z, e, jnp.sum(L, axis=0))
     return StepResult(z1, e1, L, k, ok, used_newton)
 

@@ -91,7 +91,7 @@ def march_to(program, z: np.ndarray, e: np.ndarray, h: float, steps: int) -> tup
 @program_cache
 @functools.lru_cache(maxsize=32)
 def _compiled_frequency(system: Any):
-    return jax.jit(lambda z: _frequency(system, z))
+    return jax.jit(lambda z: _frequency(system, z)[0])
 
 
 def fastest_frequency(system: Any, z0: np.ndarray) -> float:
