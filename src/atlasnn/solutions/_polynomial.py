@@ -48,6 +48,8 @@ def edge_offsets(edges: np.ndarray, lengths: np.ndarray) -> np.ndarray:
 _MAX_NODES = 1_000_000
 #: times evaluated at once (bounds the memory of the gathered polynomials)
 _EVAL_CHUNK = 65_536
+#: above this many bytes of gathered stage increments, times are evaluated window by window
+_GATHER_BYTES = 16 << 20
 
 
 def _at_least_roundoff(delta: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -192,10 +194,28 @@ class PolynomialSolution(CompanionEstimated, AbstractSolution):
         basis = shifted_legendre(theta, self.stages)  # (m, s + 1)
         weights = np.stack([theta[:, None] * (basis[:, :-1] @ self._tab.value.T), basis @ self._tab.rate.T], axis=1)
         pick = slice(None) if component is None else slice(component, component + 1)
-        rows, z, e = self._stage_rows(k, pick), self.z[k, pick], self.e[k, pick]
-        both = weights @ rows  # (m, 2, 2d): ẑ − z_k and h·dẑ/dt
+        z, e = self.z[k, pick], self.e[k, pick]
+        both = self._weighted_rows(weights, k, pick)  # (m, 2, 2d): ẑ − z_k and h·dẑ/dt
         value, rate = z + (e + both[:, 0]), both[:, 1] / length[:, None]
         return (value, rate) if component is None else (value[:, 0], rate[:, 0])
+
+    def _weighted_rows(self, weights: np.ndarray, k: np.ndarray, pick: slice) -> np.ndarray:
+        """weights (m, 2, s) times the stage increments of windows k: (m, 2, columns). Where a
+        copy of every time's rows would be large and the times are many per window, one product
+        per window instead (NLS on 512 points at 2 000 times in 12 windows: 260 MB gathered, 0.8 s
+        the first time)."""
+        columns = len(range(*pick.indices(self.system.state_dim)))
+        unique, where = np.unique(k, return_inverse=True)
+        if k.size * self.stages * columns * 8 <= _GATHER_BYTES or 4 * unique.size > k.size:
+            return weights @ self._stage_rows(k, pick)
+        rows = self._stage_rows(unique, pick)  # (u, s, columns)
+        out = np.empty((k.size, 2, columns))
+        order = np.argsort(where, kind="stable")
+        bounds = np.searchsorted(where[order], np.arange(unique.size + 1))
+        for j in range(unique.size):
+            times = order[bounds[j]:bounds[j + 1]]
+            out[times] = weights[times] @ rows[j]
+        return out
 
     def pieces(self) -> list[tuple[Any, float, float, float]]:
         raise NotImplementedError("a polynomial solution has no network pieces; its estimate() compares it "
