@@ -256,6 +256,23 @@ def test_a_solution_without_its_polynomials_solves_windows_again():
     assert np.abs(bare(t) - kept(t)).max() < 1e-14
 
 
+def test_many_times_per_window_are_evaluated_window_by_window_alike(monkeypatch):
+    # above a size of gathered polynomials, times are evaluated one window at a time (one product
+    # per window): the same values and derivatives as gathering each time's polynomial, in and out of order
+    from atlasnn.solutions import _polynomial
+
+    sol = solve(henon_heiles(), None, (0.0, 12.0))
+    t = np.random.default_rng(0).uniform(0.0, 12.0, 997)
+    gathered = sol(t), sol.derivative(t), sol.window_values(t, sol.window_index(t), 2)
+    monkeypatch.setattr(_polynomial, "_GATHER_BYTES", 0)
+    assert 4 * sol.n_windows <= t.size  # the window-by-window path is taken
+    windowed = sol(t), sol.derivative(t), sol.window_values(t, sol.window_index(t), 2)
+    for a, b in zip(gathered[:2], windowed[:2]):
+        assert np.abs(a - b).max() <= 1e-15 * np.abs(a).max()
+    for a, b in zip(gathered[2], windowed[2]):
+        assert a.shape == b.shape == t.shape and np.abs(a - b).max() <= 1e-15 * np.abs(a).max()
+
+
 @pytest.mark.parametrize("settings, needle", [
     ({"stages": 0}, "stages must be an integer from 1 to 16"),
     ({"stages": 40}, "stages must be an integer from 1 to 16"),
