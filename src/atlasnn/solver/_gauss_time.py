@@ -187,10 +187,10 @@ def potential_scale_values(system: HamiltonianSystem, z: np.ndarray) -> np.ndarr
     return (-_potential(system, np.asarray(z, np.float64)[:, : system.dim])) ** -1.5
 
 
-#: positions per evaluation of V (padded to it): one program for every count the watch sees
-#: (128, 256, 512 … windows a call), where each count compiled its own (0.13 s each for the
-#: outer solar system's expression)
-_POTENTIAL_ROWS = 128
+#: positions per evaluation of V (padded to it): one program, and one call, for every count the
+#: watch sees (128, 256, 512, 1 024 windows a call), where each count compiled its own (0.13 s
+#: each for the outer solar system's expression)
+_POTENTIAL_ROWS = 1024
 
 
 def _potential(system: HamiltonianSystem, q: np.ndarray) -> np.ndarray:
