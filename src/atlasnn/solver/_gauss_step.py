@@ -20,7 +20,6 @@ by the eigenvectors of diag(b) μ (:func:`_newton`).
 from __future__ import annotations
 
 import functools
-
 from typing import Callable, NamedTuple
 
 import equinox as eqx
@@ -29,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from atlasnn.compile_cache import program_cache
 from atlasnn.solutions import shifted_legendre
 
 __all__ = ["StepResult", "gauss_step", "solved_step", "solve_stages", "compensated_add", "small_matmul", "continued_stages",
@@ -45,6 +45,7 @@ FIXED_POINT_UNROLL = 3
 LARGE_FIELD = 150
 
 
+@program_cache
 @functools.lru_cache(maxsize=64)
 def fixed_point_unroll(system) -> int:
     """The fixed-point iterations per trip of the loop for ``system``'s field: FIXED_POINT_UNROLL,
@@ -64,6 +65,8 @@ def _operations(jaxpr) -> int:
             if inner is not None:
                 n += _operations(getattr(inner, "jaxpr", inner))
     return n
+
+
 #: the fixed-point iteration counts as converged when its smallest update is at most this times
 #: max|L| (round-off of the stages, with room for a vector field that loses a few digits)
 FIXED_POINT_FLOOR = 1e-12
