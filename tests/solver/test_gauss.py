@@ -256,6 +256,25 @@ def test_a_solution_without_its_polynomials_solves_windows_again():
     assert np.abs(bare(t) - kept(t)).max() < 1e-14
 
 
+def test_windows_solved_again_are_padded_to_few_not_to_the_block(monkeypatch):
+    # a call that needs five windows solves eight, not a block of thousands (50 s a call on a wide NLS)
+    from atlasnn.solver import _gauss
+
+    sizes, real = [], _gauss.compiled_gauss_windows
+
+    def recording(*args, **kwargs):
+        program = real(*args, **kwargs)
+        return lambda z, e, h: sizes.append(len(h)) or program(z, e, h)
+
+    monkeypatch.setattr(_gauss, "compiled_gauss_windows", recording)
+    system = henon_heiles()
+    bare = solve(system, None, (0.0, 12.0), solver=GaussCollocation(keep=False))
+    kept = solve(system, None, (0.0, 12.0))
+    t = np.linspace(0.0, bare.edges[5], 40, endpoint=False)
+    assert np.abs(bare(t) - kept(t)).max() < 1e-14
+    assert sizes == [8]
+
+
 def test_many_times_per_window_are_evaluated_window_by_window_alike(monkeypatch):
     # above a size of gathered polynomials, times are evaluated one window at a time (one product
     # per window): the same values and derivatives as gathering each time's polynomial, in and out of order

@@ -44,3 +44,19 @@ def test_a_warm_cache_serves_no_program_of_another_system(tmp_path, monkeypatch)
     assert abs(x_at_3(SLOW) - np.cos(3.0)) < 1e-8  # the cache now holds SLOW's program
     swapped = dataclasses.replace(SLOW, hamiltonian=FAST.hamiltonian, parametric=FAST.parametric)
     assert abs(x_at_3(swapped) - np.cos(6.0)) < 1e-8
+
+
+def test_the_gradient_is_jitted_inside_a_trace_and_not_on_numbers():
+    # inside a compiled program ∇H is one jitted function per system (traced once per shape); called
+    # on numbers it is not compiled (a system built anew each call paid a compile each: 14x)
+    import jax
+
+    from atlasnn.systems import _hamiltonian
+
+    system = expression_system("p**2/2 + x**4/4", ["x"], ["p"], z0=[1.0, 0.0], name="quartic")
+    before = _hamiltonian._jitted_gradient.cache_info().currsize
+    eager = np.asarray(system.grad(np.array([[2.0, 3.0]])))
+    assert _hamiltonian._jitted_gradient.cache_info().currsize == before
+    traced = np.asarray(jax.jit(system.grad)(np.array([[2.0, 3.0]])))
+    assert _hamiltonian._jitted_gradient.cache_info().currsize == before + 1
+    assert np.allclose(eager, [[8.0, 3.0]]) and np.allclose(traced, eager, rtol=1e-15, atol=0)

@@ -199,22 +199,46 @@ class TimeTransformedSolution(AbstractSolution):
         return out
 
     def estimate(self, z0: Any = None) -> ErrorEstimate:
-        """The error estimate at three times per window (its start and the middles of its halves in
-        τ, read as physical times) and at T: the companion minus this solution there. ``z0`` is
-        accepted for the common interface; the state at t0 is exact here."""
+        """The error estimate: the companion minus this solution at 3(s + 1) Chebyshev points in τ of
+        each half window (fewer where the windows are many: at most ``_MAX_NODES`` points), for
+        each half its largest difference per component placed at its worst point, and at T.
+        Three points a window missed the largest error inside it and said "accurate" of answers
+        3–6x over (Kepler e = 0.97 from apocentre at rtol 1e-8). ``z0`` is accepted for the
+        common interface; the state at t0 is exact here."""
         cached = self.__dict__.get("_estimate")
-        if cached is None:
-            ext = self.extended
-            starts, lengths = ext.edges[:-1], np.diff(ext.edges)
-            tau = np.stack([starts, starts + 0.25 * lengths, starts + 0.75 * lengths], axis=1).reshape(-1)
-            step = max(1, -(-tau.size // _MAX_NODES))
-            tau = tau[::step]
-            k = np.repeat(np.arange(ext.n_windows), 3)[::step]
-            t = ext.window_values(tau, k, self.clock)[0]
-            t = np.append(t[t < self.end], self.end)
-            z = self(t)
-            cached = self.__dict__["_estimate"] = ErrorEstimate(
-                t, _at_least_roundoff(self.companion()(t) - z, z), z, steps=[3], converged=True)
+        if cached is not None:
+            return cached
+        ext, companion = self.extended, self.companion()
+        n = ext.n_windows
+        points = int(np.clip(_MAX_NODES // (2 * n), 2, 3 * (ext.stages + 1)))
+        grid = 0.5 * (1.0 - np.cos(np.pi * np.arange(points) / (points - 1)))  # on [0, 1]
+        step = max(1, -(-2 * n * points // _MAX_NODES))  # every step-th window where even 2 points are too many
+        windows = np.arange(0, n, step)
+        ts, ds, zs = [], [], []
+        block = max(1, _EVAL_CHUNK // (2 * points))
+        for a in range(0, windows.size, block):
+            k = windows[a:a + block]
+            start, length = ext.edges[k], ext.length_of(k)
+            theta = 0.5 * (np.arange(2)[None, :, None] + grid[None, None, :])  # (1, 2, points)
+            tau = (start[:, None, None] + length[:, None, None] * theta).reshape(-1)
+            Z = ext.window_values(tau, np.repeat(k, 2 * points))[0]
+            t, z = Z[:, self.clock], Z[:, self._physical]
+            inside = t <= self.end
+            d = np.where(inside[:, None], companion(np.minimum(t, self.end)) - z, 0.0)
+            d, t, z = (x.reshape(k.size * 2, points, -1) for x in (d, t[:, None], z))
+            worst = np.argmax(np.abs(d).max(axis=2), axis=1)  # each half's worst point
+            keep = inside.reshape(k.size * 2, points).any(axis=1)
+            pick = np.arange(k.size * 2)
+            ts.append(t[pick, worst, 0][keep])
+            ds.append(np.abs(d).max(axis=1)[keep])
+            zs.append(z[pick, worst][keep])
+        end = np.asarray([self.end])
+        z_end = self(end)
+        t = np.concatenate(ts + [end])
+        z = np.concatenate(zs + [z_end])
+        d = np.concatenate(ds + [companion(end) - z_end])
+        cached = self.__dict__["_estimate"] = ErrorEstimate(t, _at_least_roundoff(d, z), z, steps=[3],
+                                                            converged=True)
         return cached
 
     # ------------------------------------------------------------------ attributes

@@ -184,7 +184,10 @@ class HamiltonianSystem:
         """∇H(z) = (∂H/∂q, ∂H/∂p) for z of shape (..., 2d)."""
         z = jnp.asarray(z)
         flat = z.reshape(-1, self.state_dim)
-        g = jax.vmap(jax.grad(self._h_single) if self.traced else _jitted_gradient(self))(flat)
+        # inside a trace (a compiled program), a jitted ∇H: traced once per shape of states; called
+        # on numbers, op by op (compiling it for a system built anew each call cost 14x)
+        jitted = isinstance(flat, jax.core.Tracer) and not self.traced
+        g = jax.vmap(_jitted_gradient(self) if jitted else jax.grad(self._h_single))(flat)
         return g.reshape(z.shape)
 
     def vector_field(self, z: jax.Array) -> jax.Array:
