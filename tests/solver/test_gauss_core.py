@@ -132,6 +132,21 @@ def test_vmap_gives_each_members_own_solve_and_gradient():
 
 
 @pytest.mark.long
+def test_vmap_over_a_value_h_closes_over_is_forward_mode_or_refused_in_one_line():
+    # the reverse-mode core cannot be mapped over a value H closes over (JAX's sequential_vmap asserts);
+    # the forward-mode one can: q(3) = cos(3 sqrt(k))
+    def q3(k, differentiation):
+        system = HamiltonianSystem(lambda q, p: 0.5 * p[0] ** 2 + 0.5 * k * q[0] ** 2, 1, z0=(1.0, 0.0))
+        return solve(system, None, (0.0, 3.0), solver=GaussCollocation(differentiation=differentiation))(3.0)[0]
+
+    ks = jnp.array([1.0, 2.0, 3.0])
+    got = np.asarray(jax.vmap(lambda k: q3(k, "forward"))(ks))
+    assert np.abs(got - np.cos(3 * np.sqrt(np.asarray(ks)))).max() < 1e-12
+    with pytest.raises(ConfigError, match="differentiation='forward'") as info:
+        jax.vmap(lambda k: q3(k, "reverse"))(ks)
+    assert "\n" not in str(info.value)
+
+
 def test_a_march_past_its_budget_raises_naming_it():
     system = kepler()
     run = jax.jit(lambda z: solve(system, z, (0.0, 10 * PERIOD), solver=GaussCollocation(max_windows=5))(1.0))

@@ -41,6 +41,10 @@ __all__ = ["compiled_gauss_core", "gauss_core", "FORWARD_NEEDED", "LOOPS", "trac
 #: the line a jax.jvp of the reverse-mode core raises
 FORWARD_NEEDED = ("jax.jvp/jax.jacfwd through solve need GaussCollocation(differentiation='forward') (the default, "
                   "'reverse', serves jax.grad/jax.vjp)")
+#: the line a jax.vmap over a value H closes over raises in reverse mode (JAX's sequential_vmap of
+#: the adjoint's forward march asserts on batched closures)
+VMAP_CLOSURE = ("jax.vmap over a value that H closes over needs GaussCollocation(differentiation='forward') "
+                "(the default, 'reverse', maps over z0, t0 and T, and serves jax.grad with respect to the value)")
 #: GaussCollocation.differentiation → how (module docstring)
 LOOPS = {"reverse": "the march's adjoint", "forward": "through the loop"}
 
@@ -218,6 +222,10 @@ def gauss_core(system: HamiltonianSystem, z0: Any, t0: Any, T: Any, *, stages: i
             if "forward-mode" not in str(exc):
                 raise
             raise ConfigError(FORWARD_NEEDED) from None
+        except AssertionError:
+            if not system.traced:
+                raise
+            raise ConfigError(VMAP_CLOSURE) from None
     return _solution(system, stages, t0, T, out)
 
 
