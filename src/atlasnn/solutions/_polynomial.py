@@ -70,10 +70,14 @@ class CompanionEstimated:
         """The companion solution of the error estimate (computed on first use and kept)."""
         kept = self.__dict__.get("_companion")
         if kept is None:
-            if self.estimator is None:
-                raise ConfigError("this solution has no error estimator (it was built without its solver)")
-            kept = self.__dict__["_companion"] = self.estimator()
+            kept = self.__dict__["_companion"] = self.companion_from()
         return kept
+
+    def companion_from(self, start: np.ndarray | None = None):
+        """A companion solution from ``start`` in place of z0 (None: z0), not kept."""
+        if self.estimator is None:
+            raise ConfigError("this solution has no error estimator (it was built without its solver)")
+        return self.estimator() if start is None else self.estimator(start)
 
     def error_estimate(self, t) -> np.ndarray:
         """The estimated error z(t) − ẑ(t) at times of the interval (the companion minus this

@@ -163,13 +163,10 @@ class TimeTransformedSolution(AbstractSolution):
         """The extended solution's companion (windows half as long in τ) in physical time."""
         kept = self.__dict__.get("_companion")
         if kept is None:
-            ext = self.extended
-            if ext.estimator is None:
-                raise ConfigError("this solution has no error estimator (it was built without its solver)")
-            start = np.array(ext.z0, np.float64)
+            start = np.array(self.extended.z0, np.float64)
             start[-1] -= self.energy_rounding()
             kept = self.__dict__["_companion"] = TimeTransformedSolution(
-                self.system, ext.estimator(start), self.end, {"companion_of": self.info.get("solver")},
+                self.system, self.extended.companion_from(start), self.end, {"companion_of": self.info.get("solver")},
                 outside="allow")
         return kept
 
@@ -212,6 +209,7 @@ class TimeTransformedSolution(AbstractSolution):
         n = ext.n_windows
         points = int(np.clip(_MAX_NODES // (2 * n), 2, 3 * (ext.stages + 1)))
         grid = 0.5 * (1.0 - np.cos(np.pi * np.arange(points) / (points - 1)))  # on [0, 1]
+        theta = 0.5 * (np.arange(2)[None, :, None] + grid[None, None, :])  # the halves' points, (1, 2, points)
         step = max(1, -(-2 * n * points // _MAX_NODES))  # every step-th window where even 2 points are too many
         windows = np.arange(0, n, step)
         ts, ds, zs = [], [], []
@@ -219,19 +217,18 @@ class TimeTransformedSolution(AbstractSolution):
         for a in range(0, windows.size, block):
             k = windows[a:a + block]
             start, length = ext.edges[k], ext.length_of(k)
-            theta = 0.5 * (np.arange(2)[None, :, None] + grid[None, None, :])  # (1, 2, points)
             tau = (start[:, None, None] + length[:, None, None] * theta).reshape(-1)
             Z = ext.window_values(tau, np.repeat(k, 2 * points))[0]
             t, z = Z[:, self.clock], Z[:, self._physical]
             inside = t <= self.end
             d = np.where(inside[:, None], companion(np.minimum(t, self.end)) - z, 0.0)
             d, t, z = (x.reshape(k.size * 2, points, -1) for x in (d, t[:, None], z))
+            halves = np.arange(k.size * 2)
             worst = np.argmax(np.abs(d).max(axis=2), axis=1)  # each half's worst point
             keep = inside.reshape(k.size * 2, points).any(axis=1)
-            pick = np.arange(k.size * 2)
-            ts.append(t[pick, worst, 0][keep])
+            ts.append(t[halves, worst, 0][keep])
             ds.append(np.abs(d).max(axis=1)[keep])
-            zs.append(z[pick, worst][keep])
+            zs.append(z[halves, worst][keep])
         end = np.asarray([self.end])
         z_end = self(end)
         t = np.concatenate(ts + [end])
