@@ -464,8 +464,13 @@ def render(text: str) -> str:
         if record is None:
             body = f"(no record yet: `{RECORDS[name]}`)\n"
         else:
-            load = (record.get("machine") or {}).get("load_average")
-            note = f" Load average {load[0]:.1f} while it ran." if load else ""
+            machine = record.get("machine") or {}
+            load, model = machine.get("load_average"), (machine.get("lscpu") or {}).get("Model name")
+            note = ""
+            if model:  # each table names its machine: records of one page may come from different ones
+                one = " (one core used)" if machine.get("cores_available") == 1 else ""
+                note += f" On a {machine.get('cpu_count', '?')}-core {model}{one}."
+            note += f" Load average {load[0]:.1f} while it ran." if load else ""
             updated = record.get("updated")
             if updated:  # a record whose named rows a later run replaced (``--update``)
                 rerun = updated.get("problems") or updated.get("methods") or []

@@ -219,22 +219,66 @@ def test_a_linear_part_without_the_rests_flow_is_refused_in_one_line():
     assert "\n" not in str(info.value)
 
 
-def test_a_stability_bound_step_takes_the_scheme_that_reaches_furthest():
-    """FPUT-β excited in its slowest mode: the step is held by the fastest mode's stability, not
-    by accuracy; the default then weighs McLachlan's order-4 scheme (the furthest reach per force
-    evaluation) against the tolerance's, takes the one of fewer evaluations, and meets the tolerance."""
+def _slow_mode_chain(n: int):
     from atlasnn.systems import fput
 
-    n = 32
-    chain = fput(particles=n, beta=1.0)
-    z0 = np.concatenate([np.zeros(n), np.sin(np.pi * np.arange(1, n + 1) / (n + 1))])
-    sol = solve(chain, z0, (0.0, 50.0), rtol=1e-8)
-    costs = sol.info["scheme_choice"]
-    assert sol.info["limited_by"] == "stability" and "mclachlan4" in costs and len(costs) == 2
-    assert sol.info["scheme"] == min(costs, key=costs.get)
+    return fput(particles=n, beta=1.0), np.concatenate([np.zeros(n), np.sin(np.pi * np.arange(1, n + 1) / (n + 1))])
+
+
+@pytest.mark.parametrize("rtol, scheme", [(1e-8, "mclachlan4"), (1e-11, "blanes_moan6")])
+def test_a_stability_bound_step_takes_the_cheapest_scheme_that_meets_the_tolerance_at_its_limit(rtol, scheme):
+    """FPUT-β of 128 particles excited in its slowest mode: the step is held by the fastest mode's
+    stability, not by accuracy; the default probes the schemes at their stability limits, the
+    cheapest there first (McLachlan's order 4, then Blanes–Moan's order 6), and takes the first
+    that meets the tolerance there: at 1e-8 McLachlan's, at 1e-11 Blanes–Moan's (not the
+    tolerance's Sofroniou–Spaletta 10, 3.5 times the force evaluations at its limit). The check
+    compares with steps 7/8 as long — a longer step than one held at the limit is not stable —
+    and the tolerance is met."""
+    chain, z0 = _slow_mode_chain(128)
+    sol = solve(chain, z0, (0.0, 50.0), rtol=rtol)
+    assert sol.info["limited_by"] == "stability" and sol.info["scheme"] == scheme
+    assert list(sol.info["scheme_choice"])[-1] == scheme and "sofspa10" not in sol.info["scheme_choice"]
+    assert sol.info["check_steps"] * 7 == sol.info["steps"] * 8 and sol.info["check"] <= 1.0
     t = np.linspace(0.0, 50.0, 40)
     ref = reference_solution(chain, z0, t, rtol=1e-13, atol=1e-13)
-    assert np.abs(sol(t) - ref).max() <= 3e-8 * np.abs(ref).max()
+    assert np.abs(sol(t) - ref).max() <= 3 * rtol * np.abs(ref).max() + 1e-13
+
+
+@pytest.mark.parametrize("modes", ["slowest", "all"])
+def test_where_the_reach_scheme_misses_the_tolerance_the_schemes_are_weighed_by_their_cost(modes):
+    """Where the reach schemes at their stability limits miss the tolerance (a chain of 32 in its
+    slowest mode at 1e-8; energy in every mode at 1e-9), the tolerance's scheme is piloted too,
+    the one of fewer force evaluations over the interval taken, and the tolerance met; the check
+    compares with steps twice as long unless stability holds the step."""
+    n, T, rtol = (32, 50.0, 1e-8) if modes == "slowest" else (32, 100.0, 1e-9)
+    chain, z0 = _slow_mode_chain(n)
+    if modes == "all":
+        p = np.random.default_rng(0).standard_normal(n)
+        z0 = np.concatenate([np.zeros(n), p / np.linalg.norm(p)])
+    sol = solve(chain, z0, (0.0, T), rtol=rtol)
+    costs = sol.info["scheme_choice"]
+    assert len(costs) >= 2 and sol.info["scheme"] == min(costs, key=costs.get)
+    a, b = (7, 8) if sol.info.get("limited_by") == "stability" else (2, 1)
+    assert sol.info["check_steps"] * a == sol.info["steps"] * b and sol.info["check"] <= 1.0
+    t = np.linspace(0.0, T, 50)
+    ref = reference_solution(chain, z0, t, rtol=1e-13, atol=1e-13)
+    assert np.abs(sol(t) - ref).max() <= 3 * rtol * np.abs(ref).max()
+
+
+def test_a_reach_scheme_whose_check_fails_gives_way_to_the_tolerances_scheme():
+    """FPUT-β of 64 particles in its slowest mode over [0, 200]: the pilots, 16 steps from z0, see
+    McLachlan's scheme meet 1e-7 at its stability limit, but the energy then spreads into faster
+    modes and the check finds the error far above the tolerance. The retry reads both pilots as
+    many times too low and takes the tolerance's scheme (order 6), cheaper than McLachlan's at
+    the step accuracy now asks; the tolerance is met."""
+    chain, z0 = _slow_mode_chain(64)
+    sol = solve(chain, z0, (0.0, 200.0), rtol=1e-7, atol=1e-9)
+    costs = sol.info["retry_choice"]
+    assert sol.info["first_scheme"] == "mclachlan4" and sol.info["first_check"] > 10
+    assert sol.info["scheme"] == "blanes_moan6" == min(costs, key=costs.get) and sol.info["check"] <= 1.0
+    t = np.linspace(0.0, 200.0, 60)
+    ref = reference_solution(chain, z0, t, rtol=1e-13, atol=1e-13)
+    assert np.abs(sol(t) - ref).max() <= 3e-7 * np.abs(ref).max()
 
 
 def test_a_float32_state_inside_jit_is_told_what_to_do():

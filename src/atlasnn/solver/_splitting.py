@@ -24,11 +24,12 @@ import numpy as np
 
 from atlasnn.errors import ConfigError
 from atlasnn.limits import available_memory
-from atlasnn.solutions import SplittingSolution, TracedSplittingSolution, linear_splitting, splitting_scheme
+from atlasnn.solutions import (SplittingSolution, TracedSplittingSolution, linear_splitting, splitting_scheme,
+                               stability_limit)
 from atlasnn.solver._base import AbstractSolver, register_solver, solve_one
 from atlasnn.solver._collocation import require_float64
 from atlasnn.solver._gauss_core import traced_inputs
-from atlasnn.solver._splitting_march import compiled_split_march, pilot_step, step_bounds
+from atlasnn.solver._splitting_march import PILOT_TRIES, batch_frequency, compiled_split_march, pilot_step, step_bounds
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["SplittingComposition", "SCHEME_BY_TOLERANCE", "scheme_for"]
@@ -38,38 +39,64 @@ __all__ = ["SplittingComposition", "SCHEME_BY_TOLERANCE", "scheme_for"]
 #: and Moan's order 6 the fastest or within 1.3× of it at 1e-5 and 1e-7 on every problem held by
 #: accuracy; Sofroniou and Spaletta's order 10 the fastest at 1e-9 and 1e-11 on Kepler's problem and
 #: the chain with energy in every mode, within 1.2× on Hénon–Heiles. Where stability holds the step,
-#: REACH_SCHEME is weighed against these.)
+#: the schemes of REACH_LADDER are weighed against these.)
 SCHEME_BY_TOLERANCE = (("1e-8", "blanes_moan6"), ("0", "sofspa10"))
 #: the most memory the kept states of one solution take (past it, fewer are kept and evaluating
 #: between them takes more steps)
 KEEP_BYTES = 256 << 20
-#: the most memory one call's buffer of kept states takes across the members of a batch: the program
-#: fills and returns it whole, so a large one is a fixed cost a call (FPUT-β, N = 256: a 4 MiB buffer
-#: made each of the pilot's 32-step calls take 1.9 ms, its steps 0.4 ms)
-_CHUNK_BYTES = 256 << 10
-#: marches at most with a step from the tolerance: each checked against a march with steps twice
-#: as long, and shortened where the check finds the error above the tolerance (an orbit reaching
+#: the most memory one call's buffer of kept states takes across the members of a batch, in the
+#: march that keeps them: the program fills and returns it whole, a fixed cost a call (FPUT-β,
+#: N = 1 024: a 16 MiB buffer cost 2.2 ms a call), and each call is a fixed cost too (there, 228
+#: steps kept in calls of 16 states took 10.4 ms, in calls of 256 states 7.5 ms, in one block 5.1)
+_CHUNK_BYTES = 4 << 20
+#: the buffer of the pilot's program, whose calls keep one state
+_SMALL_CHUNK = 16
+#: marches at most with a step from the tolerance: each checked against a march with longer
+#: steps, and shortened where the check finds the error above the tolerance (an orbit reaching
 #: faster frequencies, or larger errors, than the pilot's first steps saw)
 _TRIES = 4
+#: the check's step over the march's, a/b: twice as long, or where the step is held by stability
+#: 7/8 (a march with steps longer than one held at the stability limit is not safe: on FPUT-β
+#: N = 256, 4/3 and 8/7 times the step both blew up, and the check fell back to half steps, twice
+#: the march's cost); the march's step count a multiple of a, so that every b-th step of the
+#: check lands on a step of the march
+_CHECK_RATIO = (2, 1)
+_CHECK_RATIO_LIMITED = (7, 8)
+#: the check's times at most (step points of both marches, so no partial step: more cost only a
+#: row of the buffer each; at 15 the check read 0.72 of the tolerance on a chain of random masses
+#: and springs whose error reached 1.5 of it between them)
+_CHECK_TIMES = 60
 
 
-#: the scheme tried beside the tolerance's where that one is held to its stability limit: the
-#: furthest stability limit per force evaluation of the schemes of order 4 and more (0.60·2/ω
-#: against Kahan–Li 8's 0.18; ``stability_limit``)
-REACH_SCHEME = "mclachlan4"
+#: the schemes probed at their stability limits when none is given, in order of their cost per
+#: unit of h·ω at that limit (force evaluations over the limit x*: McLachlan 4 1.66, Blanes–Moan 6
+#: 3.19, Sofroniou–Spaletta 10 11.1; ``stability_limit``), those cheaper there than the
+#: tolerance's scheme: where stability holds the step, the first that meets the tolerance at its
+#: limit is the cheapest (on FPUT-β, N = 256, at rtol 1e-11, Blanes–Moan 6 at its limit took 2 310
+#: force evaluations where the tolerance's Sofroniou–Spaletta 10 would take 8 120 and McLachlan's
+#: scheme, held by accuracy, 3 900)
+REACH_LADDER = ("mclachlan4", "blanes_moan6", "sofspa10")
 
 
 @dataclass
 class _Plan:
-    """A march planned: the scheme, its order, its compiled program and buffer, the step count,
-    and the pilot's record."""
+    """A march planned: the scheme, its order, the compiled program of the pilot and the check
+    (a small buffer), the step count, and the pilot's record."""
 
     scheme: str
     order: int
     program: Any
-    chunk: int
     steps: int
     record: dict[str, Any]
+    settled: bool = True  # whether the pilot found a step (not only its last try)
+    omega: float | None = None  # the fastest linearised frequency the pilot's step bounds took
+    largest: float = math.inf  # the largest stable step (``step_bounds``)
+
+    def check_ratio(self, step: float) -> tuple[int, int]:
+        """The check's step over the march's ``step``, as (a, b) (``_CHECK_RATIO``): 7/8 where
+        stability held the step, or where twice the step would pass the largest stable one."""
+        limited = self.record.get("limited_by") == "stability" or 2.0 * step > self.largest
+        return _CHECK_RATIO_LIMITED if limited else _CHECK_RATIO
 
 
 def scheme_for(rtol: float) -> str:
@@ -99,7 +126,7 @@ class SplittingComposition(AbstractSolver):
         scheme: the scheme's name (``atlasnn.solutions.SPLITTING_SCHEMES``: leapfrog, yoshida4,
             mclachlan4, blanes_moan6, kahan_li8, sofspa10, …); None: chosen from rtol
             (``SCHEME_BY_TOLERANCE``), and where stability rather than accuracy holds the step,
-            weighed against ``REACH_SCHEME`` (``info["scheme_choice"]``).
+            weighed against those of ``REACH_LADDER`` (``info["scheme_choice"]``).
         rtol: relative tolerance: the error over the whole interval within atol + rtol·max|z|,
             per component: a pilot sets the step, a march with longer steps checks the march
             afterwards (``info["check"]``, in tolerances), and a march whose check fails is done
@@ -162,7 +189,7 @@ class SplittingComposition(AbstractSolver):
         tic = time.perf_counter()
         plan = self._plan(system, z0s, T - t0)
         pilot_time = time.perf_counter() - tic
-        zs, es, kept, steps = self._marched(system, z0s, t0, T, plan, progress)
+        zs, es, kept, steps, plan = self._marched(system, z0s, t0, T, plan, progress)
         h = (T - t0) / steps
         info = {"solver": self.name, "settings": self.settings(), "scheme": plan.scheme,
                 "order": splitting_scheme(plan.scheme).order, "stages": _kicks(plan.scheme), "windows": steps,
@@ -182,44 +209,84 @@ class SplittingComposition(AbstractSolver):
         return out
 
     def _marched(self, system, z0s: np.ndarray, t0: float, T: float, plan: "_Plan",
-                 progress: Callable[[float], None] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+                 progress: Callable[[float], None] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, "_Plan"]:
         """The march of the plan's steps — with a step from the tolerance, checked
         (:meth:`_check`) and marched again with shorter steps where the check finds the error
-        above the tolerance: the kept states, compensations, their indices and the step count."""
-        given, steps, order = self.h is not None or self.steps is not None, plan.steps, plan.order
+        above the tolerance (:meth:`_retry`): the kept states, compensations, their indices, the
+        step count and the plan marched."""
+        given, steps = self.h is not None or self.steps is not None, plan.steps
         for attempt in range(1, _TRIES + 1):
-            steps += 0 if given else -steps % 4  # a multiple of 4: the check's march takes 1/2 or 3/4 as many
-            every = max(1, math.ceil(steps * 16 * z0s.shape[1] / KEEP_BYTES))
-            zs, es, kept = march(plan.program, z0s, (T - t0) / steps, steps, every, plan.chunk, progress)
+            ab = plan.check_ratio((T - t0) / steps)
+            steps += 0 if given else -steps % ab[0]  # the check's steps land on the march's
+            every = max(1, math.ceil(steps * 8 * z0s.shape[1] / KEEP_BYTES))
+            chunk = _chunk(self.chunk, _CHUNK_BYTES, z0s.size, steps // every)
+            program = compiled_split_march(system, plan.scheme, chunk, len(z0s))
+            zs, es, kept = march(program, z0s, (T - t0) / steps, steps, every, chunk, progress)
             if given:
                 break
-            ratio = self._check(system, plan, z0s, t0, T, steps, (zs, es, kept))
-            plan.record.update(check=ratio, tries=attempt)
+            ratio, check_steps = self._check(system, plan, z0s, t0, T, steps, (zs, es, kept), ab)
+            plan.record.update(check=ratio, check_steps=check_steps, tries=attempt)
             if ratio <= 1.0:
                 break
             if attempt == _TRIES:  # what was marched is kept (the error's .partial); it is not passed off as met
                 raise _unmet(system, plan.scheme, ratio, attempt, SplittingSolution(
                     system, plan.scheme, t0, (T - t0) / steps, steps, kept, zs[:, 0], es[:, 0], dict(plan.record)))
-            # the error over the tolerance: the step it asks for, with room (at most 16 times shorter a try)
-            shrink = (0.5 / ratio) ** (1.0 / order) if math.isfinite(ratio) else 0.5
-            steps = math.ceil(steps / min(max(shrink, 1 / 16), 0.8))
-        return zs, es, kept, steps
+            plan, steps = self._retry(system, z0s, T - t0, plan, steps, ratio, last=attempt == _TRIES - 1)
+        return zs, es, kept, steps, plan
 
-    def _check(self, system, plan: "_Plan", z0s: np.ndarray, t0: float, T: float, steps: int, fine: tuple) -> float:
+    def _retry(self, system, z0s: np.ndarray, span: float, plan: "_Plan", steps: int,
+               ratio: float, last: bool = False) -> tuple["_Plan", int]:
+        """The plan and step count of the next try after a check found the error ``ratio`` times
+        the tolerance: the step that error asks of the same scheme (with room; at most 16 times
+        shorter a try). Where that scheme was taken for its reach at the stability limit, with no
+        scheme given, accuracy holds the step after all: the tolerance's scheme (of higher order)
+        is piloted too, its pilot's error read as many times too low as the check found the
+        reach scheme's pilot's (the orbit's error grew faster than the pilots' first steps showed),
+        and the scheme of fewer force evaluations taken (``info["retry_choice"]``) — never with a
+        longer step than the one that failed (a march that blew up before may have led to it), and
+        not for the ``last`` try (a Toda lattice's shock: switched with a longer step on the last
+        try, the march failed where the same scheme's shorter step met the tolerance)."""
+        shrink = (0.5 / ratio) ** (1.0 / plan.order) if math.isfinite(ratio) else 0.5
+        same = math.ceil(steps / min(max(shrink, 1 / 16), 0.8))
+        if self.scheme is not None or plan.scheme == self.scheme_name or not math.isfinite(ratio) \
+                or last or plan.omega is None or "pilot_span" not in plan.record:
+            return plan, same
+        rec = plan.record
+        # the check's error over what the reach scheme's pilot foresaw at this step
+        foreseen = rec["pilot_error"] * span / rec["pilot_span"] * (span / steps / rec["pilot_h"]) ** plan.order
+        growth = ratio / max(foreseen, 1e-300)
+        other = self._pilot(system, z0s, span, self.scheme_name, plan.omega)
+        if not other.settled or "pilot_span" not in other.record or growth <= 1.0:
+            return plan, same
+        o = other.record
+        grown = o["pilot_error"] * span / o["pilot_span"] * growth
+        needed = max(other.steps, steps, math.ceil(span / (o["pilot_h"] * (0.5 / grown) ** (1.0 / other.order))))
+        costs = {plan.scheme: same * _kicks(plan.scheme), other.scheme: needed * _kicks(other.scheme)}
+        plan.record["retry_choice"] = other.record["retry_choice"] = {k: int(v) for k, v in costs.items()}
+        if costs[other.scheme] < costs[plan.scheme]:
+            other.record.update(tries=rec["tries"], first_check=ratio, first_scheme=plan.scheme)
+            return other, needed
+        return plan, same
+
+    def _check(self, system, plan: "_Plan", z0s: np.ndarray, t0: float, T: float, steps: int,
+               fine: tuple, ab: tuple[int, int]) -> tuple[float, int]:
         """The error of a march of ``steps`` steps (``fine``: its kept states, compensations and
-        indices) over the tolerance, at the most of 16 times and the members: against the same
-        scheme with steps r = 2 times as long (4/3 where the step is near the stability limit)
-        (Richardson: the difference over r^p − 1), or where that march is not stable, half as long
-        (the difference times 2^p/(2^p − 1))."""
+        indices) over the tolerance, at the most of ``_CHECK_TIMES`` times and the members, and the steps of the
+        march it was checked against: the same scheme with steps r = a/b times as long
+        (``ab``, from ``_Plan.check_ratio``; Richardson: the difference over |r^p − 1|), or where that march is
+        not stable, half as long (the difference times 2^p/(2^p − 1)). The times are steps of both
+        marches: the march's own states are compared, with no partial step."""
         zs, es, kept = fine
-        limited = plan.record.get("limited_by") == "stability"
-        r, p = (4 / 3 if limited else 2.0), 2.0 ** plan.order
-        for factor, weight in ((r, 1.0 / (r ** plan.order - 1.0)), (0.5, p / (p - 1.0))):
-            n = int(round(steps / factor))
+        a, b = ab
+        p = 2.0 ** plan.order
+        tries = ((steps * b // a, 1.0 / abs((a / b) ** plan.order - 1.0), b), (2 * steps, p / (p - 1.0), 2))
+        for n, weight, stride in tries:
             h = (T - t0) / n
-            every = -(-n // 15)  # at most 15 times between t0 and T: one small call of the dense output
-            other, other_e, marks = march(plan.program, z0s, h, n, every, plan.chunk, None)
-            if np.all(np.isfinite(other)) or factor == 0.5:
+            every = stride * -(-n // (_CHECK_TIMES * stride))  # each a step of the march too
+            chunk = _chunk(self.chunk, _CHUNK_BYTES, z0s.size, n // every)
+            program = compiled_split_march(system, plan.scheme, chunk, len(z0s))
+            other, other_e, marks = march(program, z0s, h, n, every, chunk, None)
+            if np.all(np.isfinite(other)) or n == 2 * steps:
                 break
         t = t0 + marks * h
         worst = 0.0
@@ -229,43 +296,49 @@ class SplittingComposition(AbstractSolver):
             gap = np.abs((other[:, m] + other_e[:, m]) - mine) * weight
             scale = self.atol + self.rtol * np.abs(mine).max()
             worst = max(worst, float(gap.max() / scale) if np.all(np.isfinite(gap)) else math.inf)
-        return worst
+        return worst, n
 
     def _plan(self, system: HamiltonianSystem, z0s: np.ndarray, span: float) -> "_Plan":
-        """The scheme, its program and the number of steps over ``span``: ``steps``, from ``h``,
-        or from the tolerance by the pilot. With no scheme given, where the tolerance's scheme is
-        held to its stability limit (a step far below the one its accuracy allows), the scheme
-        that reaches furthest per force evaluation (``REACH_SCHEME``) is tried too and the one that
-        costs fewer evaluations over the interval taken (``info["scheme_choice"]``)."""
-        chunk = int(min(self.chunk, max(16, _CHUNK_BYTES // (16 * z0s.size))))
-        first = self._pilot(system, z0s, span, self.scheme_name, chunk)
-        if self.scheme is not None or self.h is not None or self.steps is not None \
-                or first.record.get("limited_by") != "stability" or self.scheme_name == REACH_SCHEME:
-            return first
-        other = self._pilot(system, z0s, span, REACH_SCHEME, chunk)
-        costs = {plan.scheme: plan.steps * _kicks(plan.scheme) for plan in (first, other)}
-        best = min((first, other), key=lambda plan: costs[plan.scheme])
-        best.record["scheme_choice"] = {name: int(c) for name, c in costs.items()}
-        return best
+        """The scheme, its pilot's program and the number of steps over ``span``: ``steps``, from
+        ``h``, or from the tolerance by the pilot. With no scheme given (and T and V split, not a
+        linear part's flow), the schemes of ``REACH_LADDER`` cheaper at their stability limits
+        than the tolerance's are probed there first (two pilot tries each, cheapest first): the
+        first that meets the tolerance at its limit — stability, not accuracy, holds the step — is
+        taken, or a scheme probed before it that costs fewer evaluations at the step its accuracy
+        asks. Where none does, the tolerance's scheme is piloted, and of it and the probes the one
+        that costs fewer evaluations over the interval taken (``info["scheme_choice"]``)."""
+        omega = None if self.steps is not None or self.h is not None else batch_frequency(system, z0s)
+        if self.scheme is not None or omega is None or linear_splitting(system):
+            # (a linear part's flow is exact: its frequencies set no stability limit to reach past)
+            return self._pilot(system, z0s, span, self.scheme_name, omega)
+        probes: list[_Plan] = []
+        for name in (s for s in REACH_LADDER if _reach_cost(s) < _reach_cost(self.scheme_name)):
+            probes.append(self._pilot(system, z0s, span, name, omega, from_limit=True))
+            if probes[-1].record.get("limited_by") == "stability":
+                return _cheapest([p for p in probes if p.settled])
+        return _cheapest([self._pilot(system, z0s, span, self.scheme_name, omega)] + [p for p in probes if p.settled])
 
-    def _pilot(self, system, z0s: np.ndarray, span: float, scheme: str, chunk: int) -> "_Plan":
-        program = compiled_split_march(system, scheme, chunk, len(z0s))
+    def _pilot(self, system, z0s: np.ndarray, span: float, scheme: str, omega: float | None,
+               from_limit: bool = False) -> "_Plan":
+        program = compiled_split_march(system, scheme, _SMALL_CHUNK, len(z0s))
         sch = splitting_scheme(scheme)
         if self.steps is not None:
-            return _Plan(scheme, sch.order, program, chunk, self.steps, {})
+            return _Plan(scheme, sch.order, program, self.steps, {})
         if self.h is not None:
-            return _Plan(scheme, sch.order, program, chunk, max(1, round(span / self.h)), {})
-        guess, largest = step_bounds(system, z0s, span, sch)
-        h, record = pilot_step(program, z0s, span, sch.order, self.rtol, self.atol, guess, largest)
-        return _Plan(scheme, sch.order, program, chunk, max(1, math.ceil(span / h)), record)
+            return _Plan(scheme, sch.order, program, max(1, round(span / self.h)), {})
+        guess, largest = step_bounds(system, omega, span, sch)
+        h, record = pilot_step(program, z0s, span, sch.order, self.rtol, self.atol,
+                               min(largest, span / 16) if from_limit else guess, largest,
+                               tries=2 if from_limit else PILOT_TRIES)
+        settled = record.pop("settled", True)
+        return _Plan(scheme, sch.order, program, max(1, math.ceil(span / h)), record, settled, omega, largest)
 
     def companion(self, sol: SplittingSolution) -> SplittingSolution:
         """The same scheme over the same interval with steps half as long, keeping its states at
         the same times: the reference of the error estimate."""
-        n = sol.system.state_dim
-        chunk = int(min(self.chunk, max(16, _CHUNK_BYTES // (16 * n))))
-        program = compiled_split_march(sol.system, sol.scheme, chunk, 1)
         every = int(sol.kept[1] - sol.kept[0]) if sol.kept.size > 2 else sol.n_steps
+        chunk = _chunk(self.chunk, _CHUNK_BYTES, sol.system.state_dim, sol.n_steps // every)
+        program = compiled_split_march(sol.system, sol.scheme, chunk, 1)
         z, e, kept = march(program, sol.z0[None], 0.5 * sol.h, 2 * sol.n_steps, 2 * every, chunk, None)
         return SplittingSolution(sol.system, sol.scheme, sol.t0, 0.5 * sol.h, 2 * sol.n_steps, kept, z[:, 0],
                                  e[:, 0], {"companion_of": self.name}, outside="allow")
@@ -297,10 +370,10 @@ _READ_MEMORY_ABOVE = 64 << 20
 def march(program, z0s: np.ndarray, h: float, steps: int, every: int, chunk: int,
           progress: Callable[[float], None] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``steps`` steps of h from the states ``z0s`` (B, 2d) by the compiled ``program``, keeping the
-    state every ``every`` steps and at the end: the kept states (K, B, 2d), their compensations,
-    and their step indices (K,)."""
+    state every ``every`` steps and at the end: the kept states (K, B, 2d), their compensations
+    (zeros but at the end: the states between are kept rounded), and their step indices (K,)."""
     z, e = z0s, np.zeros_like(z0s)
-    zs, es, kept, done = [z0s[None]], [e[None]], [0], 0
+    zs, kept, done = [z0s[None]], [0], 0
     need = (steps // every + 2) * z0s.nbytes * 2
     # the memory left is read only for a large march (reading it costs ~0.2 ms, a tenth of a small solve)
     if need > _READ_MEMORY_ABOVE and (room := available_memory()) is not None and need > room:
@@ -314,12 +387,15 @@ def march(program, z0s: np.ndarray, h: float, steps: int, every: int, chunk: int
             out = program(z, e, np.float64(h), np.int64(size), np.int64(slots))
             z, e = np.asarray(out.z), np.asarray(out.e)
             zs.append(np.asarray(out.zs)[:slots])
-            es.append(np.asarray(out.es)[:slots])
             kept.extend(done + size * np.arange(1, slots + 1))
             done += size * slots
             if progress is not None:
                 progress(done / steps)
-    return np.concatenate(zs), np.concatenate(es), np.asarray(kept, np.int64)
+    zs = np.concatenate(zs)
+    zs[-1] = z  # the end state whole: its compensation beside it
+    es = np.zeros(zs.shape)  # not written but at the end: pages the system gives on first use
+    es[-1] = e
+    return zs, es, np.asarray(kept, np.int64)
 
 
 def _check_quadratic_kinetic(system: HamiltonianSystem, z0: np.ndarray, scheme: str) -> None:
@@ -351,6 +427,33 @@ def _unmet(system: HamiltonianSystem, scheme: str, ratio: float, tries: int, par
                         "the march computed so far: the error's .partial")
     error.partial = partial
     return error
+
+
+def _chunk(most: int, budget: int, size: int, kept: int) -> int:
+    """Kept states a call of the march keeping ``kept`` states of ``size`` numbers: the power of 4
+    from 16 that holds them all, within ``budget`` bytes and ``most`` (a buffer much longer than
+    the march is a fixed cost for nothing: FPUT-β, N = 256, 231 steps kept in a buffer of 1 024
+    took 5.4 ms, of 256 2.1 ms; four sizes at most, each a program)."""
+    rows = 16
+    while rows < kept and rows * 4 * 8 * size <= budget and rows * 4 <= most:
+        rows *= 4
+    return min(rows, most)
+
+
+def _cheapest(plans: list["_Plan"]) -> "_Plan":
+    """Of the plans, the one of fewest force evaluations over the interval, with every plan's
+    count in its record (``scheme_choice``)."""
+    costs = {plan.scheme: plan.steps * _kicks(plan.scheme) for plan in plans}
+    best = min(plans, key=lambda plan: costs[plan.scheme])
+    best.record["scheme_choice"] = {name: int(c) for name, c in costs.items()}
+    return best
+
+
+def _reach_cost(scheme: str) -> float:
+    """Force evaluations per unit of h·ω at the scheme's stability limit: its cost where stability
+    holds the step."""
+    sch = splitting_scheme(scheme)
+    return sch.forces / stability_limit(sch)
 
 
 def _kicks(scheme: str) -> int:

@@ -3,8 +3,11 @@
 One program per system, scheme, batch size and buffer length: it takes the states of a batch
 (B, 2d) with their compensations, a step h, ``every`` and ``slots`` (both traced: any interval, any
 tolerance, the same program), takes ``slots`` × ``every`` steps and returns the state after each
-block of ``every`` steps (a buffer of ``chunk`` rows, the first ``slots`` filled). The host calls it
-until the march is done (progress between calls).
+block of ``every`` steps (a buffer of ``chunk`` rows, the first ``slots`` filled), rounded to
+float64 (z + e): the compensation carries on in the march, and only the end state's is returned
+(keeping every state's compensation too made a march that keeps every step 1.3–1.4× slower on
+FPUT-β chains of 256 and 1 024 particles). The host calls it until the march is done (progress
+between calls).
 
 The step from the tolerance (:func:`pilot_step`): from a first guess (a tenth of the period of the
 fastest linearised motion at z0, and never past the scheme's stability limit for that frequency:
@@ -30,11 +33,11 @@ from atlasnn.compile_cache import program_cache, to_host
 from atlasnn.solutions import lax_steps, linear_splitting, splitting_scheme, stability_limit, start_state
 from atlasnn.solver._gauss_march import _frequency
 
-__all__ = ["MarchOut", "compiled_split_march", "pilot_step", "step_bounds", "fastest_frequency"]
+__all__ = ["MarchOut", "compiled_split_march", "pilot_step", "step_bounds", "fastest_frequency", "batch_frequency"]
 
 #: the pilot's steps at h (and twice as many at h/2)
 PILOT_STEPS = 16
-#: the pilot's tries at most (each a factor 4 on h)
+#: the pilot's tries at most (each a factor 4 or 16 on h)
 PILOT_TRIES = 12
 #: the largest step as a fraction of the scheme's stability limit over the fastest frequency at z0
 #: (the power iterations read that frequency to a few digits, and an orbit reaches faster ones:
@@ -44,16 +47,19 @@ STABLE_FRACTION = 0.55
 
 class MarchOut(NamedTuple):
     """A call's result: the end state and its compensation (B, 2d); the states after each block of
-    steps and their compensations (chunk, B, 2d)."""
+    steps, rounded (chunk, B, 2d)."""
 
     z: jax.Array
     e: jax.Array
     zs: jax.Array
-    es: jax.Array
 
 
 def _joined(st) -> tuple[jax.Array, jax.Array]:
     return jnp.concatenate([st.q, st.p], axis=-1), jnp.concatenate([st.eq, st.ep], axis=-1)
+
+
+def _rounded(st) -> jax.Array:
+    return jnp.concatenate([st.q + st.eq, st.p + st.ep], axis=-1)
 
 
 @program_cache
@@ -65,18 +71,17 @@ def compiled_split_march(system: Any, scheme: str, chunk: int, members: int):
 
     def one(z, e, h, every, slots):
         def block(i, carry):
-            st, zs, es = carry
+            st, zs = carry
             st = lax_steps(system, sch, st, h, every)
-            z_, e_ = _joined(st)
-            return st, zs.at[i].set(z_), es.at[i].set(e_)
+            return st, zs.at[i].set(_rounded(st))
 
         zs = jnp.zeros((chunk,) + z.shape, z.dtype)
-        st, zs, es = lax.fori_loop(0, slots, block, (start_state(system, z, e), zs, zs))
-        return (*_joined(st), zs, es)
+        st, zs = lax.fori_loop(0, slots, block, (start_state(system, z, e), zs))
+        return (*_joined(st), zs)
 
     def run(z, e, h, every, slots):
-        z, e, zs, es = jax.vmap(one, in_axes=(0, 0, None, None, None), out_axes=(0, 0, 1, 1))(z, e, h, every, slots)
-        return MarchOut(z, e, zs, es)
+        z, e, zs = jax.vmap(one, in_axes=(0, 0, None, None, None), out_axes=(0, 0, 1))(z, e, h, every, slots)
+        return MarchOut(z, e, zs)
 
     return jax.jit(run)
 
@@ -101,11 +106,16 @@ def fastest_frequency(system: Any, z0: np.ndarray) -> float:
     return omega if math.isfinite(omega) and omega > 0 else 0.0
 
 
-def step_bounds(system: Any, z0s: np.ndarray, span: float, scheme: Any) -> tuple[float, float]:
+def batch_frequency(system: Any, z0s: np.ndarray) -> float:
+    """ω, the fastest linearised frequency at any member's z0 (of N alone where S's flow is
+    exact; 0 where there is none)."""
+    return max(fastest_frequency(system, z) for z in z0s)
+
+
+def step_bounds(system: Any, omega: float, span: float, scheme: Any) -> tuple[float, float]:
     """(a first step, the largest stable step) for the batch: a tenth of 2π/ω and
     ``STABLE_FRACTION`` of the scheme's stability limit over ω, ω the fastest linearised frequency
-    at any member's z0 (``span``/16 and ``span`` where there is none)."""
-    omega = max(fastest_frequency(system, z) for z in z0s)  # of N alone where S's flow is exact
+    (:func:`batch_frequency`; ``span``/16 and ``span`` where there is none)."""
     if omega == 0.0:
         return span / PILOT_STEPS, span
     # a linear splitting's stiff part is solved exactly: N's frequency sets no stability limit
@@ -114,14 +124,15 @@ def step_bounds(system: Any, z0s: np.ndarray, span: float, scheme: Any) -> tuple
 
 
 def pilot_step(program, z0s: np.ndarray, span: float, order: int, rtol: float, atol: float, h: float,
-               largest: float) -> tuple[float, dict[str, Any]]:
+               largest: float, tries: int = PILOT_TRIES) -> tuple[float, dict[str, Any]]:
     """The step that meets the tolerance over ``span`` (module docstring), at most ``largest`` (the
-    stable steps), and the pilot's record. ``h`` is the first guess; the batch's smallest step
+    stable steps), and the pilot's record (``settled`` False where ``tries`` tries found none: the
+    step returned is then the last tried). ``h`` is the first guess; the batch's smallest step
     serves every member."""
     zero = np.zeros_like(z0s)
-    record: dict[str, Any] = {"pilot_tries": 0}
+    record: dict[str, Any] = {"pilot_tries": 0, "settled": True}
     err = scale = math.nan
-    for _ in range(PILOT_TRIES):
+    for _ in range(tries):
         record["pilot_tries"] += 1
         pilot = min(PILOT_STEPS * h, span)
         h = pilot / PILOT_STEPS
@@ -138,7 +149,9 @@ def pilot_step(program, z0s: np.ndarray, span: float, order: int, rtol: float, a
             if h >= largest:
                 record.update(pilot_h=h, pilot_error=err, pilot_span=pilot, limited_by="stability")
                 return min(largest, span), record
-            h = min(4.0 * h, largest)  # at round-off: the error constant cannot be read here
+            # at round-off: the error constant cannot be read here; 16 times longer (the error then
+            # 16^p times larger, from below round-off: still within the pilot's reach)
+            h = min(16.0 * h, largest)
             continue
         # the error grows linearly over the interval: what it would be at the end, in tolerances
         grown = err * span / pilot
@@ -151,5 +164,5 @@ def pilot_step(program, z0s: np.ndarray, span: float, order: int, rtol: float, a
             h = proposed  # far from the pilot's step: measured again there
             continue
         return min(proposed, span), record
-    record.update(pilot_h=h, pilot_error=err)
+    record.update(pilot_h=h, pilot_error=err, settled=False)
     return h, record
