@@ -49,7 +49,7 @@ KEEP_BYTES = 256 << 20
 #: N = 1 024: a 16 MiB buffer cost 2.2 ms a call), and each call is a fixed cost too (there, 228
 #: steps kept in calls of 16 states took 10.4 ms, in calls of 256 states 7.5 ms, in one block 5.1)
 _CHUNK_BYTES = 4 << 20
-#: the buffer of the pilot's program, whose calls keep one state
+#: the buffer of the pilot's program, whose calls keep one state (and the check's, 16 a call)
 _SMALL_CHUNK = 16
 #: marches at most with a step from the tolerance: each checked against a march with longer
 #: steps, and shortened where the check finds the error above the tolerance (an orbit reaching
@@ -283,9 +283,8 @@ class SplittingComposition(AbstractSolver):
         for n, weight, stride in tries:
             h = (T - t0) / n
             every = stride * -(-n // (_CHECK_TIMES * stride))  # each a step of the march too
-            chunk = _chunk(self.chunk, _CHUNK_BYTES, z0s.size, n // every)
-            program = compiled_split_march(system, plan.scheme, chunk, len(z0s))
-            other, other_e, marks = march(program, z0s, h, n, every, chunk, None)
+            # the pilot's program (a few calls of 16 states): no program of its own to compile
+            other, other_e, marks = march(plan.program, z0s, h, n, every, _SMALL_CHUNK, None)
             if np.all(np.isfinite(other)) or n == 2 * steps:
                 break
         t = t0 + marks * h
