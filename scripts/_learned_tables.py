@@ -56,21 +56,22 @@ def _state(row: dict | None) -> str:
 
 def learned_regimes(record: dict) -> str:
     rows = record["rows"]
-    columns = [("all", "HNN"), ("all", "HNN, smoothed"), ("all", "through leapfrog"), ("positions", "through leapfrog")]
-    head = ["HNN", "HNN, smoothed differences", "through leapfrog", "known form through leapfrog, positions only",
-            "HNN / through leapfrog"]
-    out = ["| system | Δt·ω_max | σ | " + " | ".join(head) + " |", "|---|---|---|" + "---|" * len(head)]
+    columns = [("all", "HNN"), ("all", "HNN, smoothed"), ("all", "through leapfrog"),
+               ("all", "through leapfrog, end to end"), ("positions", "through leapfrog")]
+    head = ["HNN", "HNN, smoothed differences", "through leapfrog", "through leapfrog, end to end, starts fitted",
+            "known form through leapfrog, positions only"]
+    present = [k for k, c in enumerate(columns) if any((r["observed"], r["method"]) == c for r in rows)]
+    throughs = [k for k in (2, 3) if k in present]
+    ratios = ["HNN / " + ("through leapfrog" if k == 2 else "end to end") for k in throughs]
+    out = ["| system | Δt·ω_max | σ | " + " | ".join([head[k] for k in present] + ratios) + " |",
+           "|---|---|---|" + "---|" * (len(present) + len(ratios))]
     for key in dict.fromkeys((r["system"], r["spacing"], r["sigma"]) for r in rows):
         hit = {(r["observed"], r["method"]): r for r in rows if (r["system"], r["spacing"], r["sigma"]) == key}
-        hnn, through = hit.get(("all", "HNN")), hit.get(("all", "through leapfrog"))
-        ratio = (f"{hnn['state_error'] / through['state_error']:.2g}" if hnn and through
-                 and math.isfinite(hnn["state_error"]) and math.isfinite(through["state_error"]) else "—")
-        cells = [_state(hit.get(c)) for c in columns[:3]]
-        known = hit.get(columns[3])
-        cells.append("—" if known is None else f"{_state(known)}; parameters {known['parameter_error']:.1%} off")
-        out.append(f"| {key[0]} | {key[1]:g} | {key[2]:g} | " + " | ".join(cells) + f" | {ratio} |")
-    per_step = {label: statistics.median(1e3 * r["seconds_per_step"] for r in rows
-                                         if (r["observed"], r["method"]) == column)
+        cells = [_state(hit.get(columns[k])) if k < 4 else _known(hit.get(columns[k])) for k in present]
+        cells += [_ratio(hit.get(columns[0]), hit.get(columns[k])) for k in throughs]
+        out.append(f"| {key[0]} | {key[1]:g} | {key[2]:g} | " + " | ".join(cells) + " |")
+    systems = list(dict.fromkeys(r["system"] for r in rows))
+    per_step = {label: " / ".join(f"{_median_step(rows, column, name):.2f}" for name in systems)
                 for column, label in zip(columns, head) if any((r["observed"], r["method"]) == column for r in rows)}
     return "\n".join(out) + (
         f"\n\nEach cell: the held-out state error, the largest over {record['horizon_factor']}× the training span "
@@ -80,8 +81,59 @@ def learned_regimes(record: dict) -> str:
         f"{record['network']}; leapfrog: {record['leapfrog_per_interval']} steps per observation interval, "
         f"segments of {record['ahead']} observations ({record['position_ahead']} end to end from positions only, a "
         f"known form: the pendulum's g, the chain's k and β, with the masses given, at rate {record['known_rate']:g}; "
-        "the largest relative error of its parameters). Median training time per Adam step: "
-        + ", ".join(f"{label} {ms:.2f} ms" for label, ms in per_step.items()) + ".")
+        "the largest relative error of its parameters). The last observed trajectory held out whole where every "
+        "component is observed. Median time per Adam step after the first (which compiles): "
+        + ", ".join(f"{label} {ms} ms" for label, ms in per_step.items()) + f" ({' / '.join(systems)})."
+        + _guide(rows))
+
+
+def _median_step(rows: list, column: tuple, system: str) -> float:
+    """The median time per Adam step, in ms, of a method's rows on one system."""
+    return statistics.median(1e3 * r["seconds_per_step"] for r in rows
+                             if (r["observed"], r["method"]) == column and r["system"] == system)
+
+
+def _guide(rows: list) -> str:
+    """How the results' own guide to extrapolation (``expected_error`` over the same horizon, on the
+    state error's scale) compares with the held-out error the table shows; a guide at its ceiling
+    (2√2 of the data's size: no skill expected) is counted apart."""
+    pairs = [(r["expected_state_error"], r["state_error"], _ceiling(r)) for r in rows
+             if r.get("expected_state_error") is not None and math.isfinite(r["state_error"]) and r["state_error"] > 0]
+    if not pairs:
+        return ""
+    capped = [m for _, m, top in pairs if top]
+    ratios = [e / m for e, m, top in pairs if not top]
+    within = sum(0.5 <= q <= 2.0 for q in ratios)
+    below = [q for q in ratios if q < 1.0]
+    text = (f"\n\nEach result's own guide to the same horizon (`expected_error`, from its drift over the data's "
+            f"span, no reference used) against the held-out error measured: on {len(capped)} of {len(pairs)} "
+            "results the guide is at its ceiling (no skill expected)"
+            + (f", where the measured error is {min(capped):.2g}–{max(capped):.2g} of the range" if capped else ""))
+    if ratios:
+        text += (f"; on the other {len(ratios)} it is within 2× of the measured error on {within}, above it on "
+                 f"{len(ratios) - len(below)}, below it on {len(below)}"
+                 + (f" (by up to {1 / min(below):.1f}×)" if below else "")
+                 + f"; median guide / measured {statistics.median(ratios):.2g}")
+    return text + "."
+
+
+def _ceiling(row: dict) -> bool:
+    """Whether a row's guide is at its ceiling, 2√2 of the data's size."""
+    drift = row.get("drift")
+    if not isinstance(drift, dict):
+        return False
+    grown = 2 * math.sqrt(3) * max(drift["drift"], drift["floor"]) * 10
+    return grown >= 2 * math.sqrt(2) * (1 - 1e-9)
+
+
+def _known(row: dict | None) -> str:
+    return "—" if row is None else f"{_state(row)}; parameters {row['parameter_error']:.1%} off"
+
+
+def _ratio(hnn: dict | None, through: dict | None) -> str:
+    if not (hnn and through and math.isfinite(hnn["state_error"]) and math.isfinite(through["state_error"])):
+        return "—"
+    return f"{hnn['state_error'] / through['state_error']:.2g}"
 
 
 MAKERS = {"learned": learned, "learned_regimes": learned_regimes}

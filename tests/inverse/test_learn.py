@@ -230,15 +230,19 @@ def test_an_hnn_on_differences_too_coarse_or_too_noisy_is_not_trusted():
     """Spring b = 2 observed every 0.5: central differences shrink the rates by sin(ωΔ)/(ωΔ), so the
     HNN's b is several per cent off while fitting its differences well; its flow misses the
     observations, which the result says (noise=0 given: exact data). Every 0.1 with σ = 0.3: the
-    differences are mostly noise."""
+    differences are mostly noise. Every 0.1 with σ = 0.01, b within 1 % — but the differences'
+    O(Δ²) shrinkage is still in it, and over the data's span of 12 its flow drifts off them by more
+    than 1 % of their size (which the span check says, and nothing else does)."""
     coarse = learn_hamiltonian(Stiffness(jnp.array(1.2)), _coarse(0.5), HNN(steps=300, rate=0.05), noise=0.0)
     assert abs(float(coarse.model.b) - 2.0) > 0.05 and not coarse.trusted
     assert any("too coarse" in n for n in coarse.notes)
     noisy = learn_hamiltonian(Stiffness(jnp.array(1.2)), _coarse(0.1, 0.3), HNN(steps=100, rate=0.05), noise=0.3)
     assert not noisy.trusted and any("regresses on noise" in n for n in noisy.notes)
     assert any("do not pin H down" in n for n in noisy.notes)
-    fine = learn_hamiltonian(Stiffness(jnp.array(1.2)), _coarse(0.1, 0.01), HNN(steps=300, rate=0.05), noise=0.01)
-    assert fine.trusted and abs(float(fine.model.b) - 2.0) < 0.02, fine.notes
+    dense = learn_hamiltonian(Stiffness(jnp.array(1.2)), _coarse(0.1, 0.01), HNN(steps=300, rate=0.05), noise=0.01)
+    assert abs(float(dense.model.b) - 2.0) < 0.02 and not dense.trusted
+    assert len(dense.notes) >= 1 and "H_θ's flow from starts fitted to them" in dense.notes[0], dense.notes
+    assert 0.01 < dense.drift.drift < 0.05 and dense.expected_error(120.0) > 0.3
 
 
 class Coupled(eqx.Module):
@@ -335,3 +339,94 @@ def test_a_known_forms_standard_error_covers_its_error_and_flags_what_the_data_c
     assert any("do not determine every parameter" in n for n in short.notes) and not short.trusted, short.notes
     early = learn_hamiltonian(Stiffness(jnp.array(1.2)), positions(12.0), method(10, 10, steps=40), noise=0.02)
     assert any("stopped short of the loss's minimum" in n for n in early.notes) and not early.trusted, early.notes
+
+
+def test_the_span_check_reads_a_wrong_frequency_and_its_growth_over_time():
+    """The span check (no training): spring b = 2 observed exactly over [0, 3]; H_θ with b = 2 does
+    not drift, b = 2.01 drifts by a fraction of 1 % and its expected error ten spans on is within 2×
+    of the error a solve from an exact start makes there, b = 2.1 drifts by more than 1 % (a reason
+    not to trust it). With σ = 0.05 the drift of b = 2.01 is below what the noise lets the check see:
+    the expected error is the noise's floor grown, not the small true one."""
+    from atlasnn.inverse._learn_checks import drift_reasons, span_drift
+    from atlasnn.inverse._learn_data import check_trajectories
+
+    data = check_trajectories(_trajectories())
+    size = float(np.sqrt(np.mean(np.concatenate([traj.z for traj in data]) ** 2)))
+    assert span_drift(Stiffness(jnp.array(2.0)), 1, data, 0.0).drift < 1e-8
+    near = span_drift(Stiffness(jnp.array(2.01)), 1, data, 0.0)
+    truth = atlasnn.HamiltonianSystem(lambda q, p: p[0] ** 2 / 2 + q[0] ** 2, 1)
+    t = np.linspace(0.0, 30.0, 301)
+    miss = np.abs(atlasnn.solve(atlasnn.HamiltonianSystem(Stiffness(jnp.array(2.01)), 1), [1.0, 0.0], (0.0, 30.0))(t)
+                  - atlasnn.solve(truth, [1.0, 0.0], (0.0, 30.0))(t)).max() / size
+    assert 1e-3 < near.drift < 1e-2 and not drift_reasons(near, 0.0)
+    assert 0.5 * miss < near.expected_error(30.0) < 2.0 * miss
+    far = span_drift(Stiffness(jnp.array(2.1)), 1, data, 0.0)
+    assert far.drift > 1e-2 and "beyond the noise: its predictions drift" in drift_reasons(far, 0.0)[0]
+    noisy = span_drift(Stiffness(jnp.array(2.01)), 1, check_trajectories(_trajectories(noise=0.05)), 0.05)
+    assert noisy.drift < noisy.floor and noisy.expected_error(30.0) > 3 * miss
+
+
+def test_fitted_starts_are_unknowns_and_their_observed_values_targets():
+    """fit_starts: every segment's whole start is trained with θ, from its observed values, which
+    join the targets: at the observed starts the loss is the same predictions' over one more
+    target each (exact weights: A/(A + 1) of it), and moving a start moves the loss."""
+    from atlasnn.inverse._learn_data import check_trajectories
+    from atlasnn.solver import SplittingComposition
+
+    data = check_trajectories(_trajectories(noise=0.01))
+    solver = SplittingComposition(scheme="leapfrog", steps=10)
+    plain = ThroughSolver(ahead=5, stride=5, solver=solver)
+    fitted = ThroughSolver(ahead=5, stride=5, fit_starts=True, solver=solver)
+    model = Stiffness(jnp.array(2.0))
+    with jax.enable_x64(True):
+        loss, _, none = plain.losses(data, 0.2, 1)
+        loss_fit, held, guess = fitted.losses(data, 0.2, 1)
+        assert none.size == 0 and guess.size == 2 * 4 * 2  # 4 end-to-end segments a trajectory before its held-out part
+        at_observed = float(loss_fit(model, guess))
+        assert at_observed == pytest.approx(float(loss(model, none)) * 5 / 6, rel=1e-12)
+        assert float(loss_fit(model, guess + 0.01)) != pytest.approx(at_observed, rel=1e-3) and held is not None
+    with pytest.raises(ConfigError, match="fit_starts must be True or False"):
+        ThroughSolver(fit_starts=1)
+
+
+def test_a_trajectory_held_out_whole_is_never_trained_on_and_judges_the_fit():
+    """held_out_trajectories=k: the last k trajectories are held out whole — every segment (or central
+    difference) of theirs in the held-out part, none in training — and a value that would leave no
+    trajectory to train on is refused in one line."""
+    from atlasnn.inverse._learn_data import check_trajectories, hold_whole, rates, segments
+
+    data = hold_whole(check_trajectories(_trajectories(starts=([1.0, 0.0], [0.0, 1.0], [0.5, 0.5]))), 1)
+    assert [traj.held for traj in data] == [False, False, True]
+    train, test = segments(data, 5, 0.2)
+    held_starts = {tuple(z) for z in data[2].z[:-5]}
+    assert not held_starts & {tuple(z) for z in train.starts} and held_starts <= {tuple(z) for z in test.starts}
+    (states, _), (held_states, _) = rates(data, 0.2)
+    assert not {tuple(z) for z in data[2].z} & {tuple(z) for z in states} and len(held_states) > 29
+    for count in (3, -1, 1.5):
+        with pytest.raises(ConfigError, match=r"held_out_trajectories must be an integer in \[0, 2\]"):
+            learn_hamiltonian(_guess(), _trajectories(starts=([1.0, 0.0], [0.0, 1.0], [0.5, 0.5])), HNN(steps=1),
+                              held_out_trajectories=count)
+
+
+def test_a_step_that_biases_a_known_form_is_said_and_refining_it_moves_towards_the_truth():
+    """Spring b = 2 observed exactly every 0.5, one leapfrog step an interval: near its least-squares
+    minimum (b ≈ 1.918, the modified stiffness) the minimum through steps half as long lies closer to
+    2 by more than the standard error — a reason not to trust it; eight steps an interval at b = 2
+    move b by less than 0.1 %, and nothing is said."""
+    from atlasnn.inverse._learn_data import check_trajectories
+    from atlasnn.inverse._learn_errors import standard_errors
+    from atlasnn.solver import SplittingComposition
+
+    data = check_trajectories(_coarse(0.5))
+    for steps, modified in ((5, 2 * (1 - np.cos(np.sqrt(2.0) * 0.5)) / 0.25), (40, 2.0)):
+        method = ThroughSolver(solver=SplittingComposition(scheme="leapfrog", steps=steps))
+        with jax.enable_x64(True):
+            std, reasons = standard_errors(method.residuals(data, 0.2, 1), Stiffness(jnp.array(modified)),
+                                           jnp.zeros(0), method.refined_residuals(data, 0.2, 1))
+        biased = [r for r in reasons if r.startswith("the step biases θ")]
+        if steps == 5:
+            moved = float(biased[0].split("→ ")[1].split(",")[0])
+            assert modified < moved < 2.0 and moved - modified > 2 * std[0], reasons
+        else:
+            assert not biased, reasons
+    assert HNN().refined_residuals(data, 0.2, 1) is None

@@ -23,6 +23,7 @@ from atlasnn.inverse._collocation_fit import CollocationFit, fit_collocation
 from atlasnn.inverse._fit_result import MISFIT_LIMIT, FitResult, distrust, flag_misfit, gauss_newton_covariance
 from atlasnn.inverse._joint import JointConfig, fit_joint
 from atlasnn.inverse._learn import HNN, AbstractLearnMethod, LearnedHamiltonian, ThroughSolver, learn_hamiltonian
+from atlasnn.inverse._learn_checks import SpanDrift
 from atlasnn.inverse._methods import FIT_METHODS, BundleFit, Joint, Shooting, fit, register_fit_method
 from atlasnn.inverse._multistart import auto_starts, fit_multistart, judge_fit
 from atlasnn.inverse._shooting import auto_segments, check_shooting_inputs, fit_shooting, predict_fit, shooting_misfit
@@ -36,6 +37,7 @@ __all__ = [
     "HNN",
     "AbstractLearnMethod",
     "LearnedHamiltonian",
+    "SpanDrift",
     "AbstractFitMethod",
     "Shooting",
     "CollocationFit",

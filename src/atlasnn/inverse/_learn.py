@@ -29,17 +29,16 @@ import numpy as np
 import optax
 
 from atlasnn.errors import ConfigError
-from atlasnn.inverse._learn_checks import (FLOW_ACCURACY, NOISE_FACTOR, flow_reasons, modified_reasons, noise_reasons,
-                                          observed_size)
-from atlasnn.inverse._learn_data import _on_steps, check_trajectories, continuations, rates, segments
+from atlasnn.inverse._learn_checks import (FLOW_ACCURACY, NOISE_FACTOR, SpanDrift, drift_reasons, flow_reasons,
+                                          modified_reasons, noise_reasons, observed_size, span_drifts)
+from atlasnn.inverse._learn_data import _on_steps, check_trajectories, continuations, hold_whole, rates, segments
 from atlasnn.inverse._learn_errors import standard_errors
+from atlasnn.inverse._learn_result import LearnedHamiltonian, judge
 from atlasnn.solver import GaussCollocation, SplittingComposition, solve
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["AbstractLearnMethod", "ThroughSolver", "HNN", "LearnedHamiltonian", "learn_hamiltonian"]
 
-#: a held-out loss this many times the training loss (or the noise's) is "does not generalise"
-HELD_OUT_FACTOR = 3.0
 #: the window budget of a held-out part predicted from the last trained start (longer than a segment)
 CONTINUATION_WINDOWS = 1024
 
@@ -80,6 +79,11 @@ class AbstractLearnMethod(abc.ABC):
         the parameters' standard errors; None where the method has none."""
         return None
 
+    def refined_residuals(self, trajectories: list, held_out: float, dof: int) -> tuple[Callable, float] | None:
+        """:meth:`residuals` through steps half as long, where the method's steps are fixed (the
+        check that their error does not bias θ); None otherwise."""
+        return None
+
     @abc.abstractmethod
     def noise_loss(self, sigma: float, trajectories: list) -> float:
         """The loss that noise of σ on every observed value gives alone (for the trust rule)."""
@@ -113,6 +117,10 @@ class ThroughSolver(AbstractLearnMethod):
         stride: a segment starts at every ``stride``-th observation (1: at each, the segments
             overlapping ``ahead``-fold; ``ahead``: end to end, each observation predicted once, a
             training step that many times cheaper).
+        fit_starts: every segment's whole start trained with θ (from its observed values, which are
+            fitted as one more target), not only its missing components: the start's noise is not
+            carried along the prediction, so end-to-end segments (``stride=ahead``) learn as well as
+            overlapping ones at a fraction of a step's cost.
         steps: Adam steps.
         rate: Adam's learning rate.
         solver: the solve differentiated through: a ``GaussCollocation`` with a loose tolerance
@@ -126,6 +134,7 @@ class ThroughSolver(AbstractLearnMethod):
 
     ahead: int = 5
     stride: int = 1
+    fit_starts: bool = False
     steps: int = 1000
     rate: float = 3e-3
     solver: GaussCollocation = GaussCollocation(stages=4, rtol=1e-7, atol=1e-9, max_windows=64)
@@ -135,6 +144,8 @@ class ThroughSolver(AbstractLearnMethod):
         super().__post_init__()
         _positive_int("ThroughSolver", "ahead", self.ahead)
         _positive_int("ThroughSolver", "stride", self.stride)
+        if not isinstance(self.fit_starts, bool):
+            raise ConfigError(f"ThroughSolver fit_starts must be True or False, got {self.fit_starts!r}")
         if isinstance(self.solver, SplittingComposition):
             if self.solver.steps is None:
                 raise ConfigError("ThroughSolver with a SplittingComposition needs its steps=N (the steps over each "
@@ -148,9 +159,18 @@ class ThroughSolver(AbstractLearnMethod):
         """Whether the model must be separable (a splitting is trained through)."""
         return isinstance(self.solver, SplittingComposition)
 
-    def losses(self, trajectories, held_out, dof):
+    def _trained(self, trajectories, held_out) -> tuple:
+        """(training segments, held-out segments, the indices of the starts' values trained with θ):
+        the missing ones, or every one (``fit_starts``: the observed start then one more target)."""
         train, test = segments(trajectories, self.ahead, held_out, self.stride)
-        missing = np.nonzero(np.isnan(train.starts))
+        if not self.fit_starts:
+            return train, test, np.nonzero(np.isnan(train.starts))
+        train = replace(train, times=np.concatenate([train.t0[:, None], train.times], axis=1),
+                        targets=np.concatenate([train.starts[:, None], train.targets], axis=1))
+        return train, test, np.nonzero(np.ones(train.starts.shape, bool))
+
+    def losses(self, trajectories, held_out, dof):
+        train, test, missing = self._trained(trajectories, held_out)
         if test is not None:
             test_loss = self._loss(train, test.times, test.targets, dof, None, pieces=test)
         elif held_out > 0 and (later := continuations(trajectories, self.ahead, held_out,
@@ -173,9 +193,14 @@ class ThroughSolver(AbstractLearnMethod):
         return replace(self.solver, steps=self.solver.steps * max(1, math.ceil(span / segment)))
 
     def residuals(self, trajectories, held_out, dof):
-        train, _ = segments(trajectories, self.ahead, held_out, self.stride)
-        missing = np.nonzero(np.isnan(train.starts))
-        return self._residual(train, train.times, train.targets, dof, missing), self.ahead / self.stride
+        train, _, missing = self._trained(trajectories, held_out)
+        return self._residual(train, train.times, train.targets, dof, missing), max(1.0, self.ahead / self.stride)
+
+    def refined_residuals(self, trajectories, held_out, dof):
+        if not self.separable:  # the Gauss solver's tolerance sets its error: nothing fixed to refine
+            return None
+        return replace(self, solver=replace(self.solver, steps=2 * self.solver.steps)).residuals(
+            trajectories, held_out, dof)
 
     def _loss(self, train, times, targets, dof: int, missing, rows=None, solver=None, pieces=None) -> Callable:
         """The masked mean squared error of predictions of ``targets`` at ``times`` from the
@@ -214,8 +239,9 @@ class ThroughSolver(AbstractLearnMethod):
         return residual
 
     def noise_loss(self, sigma, trajectories):
-        # the target's noise and the start's, carried forward (about σ² each for short segments); on
-        # exact or nearly exact data, predictions within FLOW_ACCURACY of the data's size
+        # the target's noise and the start's, carried forward (about σ² each for short segments; a
+        # fitted start carries less, which this allowance does not count); on exact or nearly exact
+        # data, predictions within FLOW_ACCURACY of the data's size
         return max(2.0 * sigma ** 2, (FLOW_ACCURACY * observed_size(trajectories)) ** 2 / NOISE_FACTOR)
 
     def trust_reasons(self, model, dof, trajectories, noise):
@@ -268,52 +294,9 @@ class HNN(AbstractLearnMethod):
         return loss
 
 
-@dataclasses.dataclass(eq=False)
-class LearnedHamiltonian:
-    """What ``learn_hamiltonian`` learned.
-
-    Attributes:
-        model: the trained H_θ (the one of least held-out loss, or of least training loss where
-            nothing is held out).
-        dof: its degrees of freedom.
-        method: the method, in words.
-        loss: the kept model's training loss.
-        held_out_loss: its loss on the held-out part (None: nothing held out).
-        noise: the σ given to the rules (None: not given).
-        steps: Adam steps taken.
-        curve: the training loss at every step.
-        seconds: the training's wall time.
-        stopped: why training stopped early (interrupted, a non-finite loss, the solver failing), or None.
-        notes: the reasons behind ``trusted``, each with what to do.
-        trusted: False when a rule found a reason not to believe the learned H.
-        std: the standard error of each of θ's values (flattened in the model's order), from the
-            residuals' Jacobian at the result (the unknown start values profiled out), for a model
-            of at most a few dozen values trained through the solver; None otherwise.
-    """
-
-    model: Any
-    dof: int
-    method: str
-    loss: float
-    held_out_loss: float | None
-    noise: float | None
-    steps: int
-    curve: list
-    seconds: float
-    stopped: str | None
-    notes: list
-    trusted: bool
-    std: np.ndarray | None = None
-
-    @property
-    def system(self) -> HamiltonianSystem:
-        """The learned H as a ``HamiltonianSystem``: solve it, save it, check it like any other."""
-        return HamiltonianSystem(self.model, self.dof, name="learned")
-
-
 def learn_hamiltonian(model: Any, trajectories: Any, method: AbstractLearnMethod | None = None, *,
                       dof: int | None = None, noise: float | None = None, held_out: float = 0.2,
-                      progress: Callable[[int, float], None] | None = None) -> LearnedHamiltonian:
+                      held_out_trajectories: int = 0, progress: Callable[[int, float], None] | None = None) -> LearnedHamiltonian:
     """H_θ(q, p) learned from observed trajectories.
 
     Args:
@@ -328,6 +311,9 @@ def learn_hamiltonian(model: Any, trajectories: Any, method: AbstractLearnMethod
         noise: σ of the observations' noise, if known: a loss far above the noise's own is flagged.
         held_out: the fraction of every trajectory's observations, at its end, kept out of training
             and used to pick the model and to judge whether it generalises (0: none).
+        held_out_trajectories: the last this many trajectories held out whole: whether H_θ holds
+            for other states than those it learned from is then judged too (their loss joins the
+            held-out one; the span check reads their drift).
         progress: called as ``progress(step, loss)`` about 50 times in a training.
 
     Returns a [`LearnedHamiltonian`][atlasnn.inverse.LearnedHamiltonian] (``.system`` is the
@@ -342,7 +328,7 @@ def learn_hamiltonian(model: Any, trajectories: Any, method: AbstractLearnMethod
                               or not math.isfinite(noise) or noise < 0):
         raise ConfigError(f"noise must be a finite number >= 0 (the noise's σ), got {noise!r}")
     with jax.enable_x64(True):
-        data = check_trajectories(trajectories)
+        data = hold_whole(check_trajectories(trajectories), held_out_trajectories)
         width = data[0].z.shape[1]
         dof = width // 2 if dof is None else _positive_int("learn_hamiltonian", "dof", dof)
         if 2 * dof != width:
@@ -361,12 +347,26 @@ def learn_hamiltonian(model: Any, trajectories: Any, method: AbstractLearnMethod
         record = _train(model, unknown, method, train_loss, test_loss, progress)
         kept_unknown = record.pop("unknown")
         std, vague = (None, []) if not record["curve"] else standard_errors(
-            method.residuals(data, float(held_out), dof), record["model"], kept_unknown)
+            method.residuals(data, float(held_out), dof), record["model"], kept_unknown,
+            method.refined_residuals(data, float(held_out), dof))
         floor = None if noise is None else method.noise_loss(noise, data)
         floor = None if floor == 0.0 else floor  # an HNN on exact data: its flow judges it
         found = [] if not record["curve"] else method.trust_reasons(record["model"], dof, data, noise)
-    return _judge(LearnedHamiltonian(dof=dof, method=method.name, noise=noise, notes=notes, trusted=True, std=std,
-                                     **record), floor, found + vague, method.held_out_floor(data))
+        drift = None if not record["curve"] else _worst_drift(record["model"], dof, data, noise)
+        if drift is not None:
+            notes.append(drift.note())
+    return judge(LearnedHamiltonian(dof=dof, method=method.name, noise=noise, notes=notes, trusted=True, std=std,
+                                    drift=drift, **record), floor, found + vague + drift_reasons(drift, noise),
+                 method.held_out_floor(data))
+
+
+def _worst_drift(model: Any, dof: int, data: list, noise: float | None) -> SpanDrift | None:
+    """The span check over the trajectories trained on and over those held out whole, apart: the
+    one that expects the larger error."""
+    groups = [group for group in ([traj for traj in data if not traj.held], [traj for traj in data if traj.held])
+              if group]
+    found = [d for d in span_drifts(model, dof, groups, noise) if d is not None]
+    return max(found, key=lambda d: d.expected_error(10 * d.span), default=None)
 
 
 def _check_model(model: Any, dof: int, data: list, separable: bool = False) -> list[str]:
@@ -456,38 +456,3 @@ def _runtime_message(exc: Exception) -> str:
         if "EquinoxRuntimeError: " in line:
             return line.split("EquinoxRuntimeError: ", 1)[1][:300]
     return (lines[0] if lines else type(exc).__name__)[:300]
-
-
-def _judge(result: LearnedHamiltonian, floor: float | None, found: list[str] = (),
-           held_floor: float = 0.0) -> LearnedHamiltonian:
-    """The trust rules, each a reason not to believe the learned H: a training that stopped early
-    or never had a finite loss, a loss far above the noise's own (``floor``, when the noise is
-    given), a held-out loss far above the training loss (and above ``held_floor``), neither of those
-    two checks possible (a fit no rule could judge is not trusted), and the method's own reasons
-    ``found`` (:meth:`AbstractLearnMethod.trust_reasons`: noisy data, an HNN's flow). The notes that are not reasons (nothing
-    held out, no noise given, more weights than data) follow."""
-    reasons = []
-    interrupted = (result.stopped or "").startswith("interrupted")
-    if result.stopped is not None:
-        remedy = ("train again for the whole budget" if interrupted else
-                  "train again with a smaller rate or a smaller solver tolerance")
-        reasons.append(f"training stopped early ({result.stopped}); the best H before it is kept: {remedy} before "
-                       "trusting it")
-    if not result.curve:
-        return dataclasses.replace(result, notes=reasons + list(result.notes), trusted=False)
-    if not math.isfinite(result.loss):
-        reasons.append("no step gave a finite loss: nothing was learned; check the model's scale against the data's")
-    elif floor is not None and result.loss > NOISE_FACTOR * floor:
-        reasons.append(f"the training loss {result.loss:.2g} is {result.loss / floor:.1f}× the noise's own "
-                       f"({floor:.2g}): the model or its training falls short; more steps, a larger network, or "
-                       "another rate")
-    if floor is None and result.held_out_loss is None:
-        reasons.append("no rule could judge the fit (no noise level given, nothing held out): give noise= or "
-                       "held_out > 0 (the end of each trajectory kept out of training) before trusting it")
-    reasons += list(found)
-    if result.held_out_loss is not None and \
-            result.held_out_loss > HELD_OUT_FACTOR * max(result.loss, floor or 0.0, held_floor):
-        ratio = result.held_out_loss / max(result.loss, floor or 0.0)
-        reasons.append(f"the held-out loss {result.held_out_loss:.2g} is {ratio:.1f}× the training loss: H_θ does not "
-                       "generalise to the held-out part; more or longer trajectories, a smaller network or fewer steps")
-    return dataclasses.replace(result, notes=reasons + list(result.notes), trusted=not reasons)

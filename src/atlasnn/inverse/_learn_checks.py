@@ -7,8 +7,10 @@ to do.
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Callable
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -17,7 +19,8 @@ from atlasnn.inverse._learn_data import Trajectory
 from atlasnn.solver import GaussCollocation, solve
 from atlasnn.systems import HamiltonianSystem
 
-__all__ = ["flow_miss", "flow_reasons", "modified_reasons", "noise_reasons", "observed_size", "FLOW_ACCURACY",
+__all__ = ["flow_miss", "flow_reasons", "modified_reasons", "noise_reasons", "observed_size", "span_drift",
+           "span_drifts", "drift_reasons", "predict_flow", "SpanDrift", "FLOW_ACCURACY",
            "FLOW_AHEAD", "PROPAGATION", "NOISE_FACTOR", "NOISY_DATA", "NOISY_RATES"]
 
 #: a loss this many times the noise's own (2σ² for predicted states) is "far above the noise"
@@ -36,8 +39,15 @@ PROPAGATION = 0.5
 NOISY_DATA = 0.2
 #: central differences whose noise is this part of the rates' rms or more: the HNN regresses on noise
 NOISY_RATES = 0.3
+#: the flow checks solve this many starts in one call
+FLOW_BATCH = 128
+#: Gauss–Newton iterations fitting a trajectory's start to the learned flow (from the observed start)
+SPAN_ITERATIONS = 2
 #: the solve of the flow check: accurate, so that what it measures is H_θ's, not the solver's
 _FLOW_SOLVER = GaussCollocation(stages=8, rtol=1e-10, atol=1e-12, max_windows=512)
+#: the span check's solves: over a whole trajectory, accurate well below any noise or FLOW_ACCURACY
+_SPAN_SOLVER = GaussCollocation(rtol=1e-9, atol=1e-11, max_windows=512)
+
 
 
 def observed_size(trajectories: list[Trajectory]) -> float:
@@ -76,6 +86,42 @@ def noise_reasons(trajectories: list[Trajectory], noise: float | None, hnn: bool
     return reasons
 
 
+@eqx.filter_jit
+def _flow_batch(model: Any, dof: int, starts: jax.Array, t0: jax.Array, t1: jax.Array) -> jax.Array:
+    system = HamiltonianSystem(model, dof, name="learned")
+    return jax.vmap(lambda z, a, b: solve(system, z, (a, b), solver=_FLOW_SOLVER)(b))(starts, t0, t1)
+
+
+@eqx.filter_jit
+def _orbit_batch(model: Any, dof: int, starts: jax.Array, times: jax.Array) -> jax.Array:
+    system = HamiltonianSystem(model, dof, name="learned")
+    return jax.vmap(lambda z, ts: solve(system, z, (ts[0], ts[-1]), solver=_SPAN_SOLVER)(ts))(starts, times)
+
+
+def predict_orbits(model: Any, dof: int, starts: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """H_θ's orbits from ``starts`` (N, 2d) at ``times[:, 0]`` read at ``times`` (N, M), solved
+    accurately, (N, M, 2d)."""
+    return _in_batches(_orbit_batch, model, dof, starts, times)
+
+
+def predict_flow(model: Any, dof: int, starts: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
+    """H_θ's flow from each of ``starts`` (N, 2d) at ``t0`` (N,) to ``t1`` (N,), solved accurately."""
+    return _in_batches(_flow_batch, model, dof, starts, t0, t1)
+
+
+def _in_batches(program: Callable, model: Any, dof: int, *arrays: np.ndarray) -> np.ndarray:
+    """``program`` on FLOW_BATCH rows of ``arrays`` at a time, the last batch padded by repeating
+    the first row: one compiled program for every check of a model of this shape (the model is
+    its argument, not its constant)."""
+    size = arrays[0].shape[0]
+    pad = (-size) % FLOW_BATCH
+    arrays = [np.concatenate([x, np.repeat(x[:1], pad, axis=0)]) for x in arrays]
+    with jax.enable_x64(True):
+        out = [np.asarray(program(model, dof, *(jnp.asarray(x[k:k + FLOW_BATCH]) for x in arrays)))
+               for k in range(0, size + pad, FLOW_BATCH)]
+    return np.concatenate(out)[:size]
+
+
 def flow_miss(model: Any, dof: int, trajectories: list[Trajectory], noise: float | None) -> str | None:
     """H_θ's flow, solved accurately, from every observed state to each of the next FLOW_AHEAD
     observations, against them (a wrong frequency's miss grows along the way): None where what it
@@ -91,13 +137,10 @@ def flow_miss(model: Any, dof: int, trajectories: list[Trajectory], noise: float
     starts, ends, t0, t1 = (np.concatenate(x) for x in (starts, ends, t0, t1))
     if not starts.size:
         return None
-    system = HamiltonianSystem(model, dof, name="learned")
-    with jax.enable_x64(True):
-        flow = jax.jit(jax.vmap(lambda z, a, b: solve(system, z, (a, b), solver=_FLOW_SOLVER)(b)))
-        try:
-            predicted = np.asarray(flow(*(jnp.asarray(x) for x in (starts, t0, t1))))
-        except Exception as exc:  # noqa: BLE001 (a learned H that cannot be solved is a reason itself)
-            return f"could not be solved from the observed states ({type(exc).__name__})"
+    try:
+        predicted = predict_flow(model, dof, starts, t0, t1)
+    except Exception as exc:  # noqa: BLE001 (a learned H that cannot be solved is a reason itself)
+        return f"could not be solved from the observed states ({type(exc).__name__})"
     squares = (predicted - ends) ** 2
     miss = float(np.sqrt(np.mean(squares)))
     # a flow from a noisy state to a noisy one misses by about √2·σ rms (the start's noise carried by
@@ -137,3 +180,107 @@ def modified_reasons(model: Any, dof: int, trajectories: list[Trajectory], noise
     return [f"H_θ is the modified Hamiltonian of {scheme} at its step ({steps} steps a segment): solved accurately, "
             f"its flow {miss}; to learn the true H, train with more steps (SplittingComposition(steps=…)) until "
             "the result no longer changes — or predict with the same scheme and step"]
+
+
+@dataclass(frozen=True)
+class SpanDrift:
+    """How far H_θ's flow drifts from the data over their whole span: from a start fitted to each
+    trajectory (Gauss–Newton from the observed one), the rms miss beyond the noise, relative to
+    the observed values' size (``drift``); ``floor``, the least drift the noise lets the check see
+    (one standard error of the noise's mean square); trajectories of ``span`` time units."""
+
+    drift: float
+    floor: float
+    span: float
+
+    def expected_error(self, horizon: float) -> float:
+        """The miss to expect ``horizon`` time units from an exact start, relative to the data's
+        size: a phase error grows in proportion to time, and a miss growing linearly to m at T,
+        less its mean (the fitted start), has rms m/(2√3): so 2√3·max(drift, floor)·horizon/T
+        (horizon at least T), at most 2√2 (a sine's whole range over its rms: anywhere on the orbit).
+        Where the drift is within the noise (below ``floor``), the floor grown: as large as the data
+        allow, likely far above the error a model of few parameters makes."""
+        seen = max(self.drift, self.floor)
+        return float(min(2.0 * np.sqrt(2.0), 2.0 * np.sqrt(3.0) * seen * max(horizon, self.span) / self.span))
+
+    def note(self) -> str:
+        """What the check says of predictions beyond the data's span, in words."""
+        later = self.expected_error(10 * self.span)
+        if self.drift >= self.floor:
+            return (f"checked over the observations' span ({self.span:.3g}); beyond it a prediction is an "
+                    f"extrapolation: about {later:.0%} of the data's size after ten such spans (expected_error(t))")
+        return (f"checked over the observations' span ({self.span:.3g}): its drift there is within the noise, which "
+                f"cannot rule out a drift growing to {later:.0%} of the data's size after ten such spans "
+                "(expected_error(t): a figure the data allow, not one they show)")
+
+
+def span_drift(model: Any, dof: int, trajectories: list[Trajectory], noise: float | None) -> SpanDrift | None:
+    """H_θ's flow against every trajectory observed whole at its start, over all its observations,
+    from the starts that fit them best (Gauss–Newton from the observed ones, the Jacobian by
+    differences: a start's noise carried over a long span would otherwise read as H_θ's drift);
+    None where no trajectory starts whole or a solve fails."""
+    return span_drifts(model, dof, [trajectories], noise)[0]
+
+
+def span_drifts(model: Any, dof: int, groups: list[list[Trajectory]],
+                noise: float | None) -> list[SpanDrift | None]:
+    """:func:`span_drift` of each group of trajectories, all fitted in the same batched solves."""
+    width = 2 * dof
+    whole = [(g, traj) for g, group in enumerate(groups) for traj in group
+             if not np.any(np.isnan(traj.z[0])) and traj.t.size > width + 1]
+    if not whole:
+        return [None] * len(groups)
+    longest = max(traj.t.size for _, traj in whole)
+    # every trajectory's times and targets padded to the longest by repeating its last time, not observed
+    times = np.stack([np.concatenate([traj.t, np.repeat(traj.t[-1:], longest - traj.t.size)]) for _, traj in whole])
+    target = np.stack([np.concatenate([traj.z, np.full((longest - traj.t.size, width), np.nan)]) for _, traj in whole])
+    target[:, 0] = np.nan  # the start is fitted, not a target
+    seen = ~np.isnan(target)
+    z0 = np.stack([traj.z[0] for _, traj in whole])
+    best = None
+    for last in [False] * SPAN_ITERATIONS + [True]:
+        nudge = 1e-6 * np.maximum(1.0, np.abs(z0))  # (K, 2d)
+        nudged = [] if last else [z0 + nudge * np.eye(width)[j] for j in range(width)]
+        try:
+            orbits = predict_orbits(model, dof, np.concatenate([z0] + nudged),
+                                    np.tile(times, (len(nudged) + 1, 1))).reshape(len(nudged) + 1, *target.shape)
+        except Exception:  # noqa: BLE001 (an H_θ whose flow cannot be solved from here)
+            break
+        if not np.all(np.isfinite(orbits)):
+            break
+        r = np.where(seen, orbits[0] - np.nan_to_num(target), 0.0)  # (K, M, 2d)
+        best = r if best is None else np.where((np.sum(r ** 2, axis=(1, 2)) < np.sum(best ** 2, axis=(1, 2)))
+                                               [:, None, None], r, best)
+        if last:
+            break
+        jac = np.where(seen, (orbits[1:] - orbits[0]) / nudge.T[:, :, None, None], 0.0)  # (2d, K, M, 2d)
+        for k in range(len(whole)):
+            z0[k] = z0[k] - np.linalg.lstsq(jac[:, k].reshape(width, -1).T, r[k].ravel(), rcond=None)[0]
+    owner = np.array([g for g, _ in whole])
+    return [None if best is None or not np.any(owner == g) else
+            _drift(best[owner == g], seen[owner == g], dof, noise, groups[g], [t for h, t in whole if h == g])
+            for g in range(len(groups))]
+
+
+def _drift(residual: np.ndarray, seen: np.ndarray, dof: int, noise: float | None,
+           trajectories: list[Trajectory], whole: list[Trajectory]) -> SpanDrift:
+    """The span check's figure from its best residuals: their mean square beyond σ², each fitted
+    start taking 2d values' freedom."""
+    values = max(int(seen.sum()) - 2 * dof * len(whole), 1)
+    sigma2, size = (noise or 0.0) ** 2, observed_size(trajectories)
+    excess = float(np.sum(residual ** 2)) / values - sigma2
+    floor = float(np.sqrt(np.sqrt(2.0 / values) * sigma2)) / size
+    return SpanDrift(float(np.sqrt(max(excess, 0.0))) / size, floor,
+                     float(max(traj.t[-1] - traj.t[0] for traj in whole)))
+
+
+def drift_reasons(drift: SpanDrift | None, noise: float | None) -> list[str]:
+    """A flow that drifts off the data over their span by more than FLOW_ACCURACY of their size
+    (beyond the noise): H_θ is not the data's H, whatever it does over a few observations."""
+    if drift is None or drift.drift <= max(FLOW_ACCURACY, drift.floor):
+        return []
+    beyond = "beyond the noise" if noise is not None else "(no noise was given: the data's own noise counts here)"
+    return [f"over the observations' whole span ({drift.span:.3g}), H_θ's flow from starts fitted to them misses them "
+            f"by {drift.drift:.1%} of their size {beyond}: its predictions drift (about "
+            f"{drift.expected_error(10 * drift.span):.0%} of the size after ten such spans); more or longer "
+            "trajectories, more steps, or a model closer to the system"]

@@ -8,7 +8,7 @@ the value and the limit, raised before anything is trained.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -16,16 +16,18 @@ import numpy as np
 from atlasnn.errors import ConfigError
 from atlasnn.solver import SplittingComposition
 
-__all__ = ["Trajectory", "check_trajectories", "Segments", "segments", "continuations", "rates", "split_point"]
+__all__ = ["Trajectory", "check_trajectories", "Segments", "segments", "continuations", "rates", "split_point",
+           "hold_whole"]
 
 
 @dataclass(frozen=True, eq=False)
 class Trajectory:
     """One observed trajectory: times t (M,), strictly increasing, and states z (M, 2d), a
-    component not observed at a time NaN."""
+    component not observed at a time NaN; ``held``: held out whole (not trained on)."""
 
     t: np.ndarray
     z: np.ndarray
+    held: bool = False
 
     @property
     def partial(self) -> bool:
@@ -86,8 +88,18 @@ def check_trajectories(trajectories: Any) -> list[Trajectory]:
 
 def split_point(trajectory: Trajectory, held_out: float) -> int:
     """The index from which a trajectory's observations are held out (the last ``held_out``
-    fraction of them, by count)."""
-    return trajectory.t.size - int(np.floor(held_out * trajectory.t.size))
+    fraction of them, by count; all of a trajectory held out whole)."""
+    return 0 if trajectory.held else trajectory.t.size - int(np.floor(held_out * trajectory.t.size))
+
+
+def hold_whole(trajectories: list[Trajectory], count: int) -> list[Trajectory]:
+    """The last ``count`` trajectories held out whole (their states not trained on: the check that
+    H_θ holds for states other than those it learned from), or a one-line refusal."""
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 0 <= count < len(trajectories):
+        raise ConfigError(f"held_out_trajectories must be an integer in [0, {len(trajectories) - 1}] (at least one "
+                          f"of the {len(trajectories)} trajectories trained on), got {count!r}")
+    return [replace(traj, held=True) if k >= len(trajectories) - count else traj
+            for k, traj in enumerate(trajectories)]
 
 
 @dataclass(frozen=True, eq=False)
