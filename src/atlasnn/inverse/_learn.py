@@ -80,7 +80,7 @@ class AbstractLearnMethod(abc.ABC):
         return None
 
     def refined_residuals(self, trajectories: list, held_out: float, dof: int) -> tuple[Callable, float] | None:
-        """:meth:`residuals` through steps half as long, where the method's steps are fixed (the
+        """`residuals` through steps half as long, where the method's steps are fixed (the
         check that their error does not bias θ); None otherwise."""
         return None
 

@@ -43,7 +43,7 @@ class LearnedHamiltonian:
             of at most a few dozen values trained through the solver; None otherwise.
         drift: how far H_θ's flow drifts from the data over their whole span, from starts fitted
             to them (``drift.drift``, relative to the data's size, beyond the noise), or None
-            where no trajectory's start is observed whole; see :meth:`expected_error`.
+            where no trajectory's start is observed whole; see `expected_error`.
     """
 
     model: Any
