@@ -84,7 +84,7 @@ def learned_regimes(record: dict) -> str:
         "the largest relative error of its parameters). The last observed trajectory held out whole where every "
         "component is observed. Median time per Adam step after the first (which compiles): "
         + ", ".join(f"{label} {ms} ms" for label, ms in per_step.items()) + f" ({' / '.join(systems)})."
-        + _guide(rows))
+        + _guide(rows, record["horizon_factor"]))
 
 
 def _median_step(rows: list, column: tuple, system: str) -> float:
@@ -93,11 +93,11 @@ def _median_step(rows: list, column: tuple, system: str) -> float:
                              if (r["observed"], r["method"]) == column and r["system"] == system)
 
 
-def _guide(rows: list) -> str:
+def _guide(rows: list, horizon_factor: float) -> str:
     """How the results' own guide to extrapolation (``expected_error`` over the same horizon, on the
     state error's scale) compares with the held-out error the table shows; a guide at its ceiling
     (2√2 of the data's size: no skill expected) is counted apart."""
-    pairs = [(r["expected_state_error"], r["state_error"], _ceiling(r)) for r in rows
+    pairs = [(r["expected_state_error"], r["state_error"], _ceiling(r, horizon_factor)) for r in rows
              if r.get("expected_state_error") is not None and math.isfinite(r["state_error"]) and r["state_error"] > 0]
     if not pairs:
         return ""
@@ -117,12 +117,13 @@ def _guide(rows: list) -> str:
     return text + "."
 
 
-def _ceiling(row: dict) -> bool:
-    """Whether a row's guide is at its ceiling, 2√2 of the data's size."""
+def _ceiling(row: dict, horizon_factor: float) -> bool:
+    """Whether a row's guide is at its ceiling, 2√2 of the data's size, at ``horizon_factor`` times
+    the data's span."""
     drift = row.get("drift")
     if not isinstance(drift, dict):
         return False
-    grown = 2 * math.sqrt(3) * max(drift["drift"], drift["floor"]) * 10
+    grown = 2 * math.sqrt(3) * max(drift["drift"], drift["floor"]) * horizon_factor
     return grown >= 2 * math.sqrt(2) * (1 - 1e-9)
 
 

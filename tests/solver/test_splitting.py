@@ -65,6 +65,26 @@ def test_dense_output_between_steps_is_as_accurate_as_at_the_steps_and_continuou
     assert 0 < res < 100 * at_steps / sol.h
 
 
+def test_a_large_states_dense_output_one_row_at_a_time_is_the_batched_ones(monkeypatch):
+    """A state of 2 048 numbers or more is stepped one row at a time, the padding rows not stepped:
+    the same values (and rates) as all rows at once, for a few times and for many."""
+    from atlasnn.solutions import _splitting as dense_module
+
+    chain = builtin_system("fput", particles=1024, alpha=0.0, beta=1.0)
+    sol = solve(chain, chain.z0, (0.0, 5.0), solver=SplittingComposition(scheme="leapfrog", steps=20))
+    times = np.random.default_rng(3).uniform(0.0, 5.0, 40)
+    one_at_a_time = [sol(times[:3]), sol(times), sol._values(times, rates=True)[1]]
+    monkeypatch.setattr(dense_module, "_EVAL_BATCH_NUMBERS", 10 ** 9)
+    dense_module._dense.cache_clear()
+    try:
+        at_once = [sol(times[:3]), sol(times), sol._values(times, rates=True)[1]]
+    finally:
+        dense_module._dense.cache_clear()
+    for a, b in zip(one_at_a_time, at_once):
+        assert np.all(np.isfinite(a)) and np.abs(a - b).max() <= 1e-12 * (1.0 + np.abs(b).max())
+    assert np.abs(one_at_a_time[1]).max(axis=1).min() > 0  # no row left as padding
+
+
 @pytest.mark.parametrize("scheme", ["yoshida4", "kahan_li8"])
 def test_the_estimate_is_the_true_error_within_a_factor_two(scheme):
     pend = _pendulum()

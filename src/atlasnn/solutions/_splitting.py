@@ -41,10 +41,11 @@ __all__ = ["SplittingSolution"]
 #: calls of the large one (two programs per system and scheme; each row is a step of the method,
 #: so padding is work: 200 times take two calls of 128 rows, not one of 1 024)
 _EVAL_SMALL, _EVAL_CHUNK = 16, 128
-#: a state of at least this many numbers is stepped a few rows at a time (``lax.map``, batches of
-#: about this many numbers, which stay in the cache), not all rows at once: FPUT-β, N = 1 024, 198
-#: rows all at once took 11.6 ms, one at a time 7.5 ms. Smaller states are stepped all at once,
-#: which compiles in less than half the time (N = 256: 0.28 s against 0.75 s) and is as fast
+#: a state of at least this many numbers is stepped one row at a time (a loop over the rows a call
+#: holds, the padding rows not stepped), not all rows at once: FPUT-β, N = 1 024, 198 rows all at
+#: once took 11.6 ms, one at a time 7.5 ms; 200 times in two calls of 128 rows 11.0 ms stepping the
+#: padding too, 8.3 ms without. Smaller states are stepped all at once, which compiles in less than
+#: half the time (N = 256: 0.28 s against 0.75 s) and is as fast
 _EVAL_BATCH_NUMBERS = 2048
 #: interior points per kept interval where the error estimate compares the two solutions
 _ESTIMATE_POINTS = 3
@@ -56,7 +57,8 @@ def _dense(system: HamiltonianSystem, scheme: str, kind: str):
     """The compiled dense output, per system, scheme and kind: rows of (start state, full steps,
     h, τ) -> ẑ (``"at"``: from the kept state itself, no full steps; ``"after"``: after the full
     steps) or (ẑ, dẑ/dt) (``"rate"``). The start state is a kept state rounded to float64 (the
-    march keeps them so)."""
+    march keeps them so). For a state of ``_EVAL_BATCH_NUMBERS`` numbers or more, the count of rows
+    to step comes first (the rest are padding)."""
     sch = splitting_scheme(scheme)
     if kind == "at":
         one = lambda z, steps, h, tau: partial_step(system, sch, z, jnp.zeros_like(z), 0, h, tau)  # noqa: E731
@@ -65,7 +67,15 @@ def _dense(system: HamiltonianSystem, scheme: str, kind: str):
         one = lambda z, steps, h, tau: step(system, sch, z, jnp.zeros_like(z), steps, h, tau)  # noqa: E731
     if system.state_dim < _EVAL_BATCH_NUMBERS:
         return jax.jit(jax.vmap(one))
-    return jax.jit(lambda *rows: jax.lax.map(lambda row: one(*row), rows, batch_size=_EVAL_BATCH_NUMBERS // system.state_dim))
+
+    def counted(count, *rows):  # the first ``count`` rows, one at a time; the padding is left as zeros
+        tree = jax.tree_util.tree_map
+        shapes = jax.eval_shape(one, *tree(lambda x: x[0], rows))
+
+        def row(i, out):
+            return tree(lambda o, v: o.at[i].set(v), out, one(*tree(lambda x: x[i], rows)))
+        return jax.lax.fori_loop(0, count, row, tree(lambda s: jnp.zeros((rows[0].shape[0],) + s.shape, s.dtype), shapes))
+    return jax.jit(counted)
 
 
 @dataclass(eq=False)
@@ -158,7 +168,8 @@ class SplittingSolution(CompanionEstimated, AbstractSolution):
                 m = min(_EVAL_CHUNK, flat.size - a)
                 size = _EVAL_SMALL if m <= _EVAL_SMALL else _EVAL_CHUNK
                 take = np.minimum(np.arange(a, a + size), flat.size - 1)  # padded with the last row
-                out = program(starts[c[take]], steps[take], np.full(size, self.h), tau[take])
+                rows_in = (starts[c[take]], steps[take], np.full(size, self.h), tau[take])
+                out = program(*rows_in) if d < _EVAL_BATCH_NUMBERS else program(np.int64(m), *rows_in)
                 where = rows[a:a + m]
                 if rates:
                     z[where], dz[where] = np.asarray(out[0])[:m], np.asarray(out[1])[:m]
