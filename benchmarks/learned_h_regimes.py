@@ -4,7 +4,8 @@ through a solver pays against an HNN.
 For each system, trajectories observed at spacings Δt ∈ {0.1, 0.5, 1} (in units of the fastest
 period / 2π, 1/ω_max), 31 observations each, with Gaussian noise of σ ∈ {0, 1 %, 5 %} of each
 component's rms over the data, on every component or on the positions only. Of the observed
-trajectories (four of the pendulum, seven of the chain) the last is held out whole where every
+trajectories (four of the pendulum, seven of the chain, five of the three bodies near Chenciner and
+Montgomery's figure eight) the last is held out whole where every
 component is observed (``held_out_trajectories=1``): the held-out loss and the span check then see
 states not trained on. The same separable
 network H_θ = T_θ(p) + V_θ(q) (two MLPs, softplus, the same initial weights) and the same Adam
@@ -22,7 +23,8 @@ steps and rate for every method:
 
 From the positions alone H is fixed only up to a change of the momenta, so a network's H there has
 momenta of its own; what positions do determine is a known form's parameters with the masses given:
-the pendulum's g in p²/2 − g·cos q, the chain's k and β in Σ p²/2 + Σ (k s²/2 + β s⁴/4), learned
+the pendulum's g in p²/2 − g·cos q, the chain's k and β in Σ p²/2 + Σ (k s²/2 + β s⁴/4), the three
+bodies' G in Σ |p|²/2 − G Σ 1/r, learned
 through leapfrog on end-to-end segments of 10 observations, each segment's starting momentum an
 unknown (the HNN needs every component), at Adam's rate 0.05. Their relative error and standard
 errors are recorded beside the held-out errors.
@@ -35,14 +37,17 @@ progress calls) are recorded.
 
     python -m benchmarks.learned_h_regimes --out docs/benchmarks/learned_h_regimes.json
     python -m benchmarks.learned_h_regimes --systems pendulum --spacings 0.5 --sigmas 0.01 --steps 100  # quick
+    python -m benchmarks.learned_h_regimes --systems three-body --update --out docs/benchmarks/learned_h_regimes.json  # one system again
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import statistics
 import time
+from pathlib import Path
 
 import equinox as eqx
 import jax
@@ -81,6 +86,32 @@ def _chain_starts(seed: int, count: int) -> list:
     return [np.concatenate([0.4 * rng.standard_normal(CHAIN), 0.4 * rng.standard_normal(CHAIN)]) for _ in range(count)]
 
 
+def _three_body(q, p, G=1.0):
+    """Three unit masses in the plane, gravitation (G = 1): q = (x₁, y₁, x₂, y₂, x₃, y₃)."""
+    r = q.reshape(3, 2)
+    pairs = [(0, 1), (0, 2), (1, 2)]
+    return jnp.sum(p ** 2) / 2 - G * sum(1.0 / jnp.sqrt(jnp.sum((r[i] - r[j]) ** 2)) for i, j in pairs)
+
+
+#: Chenciner and Montgomery's figure eight (period 6.3259), the orbit every three-body start is near
+_EIGHT = np.array([0.97000436, -0.24308753, -0.97000436, 0.24308753, 0.0, 0.0,
+                   0.466203685, 0.43236573, 0.466203685, 0.43236573, -0.93240737, -0.86473146])
+EIGHT_PERIOD = 6.3259
+
+
+def _eight_starts(seed: int, count: int) -> list:
+    """Starts near the figure eight: each coordinate moved by 0.5 % of its size (2 % led some orbits
+    to a collision within ten spans), the total momentum
+    kept zero."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(count):
+        z = _EIGHT * (1.0 + 0.005 * rng.standard_normal(12))
+        z[6:] -= np.tile(z[6:].reshape(3, 2).mean(axis=0), 3)
+        out.append(z)
+    return out
+
+
 #: name -> (true H, degrees of freedom, ω_max (the fastest linear frequency), observed starts (the last one's
 #: trajectory held out whole where every component is observed), held-out starts of the final solves)
 SYSTEMS = {
@@ -88,11 +119,14 @@ SYSTEMS = {
                  [[1.0, 0.0], [0.0, 1.2], [-0.5, -0.6], [0.4, 0.8]], [[0.7, -0.4], [-1.2, 0.3], [0.2, 0.9]]),
     "spring-chain": (_chain, CHAIN, 2 * np.sin(np.pi * CHAIN / (2 * (CHAIN + 1))),
                      _chain_starts(1, 7), _chain_starts(2, 3)),
+    # the figure eight's own frequency (its bodies' closest approaches are faster, but not by much)
+    "three-body": (_three_body, 6, 2 * np.pi / EIGHT_PERIOD, _eight_starts(1, 5), _eight_starts(2, 3)),
 }
 
 
 class KnownForm(eqx.Module):
-    """The true H's form with its parameters unknown: g of the pendulum, k and β of the chain."""
+    """The true H's form with its parameters unknown: g of the pendulum, k and β of the chain, G of
+    the three bodies."""
 
     name: str = eqx.field(static=True)
     theta: jax.Array
@@ -100,12 +134,14 @@ class KnownForm(eqx.Module):
     def __call__(self, q, p):
         if self.name == "pendulum":
             return p[0] ** 2 / 2 - self.theta[0] * jnp.cos(q[0])
+        if self.name == "three-body":
+            return _three_body(q, p, self.theta[0])
         stretch = jnp.diff(jnp.concatenate([jnp.zeros(1), q, jnp.zeros(1)]))
         return jnp.sum(p ** 2) / 2 + self.theta[0] * jnp.sum(stretch ** 2) / 2 + self.theta[1] * jnp.sum(stretch ** 4) / 4
 
 
 #: the known forms' true parameters and the guess every training starts from
-TRUE_PARAMETERS = {"pendulum": [1.0], "spring-chain": [1.0, 1.0]}
+TRUE_PARAMETERS = {"pendulum": [1.0], "spring-chain": [1.0, 1.0], "three-body": [1.0]}
 GUESS = 0.6
 
 
@@ -246,22 +282,30 @@ def main(argv=None) -> None:
     ap.add_argument("--rate", type=float, default=3e-3)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out")
+    ap.add_argument("--update", action="store_true", help="rerun only --systems, keeping the record's other rows")
     args = ap.parse_args(argv)
     started = time.perf_counter()
     rows = [row for name in args.systems for spacing in args.spacings for sigma in args.sigmas
             for observed in args.observed
             for row in run(name, spacing, sigma, observed, args.steps, args.rate, args.seed)]
     command = "python -m benchmarks.learned_h_regimes " + " ".join(
-        f"--{k} {' '.join(map(str, v)) if isinstance(v, list) else v}" for k, v in vars(args).items() if v is not None)
+        f"--{k} {' '.join(map(str, v)) if isinstance(v, list) else v}" if not isinstance(v, bool) else f"--{k}"
+        for k, v in vars(args).items() if v is not None and v is not False)
     print(f"{len(rows)} trainings in {time.perf_counter() - started:.0f} s")
+    extra = {}
+    if args.update and args.out and Path(args.out).is_file():  # the other systems' rows as their own run made them
+        kept = json.loads(Path(args.out).read_text(encoding="utf-8"))
+        rows = [r for r in kept["rows"] if r["system"] not in args.systems] + rows
+        extra["updated"] = {"problems": args.systems, "earlier": kept.get("command"),
+                            "earlier_machine": kept.get("machine")}
     if args.out:
-        write_result(args.out, {"command": command, "machine": machine_info(), "observations": OBSERVATIONS,
+        write_result(args.out, {"command": command, "machine": machine_info(), **extra, "observations": OBSERVATIONS,
                                 "horizon_factor": HORIZON_FACTOR, "ahead": AHEAD, "held_whole": HELD_WHOLE,
                                 "leapfrog_per_interval": LEAPFROG_PER_INTERVAL, "position_ahead": POSITION_AHEAD,
                                 "known_rate": KNOWN_RATE,
                                 "steps": args.steps,
                                 "rate": args.rate, "network": "T_θ(p) + V_θ(q), two MLPs d → w → w → 1, softplus "
-                                "(w = 32 for one degree of freedom, 64 for the chain)", "rows": rows})
+                                "(w = 32 for one degree of freedom, 64 for more)", "rows": rows})
 
 
 if __name__ == "__main__":

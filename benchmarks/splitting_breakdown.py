@@ -82,7 +82,7 @@ def main(argv=None) -> None:
     needed = steps_needed(64, args.rtol, (217, 300, 400, 500, 600, 700, 850))
     if args.out:
         write_result(args.out, {"command": "python -m benchmarks.splitting_breakdown", "benchmark": "splitting_breakdown",
-                                "machine": machine_info(), "T": T, "times": TIMES.size, "rows": rows,
+                                "machine": machine_info(), "T": T, "times": TIMES.size, "repeats": args.repeats, "rows": rows,
                                 "steps_needed": needed})
 
 

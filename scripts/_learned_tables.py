@@ -80,11 +80,19 @@ def learned_regimes(record: dict) -> str:
         f"{record['steps']} Adam steps (rate {record['rate']:g}) for every method, the network "
         f"{record['network']}; leapfrog: {record['leapfrog_per_interval']} steps per observation interval, "
         f"segments of {record['ahead']} observations ({record['position_ahead']} end to end from positions only, a "
-        f"known form: the pendulum's g, the chain's k and β, with the masses given, at rate {record['known_rate']:g}; "
+        f"known form: {_known_forms(systems)}, with the masses given, at rate {record['known_rate']:g}; "
         "the largest relative error of its parameters). The last observed trajectory held out whole where every "
         "component is observed. Median time per Adam step after the first (which compiles): "
         + ", ".join(f"{label} {ms} ms" for label, ms in per_step.items()) + f" ({' / '.join(systems)})."
         + _guide(rows, record["horizon_factor"]))
+
+
+#: each system's known form's parameters, as the table's note names them
+_PARAMETERS = {"pendulum": "the pendulum's g", "spring-chain": "the chain's k and β", "three-body": "the three bodies' G"}
+
+
+def _known_forms(systems: list) -> str:
+    return ", ".join(_PARAMETERS.get(name, name) for name in systems)
 
 
 def _median_step(rows: list, column: tuple, system: str) -> float:

@@ -103,7 +103,7 @@ def splitting_breakdown(record: dict) -> str:
     counts = ", ".join(f"{x['steps']}: {x['error_over_tolerance']:.2g}" for x in need["rows"])
     return "\n".join(rows) + (
         f"\n\n`solve` with no solver given at rtol {record['rows'][0]['rtol']:g} over [0, {record['T']:g}]; each "
-        "part the best of five after a first call; march: the chosen scheme and step count given, with no pilot "
+        f"part the best of {record['repeats']} after a first call; march: the chosen scheme and step count given, with no pilot "
         "and no check; checks and retries: the rest of the solve. On the chain of "
         f"{need['particles']}, the error of {need['scheme']} over the tolerance by step count (against "
         f"Sofroniou–Spaletta 10 with 4 000 steps): {counts}; the default took {need['default_steps']}.")

@@ -73,11 +73,11 @@ def test_a_large_states_dense_output_one_row_at_a_time_is_the_batched_ones(monke
     chain = builtin_system("fput", particles=1024, alpha=0.0, beta=1.0)
     sol = solve(chain, chain.z0, (0.0, 5.0), solver=SplittingComposition(scheme="leapfrog", steps=20))
     times = np.random.default_rng(3).uniform(0.0, 5.0, 40)
-    one_at_a_time = [sol(times[:3]), sol(times), sol._values(times, rates=True)[1]]
+    one_at_a_time = [sol(times[:3]), sol(times), sol.derivative(times)]
     monkeypatch.setattr(dense_module, "_EVAL_BATCH_NUMBERS", 10 ** 9)
     dense_module._dense.cache_clear()
     try:
-        at_once = [sol(times[:3]), sol(times), sol._values(times, rates=True)[1]]
+        at_once = [sol(times[:3]), sol(times), sol.derivative(times)]
     finally:
         dense_module._dense.cache_clear()
     for a, b in zip(one_at_a_time, at_once):
