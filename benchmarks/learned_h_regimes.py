@@ -5,11 +5,10 @@ For each system, trajectories observed at spacings Δt ∈ {0.1, 0.5, 1} (in uni
 period / 2π, 1/ω_max), 31 observations each, with Gaussian noise of σ ∈ {0, 1 %, 5 %} of each
 component's rms over the data, on every component or on the positions only. Of the observed
 trajectories (four of the pendulum, seven of the chain, five of the three bodies near Chenciner and
-Montgomery's figure eight) the last is held out whole where every
-component is observed (``held_out_trajectories=1``): the held-out loss and the span check then see
-states not trained on. The same separable
-network H_θ = T_θ(p) + V_θ(q) (two MLPs, softplus, the same initial weights) and the same Adam
-steps and rate for every method:
+Montgomery's figure eight) the last is held out whole where every component is observed
+(``held_out_trajectories=1``): the held-out loss and the span check then see states not trained on.
+The same separable network H_θ = T_θ(p) + V_θ(q) (two MLPs, softplus, the same initial weights) and
+the same Adam steps and rate for every method:
 
 * ``HNN`` — ``learn_hamiltonian(..., HNN())``: J∇H_θ against central differences of the data;
 * ``HNN, smoothed`` — the same on the data smoothed first (a Savitzky–Golay filter of 7 points,
@@ -24,10 +23,9 @@ steps and rate for every method:
 From the positions alone H is fixed only up to a change of the momenta, so a network's H there has
 momenta of its own; what positions do determine is a known form's parameters with the masses given:
 the pendulum's g in p²/2 − g·cos q, the chain's k and β in Σ p²/2 + Σ (k s²/2 + β s⁴/4), the three
-bodies' G in Σ |p|²/2 − G Σ 1/r, learned
-through leapfrog on end-to-end segments of 10 observations, each segment's starting momentum an
-unknown (the HNN needs every component), at Adam's rate 0.05. Their relative error and standard
-errors are recorded beside the held-out errors.
+bodies' G in Σ |p|²/2 − G Σ 1/r, learned through leapfrog on end-to-end segments of 10 observations,
+each segment's starting momentum an unknown (the HNN needs every component), at Adam's rate 0.05.
+Their relative error and standard errors are recorded beside the held-out errors.
 
 Each learned H is solved (``atlasnn.solve``, defaults) from held-out initial states over ten times
 the training span, against the true H's solution: the largest state error over the output relative
@@ -100,9 +98,8 @@ EIGHT_PERIOD = 6.3259
 
 
 def _eight_starts(seed: int, count: int) -> list:
-    """Starts near the figure eight: each coordinate moved by 0.5 % of its size (2 % led some orbits
-    to a collision within ten spans), the total momentum
-    kept zero."""
+    """Starts near the figure eight: each coordinate moved by 0.5 % of its size (at 2 % an orbit
+    reached a collision within ten spans), the total momentum kept zero."""
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(count):
@@ -119,7 +116,7 @@ SYSTEMS = {
                  [[1.0, 0.0], [0.0, 1.2], [-0.5, -0.6], [0.4, 0.8]], [[0.7, -0.4], [-1.2, 0.3], [0.2, 0.9]]),
     "spring-chain": (_chain, CHAIN, 2 * np.sin(np.pi * CHAIN / (2 * (CHAIN + 1))),
                      _chain_starts(1, 7), _chain_starts(2, 3)),
-    # the figure eight's own frequency (its bodies' closest approaches are faster, but not by much)
+    # ω_max: the figure eight's own frequency, 2π over its period
     "three-body": (_three_body, 6, 2 * np.pi / EIGHT_PERIOD, _eight_starts(1, 5), _eight_starts(2, 3)),
 }
 
