@@ -4,11 +4,12 @@ through a solver pays against an HNN.
 For each system, trajectories observed at spacings Δt ∈ {0.1, 0.5, 1} (in units of the fastest
 period / 2π, 1/ω_max), 31 observations each, with Gaussian noise of σ ∈ {0, 1 %, 5 %} of each
 component's rms over the data, on every component or on the positions only. Of the observed
-trajectories (four of the pendulum, seven of the chain, five of the three bodies near Chenciner and
-Montgomery's figure eight) the last is held out whole where every component is observed
-(``held_out_trajectories=1``): the held-out loss and the span check then see states not trained on.
-The same separable network H_θ = T_θ(p) + V_θ(q) (two MLPs, softplus, the same initial weights) and
-the same Adam steps and rate for every method:
+trajectories (four of the pendulum, seven of the chain, five of the two bodies on bound orbits of
+eccentricity up to about 0.35, five of the three bodies near Chenciner and Montgomery's figure
+eight, five of the double pendulum released from rest) the last is held out whole where every
+component is observed (``held_out_trajectories=1``): the held-out loss and the span check then see
+states not trained on. The same separable network H_θ = T_θ(p) + V_θ(q) (two MLPs, softplus, the
+same initial weights) and the same Adam steps and rate for every method:
 
 * ``HNN`` — ``learn_hamiltonian(..., HNN())``: J∇H_θ against central differences of the data;
 * ``HNN, smoothed`` — the same on the data smoothed first (a Savitzky–Golay filter of 7 points,
@@ -20,11 +21,17 @@ the same Adam steps and rate for every method:
   segment's start trained with θ (``fit_starts=True``), so that each observation is predicted once
   and a start's noise is not carried along: a fifth of the segments.
 
+The double pendulum's H is not separable (its kinetic energy depends on the angles): there the
+network is one MLP of (q, p) and both ``through`` methods go through the Gauss solver instead
+(``ThroughSolver``'s default, four stages at rtol 1e-7), labelled ``through Gauss``.
+
 From the positions alone H is fixed only up to a change of the momenta, so a network's H there has
 momenta of its own; what positions do determine is a known form's parameters with the masses given:
-the pendulum's g in p²/2 − g·cos q, the chain's k and β in Σ p²/2 + Σ (k s²/2 + β s⁴/4), the three
-bodies' G in Σ |p|²/2 − G Σ 1/r, learned through leapfrog on end-to-end segments of 10 observations,
-each segment's starting momentum an unknown (the HNN needs every component), at Adam's rate 0.05.
+the pendulum's g in p²/2 − g·cos q, the chain's k and β in Σ p²/2 + Σ (k s²/2 + β s⁴/4), the two
+bodies' μ in |p|²/2 − μ/|q|, the three bodies' G in Σ |p|²/2 − G Σ 1/r, the double pendulum's g,
+learned through leapfrog (the double pendulum: the Gauss solver) on end-to-end segments of 10
+observations, each segment's starting momentum an unknown (the HNN needs every component), at
+Adam's rate 0.05.
 Their relative error and standard errors are recorded beside the held-out errors.
 
 Each learned H is solved (``atlasnn.solve``, defaults) from held-out initial states over ten times
@@ -35,7 +42,8 @@ progress calls) are recorded.
 
     python -m benchmarks.learned_h_regimes --out docs/benchmarks/learned_h_regimes.json
     python -m benchmarks.learned_h_regimes --systems pendulum --spacings 0.5 --sigmas 0.01 --steps 100  # quick
-    python -m benchmarks.learned_h_regimes --systems three-body --update --out docs/benchmarks/learned_h_regimes.json  # one system again
+    # one system again, the record's other rows kept:
+    python -m benchmarks.learned_h_regimes --systems two-body --update --out docs/benchmarks/learned_h_regimes.json
 """
 
 from __future__ import annotations
@@ -43,6 +51,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import statistics
 import time
 from pathlib import Path
@@ -62,6 +71,8 @@ from benchmarks.common import machine_info, write_result
 jax.config.update("jax_enable_x64", True)
 
 OBSERVATIONS, HORIZON_FACTOR, AHEAD, LEAPFROG_PER_INTERVAL = 31, 10, 5, 4
+#: the solver a model that is not separable is trained through: ThroughSolver's default
+GAUSS = ThroughSolver().solver
 #: positions only: segments of this many observations end to end (each segment's momentum is fitted:
 #: short overlapping segments would let the fitted momenta absorb the force)
 POSITION_AHEAD = 10
@@ -75,8 +86,7 @@ HELD_WHOLE = 1
 
 def _chain(q, p):
     """Ten unit masses between fixed walls, linear springs of unit stiffness, a quartic part (FPUT-β)."""
-    stretch = jnp.diff(jnp.concatenate([jnp.zeros(1), q, jnp.zeros(1)]))
-    return jnp.sum(p ** 2) / 2 + jnp.sum(stretch ** 2) / 2 + jnp.sum(stretch ** 4) / 4
+    return _chain_form(q, p)
 
 
 def _chain_starts(seed: int, count: int) -> list:
@@ -109,36 +119,82 @@ def _eight_starts(seed: int, count: int) -> list:
     return out
 
 
+def _two_body(q, p, mu=1.0):
+    """Two bodies in the plane in their relative coordinate (the centre of mass at rest), reduced
+    mass 1: H = |p|²/2 − μ/|q|, μ = G(m₁ + m₂) = 1."""
+    return jnp.sum(p ** 2) / 2 - mu / jnp.sqrt(jnp.sum(q ** 2))
+
+
+def _kepler_starts(seed: int, count: int) -> list:
+    """Bound orbits through r = 1 at a random angle, the speed 0.85–1.15 of the circular one and a
+    small radial part: eccentricities up to about 0.35."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(count):
+        phi, speed, radial = rng.uniform(0, 2 * np.pi), rng.uniform(0.85, 1.15), rng.uniform(-0.1, 0.1)
+        r = np.array([np.cos(phi), np.sin(phi)])
+        out.append(np.concatenate([r, speed * np.array([-r[1], r[0]]) + radial * r]))
+    return out
+
+
+def _double_pendulum(q, p, g=1.0):
+    """Two unit masses on unit rods (angles q from the vertical): not separable, the kinetic
+    energy depends on q₁ − q₂."""
+    d = q[0] - q[1]
+    return ((p[0] ** 2 + 2 * p[1] ** 2 - 2 * p[0] * p[1] * jnp.cos(d)) / (2 * (1 + jnp.sin(d) ** 2))
+            - g * (2 * jnp.cos(q[0]) + jnp.cos(q[1])))
+
+
+def _swing_starts(seed: int, count: int) -> list:
+    """Both rods released from rest at angles of 0.2–0.6 rad, either sign."""
+    rng = np.random.default_rng(seed)
+    return [np.concatenate([rng.choice([-1.0, 1.0], 2) * rng.uniform(0.2, 0.6, 2), np.zeros(2)]) for _ in range(count)]
+
+
+def _pendulum(q, p, g=1.0):
+    return p[0] ** 2 / 2 - g * jnp.cos(q[0])
+
+
+def _chain_form(q, p, k=1.0, beta=1.0):
+    stretch = jnp.diff(jnp.concatenate([jnp.zeros(1), q, jnp.zeros(1)]))
+    return jnp.sum(p ** 2) / 2 + k * jnp.sum(stretch ** 2) / 2 + beta * jnp.sum(stretch ** 4) / 4
+
+
 #: name -> (true H, degrees of freedom, ω_max (the fastest linear frequency), observed starts (the last one's
 #: trajectory held out whole where every component is observed), held-out starts of the final solves)
 SYSTEMS = {
-    "pendulum": (lambda q, p: p[0] ** 2 / 2 - jnp.cos(q[0]), 1, 1.0,
+    "pendulum": (_pendulum, 1, 1.0,
                  [[1.0, 0.0], [0.0, 1.2], [-0.5, -0.6], [0.4, 0.8]], [[0.7, -0.4], [-1.2, 0.3], [0.2, 0.9]]),
     "spring-chain": (_chain, CHAIN, 2 * np.sin(np.pi * CHAIN / (2 * (CHAIN + 1))),
                      _chain_starts(1, 7), _chain_starts(2, 3)),
+    # ω_max: the circular orbit's frequency at r = 1
+    "two-body": (_two_body, 2, 1.0, _kepler_starts(1, 5), _kepler_starts(2, 3)),
     # ω_max: the figure eight's own frequency, 2π over its period
     "three-body": (_three_body, 6, 2 * np.pi / EIGHT_PERIOD, _eight_starts(1, 5), _eight_starts(2, 3)),
+    # ω_max: the faster normal mode's, √(2 + √2)
+    "double-pendulum": (_double_pendulum, 2, np.sqrt(2 + np.sqrt(2)), _swing_starts(1, 5), _swing_starts(2, 3)),
 }
+#: systems whose H is not T(p) + V(q): a network of (q, p) trained through the Gauss solver, not leapfrog
+NOT_SEPARABLE = ("double-pendulum",)
+
+#: name -> (the true H's form with its parameters as arguments, their true values): the pendulum's g,
+#: the chain's k and β, the two bodies' μ, the three bodies' G, the double pendulum's g
+FORMS = {"pendulum": (_pendulum, [1.0]), "spring-chain": (_chain_form, [1.0, 1.0]),
+         "two-body": (_two_body, [1.0]), "three-body": (_three_body, [1.0]),
+         "double-pendulum": (_double_pendulum, [1.0])}
 
 
 class KnownForm(eqx.Module):
-    """The true H's form with its parameters unknown: g of the pendulum, k and β of the chain, G of
-    the three bodies."""
+    """The true H's form (``FORMS``) with its parameters unknown."""
 
     name: str = eqx.field(static=True)
     theta: jax.Array
 
     def __call__(self, q, p):
-        if self.name == "pendulum":
-            return p[0] ** 2 / 2 - self.theta[0] * jnp.cos(q[0])
-        if self.name == "three-body":
-            return _three_body(q, p, self.theta[0])
-        stretch = jnp.diff(jnp.concatenate([jnp.zeros(1), q, jnp.zeros(1)]))
-        return jnp.sum(p ** 2) / 2 + self.theta[0] * jnp.sum(stretch ** 2) / 2 + self.theta[1] * jnp.sum(stretch ** 4) / 4
+        return FORMS[self.name][0](q, p, *self.theta)
 
 
-#: the known forms' true parameters and the guess every training starts from
-TRUE_PARAMETERS = {"pendulum": [1.0], "spring-chain": [1.0, 1.0], "three-body": [1.0]}
+#: the guess every known form's training starts from (each parameter)
 GUESS = 0.6
 
 
@@ -152,11 +208,23 @@ class SeparableH(eqx.Module):
         return self.kinetic(p)[0] + self.potential(q)[0]
 
 
-def network(dof: int, seed: int) -> SeparableH:
+class NetworkH(eqx.Module):
+    """H_θ(q, p), one MLP of the whole state (for systems that are not separable)."""
+
+    mlp: eqx.nn.MLP
+
+    def __call__(self, q, p):
+        return self.mlp(jnp.concatenate([q, p]))[0]
+
+
+def network(dof: int, seed: int, separable: bool = True) -> SeparableH | NetworkH:
     width = 32 if dof == 1 else 64
     k1, k2 = jax.random.split(jax.random.PRNGKey(seed))
-    net = SeparableH(eqx.nn.MLP(dof, 1, width, 2, activation=jax.nn.softplus, key=k1),
-                     eqx.nn.MLP(dof, 1, width, 2, activation=jax.nn.softplus, key=k2))
+    if separable:
+        net = SeparableH(eqx.nn.MLP(dof, 1, width, 2, activation=jax.nn.softplus, key=k1),
+                         eqx.nn.MLP(dof, 1, width, 2, activation=jax.nn.softplus, key=k2))
+    else:
+        net = NetworkH(eqx.nn.MLP(2 * dof, 1, width, 2, activation=jax.nn.softplus, key=k1))
     return jax.tree_util.tree_map(lambda x: x.astype(jnp.float64) if eqx.is_inexact_array(x) else x, net)
 
 
@@ -189,7 +257,7 @@ def held_out(name: str, model, span: float, expected: float | None = None) -> di
     figure), the same on the state error's scale, per state."""
     H, dof, _, _, starts = SYSTEMS[name]
     truth = atlasnn.HamiltonianSystem(H, dof, name=name)
-    learned = atlasnn.HamiltonianSystem(model, dof, name="learned", separable=True)
+    learned = atlasnn.HamiltonianSystem(model, dof, name="learned", separable=name not in NOT_SEPARABLE)
     horizon = HORIZON_FACTOR * span
     t = np.linspace(0.0, horizon, 601)
     states, energies, failures, guides = [], [], [], []
@@ -219,17 +287,20 @@ def _expected(result, data: list, span: float) -> float | None:
     return guide * float(np.sqrt(np.nanmean(np.concatenate([z for _, z in data]) ** 2)))
 
 
-def methods(steps: int, rate: float, observed: str) -> dict:
-    through = ThroughSolver(steps=steps, rate=rate, ahead=AHEAD,
-                            solver=SplittingComposition(scheme="leapfrog", steps=LEAPFROG_PER_INTERVAL * AHEAD))
+def methods(steps: int, rate: float, observed: str, separable: bool = True) -> dict:
+    """The methods by label; through leapfrog for a separable system, through the Gauss solver
+    (``ThroughSolver``'s own, four stages at rtol 1e-7) for another."""
+    def solver(ahead: int):
+        return SplittingComposition(scheme="leapfrog", steps=LEAPFROG_PER_INTERVAL * ahead) if separable else GAUSS
+
+    through = "through leapfrog" if separable else "through Gauss"
     if observed == "positions":  # end-to-end segments of POSITION_AHEAD: one fitted momentum per segment
-        return {"through leapfrog": ThroughSolver(
-            steps=steps, rate=KNOWN_RATE, ahead=POSITION_AHEAD, stride=POSITION_AHEAD,
-            solver=SplittingComposition(scheme="leapfrog", steps=LEAPFROG_PER_INTERVAL * POSITION_AHEAD))}
-    end_to_end = ThroughSolver(steps=steps, rate=rate, ahead=AHEAD, stride=AHEAD, fit_starts=True,
-                               solver=SplittingComposition(scheme="leapfrog", steps=LEAPFROG_PER_INTERVAL * AHEAD))
+        return {through: ThroughSolver(steps=steps, rate=KNOWN_RATE, ahead=POSITION_AHEAD, stride=POSITION_AHEAD,
+                                       solver=solver(POSITION_AHEAD))}
     return {"HNN": HNN(steps=steps, rate=rate), "HNN, smoothed": HNN(steps=steps, rate=rate),
-            "through leapfrog": through, "through leapfrog, end to end": end_to_end}
+            through: ThroughSolver(steps=steps, rate=rate, ahead=AHEAD, solver=solver(AHEAD)),
+            f"{through}, end to end": ThroughSolver(steps=steps, rate=rate, ahead=AHEAD, stride=AHEAD,
+                                                    fit_starts=True, solver=solver(AHEAD))}
 
 
 def run(name: str, spacing: float, sigma: float, observed: str, steps: int, rate: float, seed: int) -> list[dict]:
@@ -237,36 +308,54 @@ def run(name: str, spacing: float, sigma: float, observed: str, steps: int, rate
     data, noise = observations(name, spacing, sigma, seed)
     span = float(data[0][0][-1])
     rows = []
-    for label, method in methods(steps, rate, observed).items():
+    separable = name not in NOT_SEPARABLE
+    for label, method in methods(steps, rate, observed, separable).items():
         given = smoothed(data) if label == "HNN, smoothed" else data
         if observed == "positions":
             given = positions_only(given, dof)
-            model = KnownForm(name, jnp.full(len(TRUE_PARAMETERS[name]), GUESS))
+            model = KnownForm(name, jnp.full(len(FORMS[name][1]), GUESS))
         else:
-            model = network(dof, seed)
+            model = network(dof, seed, separable)
         marks = []  # (step, wall time) at each progress call: the time per step once compiled
         result = learn_hamiltonian(model, given, method, noise=None if label == "HNN, smoothed" else noise,
                                    held_out_trajectories=HELD_WHOLE if observed == "all" else 0,
                                    progress=lambda k, _loss: marks.append((k, time.perf_counter())))
-        (k1, t1), (k2, t2) = marks[1], marks[-1]
+        # the time per step after the first (which compiles); none where training stopped within two calls
+        per_step = (marks[-1][1] - marks[1][1]) / (marks[-1][0] - marks[1][0]) if len(marks) > 2 else None
         extra = {}
         if observed == "positions":
-            truth = np.asarray(TRUE_PARAMETERS[name])
+            truth = np.asarray(FORMS[name][1])
             extra = {"parameters": np.asarray(result.model.theta).tolist(),
                      "std": None if result.std is None else np.asarray(result.std).tolist(),
                      "parameter_error": float(np.max(np.abs(np.asarray(result.model.theta) / truth - 1)))}
         row = {"system": name, "spacing": spacing, "sigma": sigma, "observed": observed, "method": label,
-               "loss": result.loss, "train_seconds": result.seconds, "seconds_per_step": (t2 - t1) / (k2 - k1),
+               "loss": result.loss, "train_seconds": result.seconds, "seconds_per_step": per_step,
+               "stopped": result.stopped,
                "trusted": result.trusted, "notes": list(result.notes), **extra,
                "drift": None if result.drift is None else dataclasses.asdict(result.drift),
                **held_out(name, result.model, span, _expected(result, given, span))}
-        print(f"{name:13s} Δt {spacing:<4g} σ {sigma:<5g} {observed:9s} {label:29s} {result.seconds:6.1f} s "
-              f"({1e3 * row['seconds_per_step']:.2f} ms/step)  held-out state {row['state_error']:.2e}, energy "
+        print(f"{name:15s} Δt {spacing:<4g} σ {sigma:<5g} {observed:9s} {label:29s} {result.seconds:6.1f} s "
+              f"({1e3 * (per_step or math.nan):.2f} ms/step)  held-out state {row['state_error']:.2e}, energy "
               f"{row['energy_error']:.2e} (expected {row['expected_state_error'] or float('nan'):.2e}), "
               f"trusted {result.trusted}"
-              + (f", parameters off by {extra['parameter_error']:.1e}" if extra else ""), flush=True)
+              + (f", parameters off by {extra['parameter_error']:.1e}" if extra else "")
+              + (f"; stopped: {result.stopped}" if result.stopped else ""), flush=True)
         rows.append(row)
     return rows
+
+
+def earlier_runs(kept: dict, rerun: list) -> list[dict]:
+    """The runs that made the kept record's rows other than ``rerun``'s: each with its systems,
+    command and machine (a record updated before names its own earlier runs)."""
+    updated = kept.get("updated") or {}
+    mine = updated.get("problems") or sorted({r["system"] for r in kept["rows"]})
+    runs = [{"problems": mine, "command": kept["command"], "machine": kept.get("machine")}]
+    if "earlier" in updated:  # the one-run form: the earlier run made every row but the rerun's
+        others = sorted({r["system"] for r in kept["rows"]} - set(mine), key=list(SYSTEMS).index)
+        runs.append({"problems": others, "command": updated["earlier"], "machine": updated.get("earlier_machine")})
+    runs += updated.get("earlier_runs", [])
+    runs = [{**run, "problems": [n for n in run["problems"] if n not in rerun]} for run in runs]
+    return [run for run in runs if run["problems"]]
 
 
 def main(argv=None) -> None:
@@ -292,9 +381,9 @@ def main(argv=None) -> None:
     extra = {}
     if args.update and args.out and Path(args.out).is_file():  # the other systems' rows as their own run made them
         kept = json.loads(Path(args.out).read_text(encoding="utf-8"))
-        rows = [r for r in kept["rows"] if r["system"] not in args.systems] + rows
-        extra["updated"] = {"problems": args.systems, "earlier": kept.get("command"),
-                            "earlier_machine": kept.get("machine")}
+        rows = sorted([r for r in kept["rows"] if r["system"] not in args.systems] + rows,
+                      key=lambda r: list(SYSTEMS).index(r["system"]))  # stable: each system's rows as run
+        extra["updated"] = {"problems": args.systems, "earlier_runs": earlier_runs(kept, args.systems)}
     if args.out:
         write_result(args.out, {"command": command, "machine": machine_info(), **extra, "observations": OBSERVATIONS,
                                 "horizon_factor": HORIZON_FACTOR, "ahead": AHEAD, "held_whole": HELD_WHOLE,
@@ -302,7 +391,8 @@ def main(argv=None) -> None:
                                 "known_rate": KNOWN_RATE,
                                 "steps": args.steps,
                                 "rate": args.rate, "network": "T_θ(p) + V_θ(q), two MLPs d → w → w → 1, softplus "
-                                "(w = 32 for one degree of freedom, 64 for more)", "rows": rows})
+                                "(w = 32 for one degree of freedom, 64 for more); where H is not separable (the "
+                                "double pendulum) one MLP 2d → 64 → 64 → 1 of (q, p)", "rows": rows})
 
 
 if __name__ == "__main__":

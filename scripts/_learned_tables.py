@@ -51,35 +51,51 @@ def _state(row: dict | None) -> str:
         return "—"
     if not math.isfinite(row["state_error"]):
         return "failed"
-    return f"{row['state_error']:.1e}" + ("" if row["trusted"] else " (u)")
+    return (f"{row['state_error']:.1e}" + ("" if row["trusted"] else " (u)")
+            + (" (stopped)" if row.get("stopped") else ""))
+
+
+#: the table's columns: (observed, the method's role) and their heads; a method's role is its label
+#: with the solver trained through left out (leapfrog for separable systems, Gauss for the others)
+_COLUMNS = [(("all", "HNN"), "HNN"), (("all", "HNN, smoothed"), "HNN, smoothed differences"),
+            (("all", "through"), "through the solver"),
+            (("all", "through, end to end"), "through the solver, end to end, starts fitted"),
+            (("positions", "through"), "known form through the solver, positions only")]
+
+
+def _role(row: dict) -> tuple[str, str]:
+    method = row["method"].replace("through leapfrog", "through").replace("through Gauss", "through")
+    return row["observed"], method
 
 
 def learned_regimes(record: dict) -> str:
     rows = record["rows"]
-    columns = [("all", "HNN"), ("all", "HNN, smoothed"), ("all", "through leapfrog"),
-               ("all", "through leapfrog, end to end"), ("positions", "through leapfrog")]
-    head = ["HNN", "HNN, smoothed differences", "through leapfrog", "through leapfrog, end to end, starts fitted",
-            "known form through leapfrog, positions only"]
-    present = [k for k, c in enumerate(columns) if any((r["observed"], r["method"]) == c for r in rows)]
+    columns = [c for c, _ in _COLUMNS]
+    head = [h for _, h in _COLUMNS]
+    present = [k for k, c in enumerate(columns) if any(_role(r) == c for r in rows)]
     throughs = [k for k in (2, 3) if k in present]
-    ratios = ["HNN / " + ("through leapfrog" if k == 2 else "end to end") for k in throughs]
+    ratios = ["HNN / " + ("through the solver" if k == 2 else "end to end") for k in throughs]
     out = ["| system | Δt·ω_max | σ | " + " | ".join([head[k] for k in present] + ratios) + " |",
            "|---|---|---|" + "---|" * (len(present) + len(ratios))]
     for key in dict.fromkeys((r["system"], r["spacing"], r["sigma"]) for r in rows):
-        hit = {(r["observed"], r["method"]): r for r in rows if (r["system"], r["spacing"], r["sigma"]) == key}
+        hit = {_role(r): r for r in rows if (r["system"], r["spacing"], r["sigma"]) == key}
         cells = [_state(hit.get(columns[k])) if k < 4 else _known(hit.get(columns[k])) for k in present]
         cells += [_ratio(hit.get(columns[0]), hit.get(columns[k])) for k in throughs]
         out.append(f"| {key[0]} | {key[1]:g} | {key[2]:g} | " + " | ".join(cells) + " |")
     systems = list(dict.fromkeys(r["system"] for r in rows))
-    per_step = {label: " / ".join(f"{_median_step(rows, column, name):.2f}" for name in systems)
-                for column, label in zip(columns, head) if any((r["observed"], r["method"]) == column for r in rows)}
+    per_step = {label: " / ".join(_median_step(rows, column, name) for name in systems)
+                for column, label in zip(columns, head) if any(_role(r) == column for r in rows)}
+    solvers = sorted({r["system"] for r in rows if "through Gauss" in r["method"]})
     return "\n".join(out) + (
         f"\n\nEach cell: the held-out state error, the largest over {record['horizon_factor']}× the training span "
         "relative to the state's range, the median over three held-out initial states; (u): the result was marked "
-        f"untrusted. {record['observations']} observations a trajectory; noise σ relative to each component's rms; "
+        "untrusted; (stopped): the training stopped early, its reason in the record's `stopped`. "
+        f"{record['observations']} observations a trajectory; noise σ relative to each component's rms; "
         f"{record['steps']} Adam steps (rate {record['rate']:g}) for every method, the network "
-        f"{record['network']}; leapfrog: {record['leapfrog_per_interval']} steps per observation interval, "
-        f"segments of {record['ahead']} observations ({record['position_ahead']} end to end from positions only, a "
+        f"{record['network']}; the solver: leapfrog, {record['leapfrog_per_interval']} steps per observation "
+        "interval" + (f" (for {', '.join(solvers)}, not separable: the Gauss solver, four stages at rtol 1e-7)"
+                      if solvers else "")
+        + f"; segments of {record['ahead']} observations ({record['position_ahead']} end to end from positions only, a "
         f"known form: {_known_forms(systems)}, with the masses given, at rate {record['known_rate']:g}; "
         "the largest relative error of its parameters). The last observed trajectory held out whole where every "
         "component is observed. Median time per Adam step after the first (which compiles): "
@@ -88,17 +104,19 @@ def learned_regimes(record: dict) -> str:
 
 
 #: each system's known form's parameters, as the table's note names them
-_PARAMETERS = {"pendulum": "the pendulum's g", "spring-chain": "the chain's k and β", "three-body": "the three bodies' G"}
+_PARAMETERS = {"pendulum": "the pendulum's g", "spring-chain": "the chain's k and β", "two-body": "the two bodies' μ",
+               "three-body": "the three bodies' G", "double-pendulum": "the double pendulum's g"}
 
 
 def _known_forms(systems: list) -> str:
     return ", ".join(_PARAMETERS.get(name, name) for name in systems)
 
 
-def _median_step(rows: list, column: tuple, system: str) -> float:
-    """The median time per Adam step, in ms, of a method's rows on one system."""
-    return statistics.median(1e3 * r["seconds_per_step"] for r in rows
-                             if (r["observed"], r["method"]) == column and r["system"] == system)
+def _median_step(rows: list, column: tuple, system: str) -> str:
+    """The median time per Adam step, in ms, of a method's rows on one system (—: none timed)."""
+    times = [1e3 * r["seconds_per_step"] for r in rows
+             if _role(r) == column and r["system"] == system and r["seconds_per_step"] is not None]
+    return f"{statistics.median(times):.2f}" if times else "—"
 
 
 def _guide(rows: list, horizon_factor: float) -> str:

@@ -474,8 +474,12 @@ def render(text: str) -> str:
             updated = record.get("updated")
             if updated:  # a record whose named rows a later run replaced (``--update``)
                 rerun = updated.get("problems") or updated.get("methods") or []
-                note += (f" The rows of {', '.join(rerun)} are from that run; the others from an "
-                         f"earlier one, `{updated['earlier'].strip()}`.")
+                note += f" The rows of {', '.join(rerun)} are from that run; "
+                if "earlier_runs" in updated:  # several earlier runs, each with the rows it made
+                    note += "; ".join(f"those of {', '.join(run['problems'])} from `{run['command'].strip()}`"
+                                      for run in updated["earlier_runs"]) + "."
+                else:
+                    note += f"the others from an earlier one, `{updated['earlier'].strip()}`."
             body = f"{MAKERS[name](record)}\n\nMade by `{record['command'].strip()}` → `{RECORDS[name]}`.{note}\n"
         return match.group(1) + body + match.group(4)
 

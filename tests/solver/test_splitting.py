@@ -288,14 +288,17 @@ def test_where_the_reach_scheme_misses_the_tolerance_the_schemes_are_weighed_by_
 def test_a_reach_scheme_whose_check_fails_gives_way_to_the_tolerances_scheme():
     """FPUT-β of 64 particles in its slowest mode over [0, 200]: the pilots, 16 steps from z0, see
     McLachlan's scheme meet 1e-7 at its stability limit, but the energy then spreads into faster
-    modes and the check finds the error far above the tolerance. The retry reads both pilots as
-    many times too low and takes the tolerance's scheme (order 6), cheaper than McLachlan's at
-    the step accuracy now asks; the tolerance is met."""
+    modes and the check finds the error far above the tolerance. The retry grows the order-6
+    pilot's error as a frequency the pilots missed would (the check's factor to the power 6/4)
+    and takes the tolerance's scheme, cheaper than McLachlan's at the step accuracy now asks; the
+    tolerance is met at that step, with no third march (read as many times too low as
+    McLachlan's, the order-6 pilot asked for too few steps and a third march was needed)."""
     chain, z0 = _slow_mode_chain(64)
     sol = solve(chain, z0, (0.0, 200.0), rtol=1e-7, atol=1e-9)
     costs = sol.info["retry_choice"]
     assert sol.info["first_scheme"] == "mclachlan4" and sol.info["first_check"] > 10
     assert sol.info["scheme"] == "blanes_moan6" == min(costs, key=costs.get) and sol.info["check"] <= 1.0
+    assert sol.info["tries"] == 2
     t = np.linspace(0.0, 200.0, 60)
     ref = reference_solution(chain, z0, t, rtol=1e-13, atol=1e-13)
     assert np.abs(sol(t) - ref).max() <= 3e-7 * np.abs(ref).max()

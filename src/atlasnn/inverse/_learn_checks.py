@@ -8,7 +8,7 @@ to do.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -87,37 +87,33 @@ def noise_reasons(trajectories: list[Trajectory], noise: float | None, hnn: bool
 
 
 @eqx.filter_jit
-def _flow_batch(model: Any, dof: int, starts: jax.Array, t0: jax.Array, t1: jax.Array) -> jax.Array:
+def _orbit_batch(model: Any, dof: int, solver: GaussCollocation, starts: jax.Array, times: jax.Array) -> jax.Array:
+    """Each start's orbit from its first time, read at its times (the solver a static argument)."""
     system = HamiltonianSystem(model, dof, name="learned")
-    return jax.vmap(lambda z, a, b: solve(system, z, (a, b), solver=_FLOW_SOLVER)(b))(starts, t0, t1)
-
-
-@eqx.filter_jit
-def _orbit_batch(model: Any, dof: int, starts: jax.Array, times: jax.Array) -> jax.Array:
-    system = HamiltonianSystem(model, dof, name="learned")
-    return jax.vmap(lambda z, ts: solve(system, z, (ts[0], ts[-1]), solver=_SPAN_SOLVER)(ts))(starts, times)
+    return jax.vmap(lambda z, ts: solve(system, z, (ts[0], ts[-1]), solver=solver)(ts))(starts, times)
 
 
 def predict_orbits(model: Any, dof: int, starts: np.ndarray, times: np.ndarray) -> np.ndarray:
     """H_θ's orbits from ``starts`` (N, 2d) at ``times[:, 0]`` read at ``times`` (N, M), solved
     accurately, (N, M, 2d)."""
-    return _in_batches(_orbit_batch, model, dof, starts, times)
+    return _in_batches(model, dof, _SPAN_SOLVER, starts, times)
 
 
 def predict_flow(model: Any, dof: int, starts: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
     """H_θ's flow from each of ``starts`` (N, 2d) at ``t0`` (N,) to ``t1`` (N,), solved accurately."""
-    return _in_batches(_flow_batch, model, dof, starts, t0, t1)
+    return _in_batches(model, dof, _FLOW_SOLVER, starts, np.stack([t0, t1], axis=1))[:, -1]
 
 
-def _in_batches(program: Callable, model: Any, dof: int, *arrays: np.ndarray) -> np.ndarray:
-    """``program`` on FLOW_BATCH rows of ``arrays`` at a time, the last batch padded by repeating
-    the first row: one compiled program for every check of a model of this shape (the model is
-    its argument, not its constant)."""
-    size = arrays[0].shape[0]
+def _in_batches(model: Any, dof: int, solver: GaussCollocation, starts: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """The orbits on FLOW_BATCH rows at a time, the last batch padded by repeating the first row:
+    one compiled program for every check of a model of this shape (the model is its argument, not
+    its constant)."""
+    size = starts.shape[0]
     pad = (-size) % FLOW_BATCH
-    arrays = [np.concatenate([x, np.repeat(x[:1], pad, axis=0)]) for x in arrays]
+    starts, times = (np.concatenate([x, np.repeat(x[:1], pad, axis=0)]) for x in (starts, times))
     with jax.enable_x64(True):
-        out = [np.asarray(program(model, dof, *(jnp.asarray(x[k:k + FLOW_BATCH]) for x in arrays)))
+        out = [np.asarray(_orbit_batch(model, dof, solver, jnp.asarray(starts[k:k + FLOW_BATCH]),
+                                       jnp.asarray(times[k:k + FLOW_BATCH])))
                for k in range(0, size + pad, FLOW_BATCH)]
     return np.concatenate(out)[:size]
 

@@ -39,9 +39,9 @@ def _interval(system: Any, interval: Any) -> tuple[float, float]:
 #: the smallest state (2d components) of a separable H that the default solves by a splitting
 #: method: below it the Gauss solver's fewer, longer windows cost less than the splitting's
 #: pilot, check and steps (benchmarks/splitting_workprecision.py: Hénon–Heiles, 4 components,
-#: 0.89–1.3 ms by Gauss against 0.93–1.8 ms by the fastest scheme; FPUT-β with 64 particles, 128
-#: components, the default's splitting in 0.66–0.76 of the Gauss solver's time at 1e-5 … 1e-9 of
-#: the range, 1.17 at 1e-11)
+#: 0.83–1.2 ms by Gauss against 0.81–1.7 ms by the fastest scheme, ahead only at 1e-5 of the
+#: range, by 3 %; FPUT-β with 64 particles, 128 components, the default's splitting in 0.50–0.83
+#: of the Gauss solver's time at 1e-5 … 1e-11 of the range)
 SPLITTING_AUTO_SIZE = 64
 
 

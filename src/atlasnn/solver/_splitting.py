@@ -241,10 +241,11 @@ class SplittingComposition(AbstractSolver):
         the tolerance: the step that error asks of the same scheme (with room; at most 16 times
         shorter a try). Where that scheme was taken for its reach at the stability limit, with no
         scheme given, accuracy holds the step after all: the tolerance's scheme (of higher order)
-        is piloted too, its pilot's error read as many times too low as the check found the
-        reach scheme's pilot's (the orbit's error grew faster than the pilots' first steps showed),
-        and the scheme of fewer force evaluations taken (``info["retry_choice"]``) — never with a
-        longer step than the one that failed (a march that blew up before may have led to it), and
+        is piloted too, its pilot's error grown as the check found the reach scheme's grown over
+        its pilot's, to the power of the orders' ratio (the orbit reached faster frequencies than
+        the pilots' first steps showed: an error of order p grows as the p-th power of the
+        frequency), and the scheme of fewer force evaluations taken (``info["retry_choice"]``) —
+        never with a longer step than the one that failed (a march that blew up before may have led to it), and
         not for the ``last`` try (a Toda lattice's shock: switched with a longer step on the last
         try, the march failed where the same scheme's shorter step met the tolerance)."""
         shrink = (0.5 / ratio) ** (1.0 / plan.order) if math.isfinite(ratio) else 0.5
@@ -260,7 +261,9 @@ class SplittingComposition(AbstractSolver):
         if not other.settled or "pilot_span" not in other.record or growth <= 1.0:
             return plan, same
         o = other.record
-        grown = o["pilot_error"] * span / o["pilot_span"] * growth
+        # the growth as a frequency the pilots did not see: (h·ω)^p error terms grow by g^p for a
+        # frequency g times higher, so the other scheme's error by growth^(its order / this one's)
+        grown = o["pilot_error"] * span / o["pilot_span"] * growth ** (other.order / plan.order)
         needed = max(other.steps, steps, math.ceil(span / (o["pilot_h"] * (0.5 / grown) ** (1.0 / other.order))))
         costs = {plan.scheme: same * _kicks(plan.scheme), other.scheme: needed * _kicks(other.scheme)}
         plan.record["retry_choice"] = other.record["retry_choice"] = {k: int(v) for k, v in costs.items()}
