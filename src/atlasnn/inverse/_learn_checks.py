@@ -106,8 +106,8 @@ def predict_flow(model: Any, dof: int, starts: np.ndarray, t0: np.ndarray, t1: n
 
 def _in_batches(model: Any, dof: int, solver: GaussCollocation, starts: np.ndarray, times: np.ndarray) -> np.ndarray:
     """The orbits on FLOW_BATCH rows at a time, the last batch padded by repeating the first row:
-    one compiled program for every check of a model of this shape (the model is its argument, not
-    its constant)."""
+    one compiled program per solver for every check of a model of this shape (the model is its
+    argument, not its constant)."""
     size = starts.shape[0]
     pad = (-size) % FLOW_BATCH
     starts, times = (np.concatenate([x, np.repeat(x[:1], pad, axis=0)]) for x in (starts, times))
