@@ -56,8 +56,12 @@ def energy(z: np.ndarray) -> np.ndarray:
     return kinetic + pot
 
 
-def rebound_run(system, ts, integrator: str, setting: float) -> np.ndarray:
-    """States (200, 36) at ``ts`` from REBOUND with ``integrator`` (ε for IAS15, dt for WHFast)."""
+def rebound_run(system, ts, integrator: str, setting: float, options: dict | None = None,
+                counter: list | None = None) -> np.ndarray:
+    """States (200, 36) at ``ts`` from REBOUND with ``integrator`` (ε for IAS15, dt for the others),
+    the integrator's ``options`` set by name (WHFast in democratic heliocentric coordinates where
+    none are given); ``counter[0]`` counts the force evaluations where given (a callback at each,
+    which changes no number but costs time: not for a timed run)."""
     import rebound
 
     sim = rebound.Simulation()
@@ -73,8 +77,11 @@ def rebound_run(system, ts, integrator: str, setting: float) -> np.ndarray:
         sim.integrator.epsilon = setting
     else:
         sim.dt = setting
-        sim.integrator.coordinates = 1  # democratic heliocentric
-        sim.integrator.safe_mode = 0
+        for name, value in ({"coordinates": 1, "safe_mode": 0} if options is None else options).items():
+            setattr(sim.integrator, name, value)  # coordinates 1: democratic heliocentric
+    if counter is not None:
+        sim.additional_forces = lambda _: counter.__setitem__(0, counter[0] + 1)
+        sim.force_is_velocity_dependent = 0
     out = np.empty((len(ts), 6 * n))
     for k, t in enumerate(ts):
         sim.integrate(t, exact_finish_time=1)

@@ -4,7 +4,8 @@ blocks, the pages and the check): ``splitting`` from docs/benchmarks/splitting_w
 docs/benchmarks/splitting_nls.json (``python -m benchmarks.splitting_nls``), ``splitting_long`` from
 docs/benchmarks/splitting_long.json (``python -m benchmarks.splitting_long``), ``splitting_solar``
 from docs/benchmarks/splitting_solar.json (``python -m benchmarks.splitting_solar``), ``splitting_breakdown``
-from docs/benchmarks/splitting_breakdown.json (``python -m benchmarks.splitting_breakdown``)."""
+from docs/benchmarks/splitting_breakdown.json (``python -m benchmarks.splitting_breakdown``), ``rival_costs``
+from docs/benchmarks/rival_costs.json (``python -m benchmarks.rival_costs``)."""
 
 from __future__ import annotations
 
@@ -14,7 +15,8 @@ RECORDS = {"splitting": "docs/benchmarks/splitting_workprecision.json",
            "splitting_nls": "docs/benchmarks/splitting_nls.json",
            "splitting_long": "docs/benchmarks/splitting_long.json",
            "splitting_solar": "docs/benchmarks/splitting_solar.json",
-           "splitting_breakdown": "docs/benchmarks/splitting_breakdown.json"}
+           "splitting_breakdown": "docs/benchmarks/splitting_breakdown.json",
+           "rival_costs": "docs/benchmarks/rival_costs.json"}
 
 _COLUMNS = (("gauss", "GaussCollocation"), ("diffrax-dopri8", "Diffrax Dopri8"), ("diffrax-tsit5", "Diffrax Tsit5"))
 
@@ -109,5 +111,49 @@ def splitting_breakdown(record: dict) -> str:
         f"Sofroniou–Spaletta 10 with 4 000 steps): {counts}; the default took {need['default_steps']}.")
 
 
+def _us(seconds: float) -> str:
+    return f"{seconds * 1e6:.2g} µs"
+
+
+def _counted(run: dict | None, what: str) -> str:
+    if run is None:
+        return "never"
+    return f"{what}{_ms(run['seconds'])}, {run['evaluations']:,} evaluations ({_us(run['seconds_per_evaluation'])} each)"
+
+
+def rival_costs(record: dict) -> str:
+    nls = record["nls"]
+    rows = ["| NLS, error at T ≤ | `solve` (default) | ETDRK4 | default / ETDRK4 |", "|---|---|---|---|"]
+    for level in nls["levels"]:
+        mine, rival, ratio = level["default"], level["etdrk4"], level["ratio"]
+        rows.append(f"| {level['level']:.0e} | "
+                    + _counted(mine, "" if mine is None else f"rtol {mine['rtol']:.0e}, s = {mine['stages']}: ")
+                    + " | " + _counted(rival, "" if rival is None else f"{rival['steps']} steps: ")
+                    + f" | {'—' if ratio is None else f'{ratio:.2f}'} |")
+    rows += ["", "| `SplittingComposition()`, rtol | time, error at T | pilot | march | check | scheme, steps | a flow of "
+             "the march |", "|---|---|---|---|---|---|---|"]
+    for r in nls["splitting"]:
+        rows.append(f"| {r['rtol']:.0e} | {_ms(r['seconds'])}, {r['error']:.1e} | {_ms(r['pilot_s'])} | {_ms(r['march_s'])} | "
+                    f"{_ms(r['check_s'])} | {r['scheme']}, {r['steps']} | {_us(r['march_seconds_per_flow'])} |")
+    solar = record["solar"]
+    rows += ["", "| outer solar system | setting | time | position error (AU) | max \\|H/H0 − 1\\| | evaluations |",
+             "|---|---|---|---|---|---|"]
+    for r in solar["rows"]:
+        label = "`solve` (default), rtol" if r["method"] == "atlasnn" else r["method"] + (", ε" if "IAS15" in r["method"]
+                                                                                          else ", days")
+        rows.append(f"| {label} | {r['setting']:.4g} | {_ms(r['seconds'])} | {r['position_error_au']:.1e} | "
+                    f"{r['energy_error']:.1e} | {r['evaluations']:,} ({_us(r['seconds_per_evaluation'])} each) |")
+    return "\n".join(rows) + (
+        f"\n\nNLS: M = {nls['points']} points over [0, {nls['T']:g}], the end state against the exact soliton; each cell "
+        "the fastest run within the error (the default swept over rtol 1e-4 … 1e-12, atol = rtol/100; ETDRK4 over "
+        "100 … 12 800 steps); an evaluation: for the default one stage of one fixed-point iteration (the nonlinear "
+        "field and the linear part's solve there), for ETDRK4 one of the four nonlinear fields of a step. The "
+        "splitting's march: its scheme and step count given, no pilot and no check; a flow: one linear and one "
+        f"nonlinear flow. Outer solar system: {solar['T_days']:g} days, {solar['times']} output times, errors "
+        f"against {solar['reference']}; an evaluation: the field (forces) at one state, the default's its "
+        "iterations × stages, REBOUND's counted by a callback in a run of their own; the Wisdom–Holman runs in "
+        "Jacobi coordinates, WHFast with its 17th-order and second correctors and the lazy kernel.")
+
+
 MAKERS = {"splitting": splitting, "splitting_nls": splitting_nls, "splitting_long": splitting_long,
-          "splitting_solar": splitting_solar, "splitting_breakdown": splitting_breakdown}
+          "splitting_solar": splitting_solar, "splitting_breakdown": splitting_breakdown, "rival_costs": rival_costs}
