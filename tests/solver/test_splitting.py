@@ -227,6 +227,33 @@ def test_a_pde_with_its_declared_flows_is_split_step_solved_to_its_tolerance():
     assert np.abs(sol.end_state - ref).max() <= 3e-7 * np.abs(ref).max()
 
 
+def test_a_pilot_over_the_whole_interval_is_the_march_where_its_steps_suffice():
+    """On a short interval the pilot's two marches (16 steps and 32) cover it: where 32 steps meet
+    the tolerance, that march is the solution — the same numbers as a march of 32 steps — and its
+    check is the pilot's 16-step march, as a check with twice the step would read it (recomputed
+    here from two separate solves); over a longer interval, a march of its own."""
+    from atlasnn.systems import nls
+
+    wave = nls(points=64, length=32.0)
+    T, rtol = 3.0, 1e-6
+    sol = solve(wave, None, (0.0, T), solver=SplittingComposition(rtol=rtol, atol=0.0))
+    info = sol.info
+    assert info["march_from_pilot"] is True and info["steps"] == 32 and info["tries"] == 1
+    scheme = info["scheme"]
+    fine = solve(wave, None, (0.0, T), solver=SplittingComposition(scheme=scheme, steps=32))
+    coarse = solve(wave, None, (0.0, T), solver=SplittingComposition(scheme=scheme, steps=16))
+    assert np.array_equal(fine.end_state, sol.end_state)
+    t = np.linspace(0.0, T, 17)
+    mine = fine(t)
+    p = 2.0 ** splitting_scheme(scheme).order
+    check = np.abs(coarse(t) - mine).max() / (p - 1.0) / (rtol * np.abs(mine).max())
+    assert info["check"] == pytest.approx(check, rel=1e-6) and info["check"] <= 1.0
+    exact = solve(wave, None, (0.0, T), solver=GaussCollocation(rtol=1e-13)).end_state
+    assert np.abs(sol.end_state - exact).max() <= 3 * rtol * np.abs(exact).max()
+    longer = solve(wave, None, (0.0, 10 * T), solver=SplittingComposition(rtol=rtol, atol=0.0)).info
+    assert "march_from_pilot" not in longer and longer["steps"] > 32
+
+
 def test_a_linear_part_without_the_rests_flow_is_refused_in_one_line():
     import dataclasses
 

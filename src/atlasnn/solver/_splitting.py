@@ -23,13 +23,13 @@ import jax
 import numpy as np
 
 from atlasnn.errors import ConfigError
-from atlasnn.limits import available_memory
 from atlasnn.solutions import (SplittingSolution, TracedSplittingSolution, linear_splitting, splitting_scheme,
                                stability_limit)
 from atlasnn.solver._base import AbstractSolver, register_solver, solve_one
 from atlasnn.solver._collocation import require_float64
 from atlasnn.solver._gauss_core import traced_inputs
-from atlasnn.solver._splitting_march import PILOT_TRIES, batch_frequency, compiled_split_march, pilot_step, step_bounds
+from atlasnn.solver._splitting_march import (PILOT_CHUNK, PILOT_STEPS, PILOT_TRIES, PilotMarches, batch_frequency,
+                                             compiled_split_march, march, pilot_step, step_bounds)
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["SplittingComposition", "SCHEME_BY_TOLERANCE", "scheme_for"]
@@ -49,8 +49,6 @@ KEEP_BYTES = 256 << 20
 #: N = 1 024: a 16 MiB buffer cost 2.2 ms a call), and each call is a fixed cost too (there, 228
 #: steps kept in calls of 16 states took 10.4 ms, in calls of 256 states 7.5 ms, in one block 5.1)
 _CHUNK_BYTES = 4 << 20
-#: the buffer of the pilot's program, whose calls keep one state (and the check's, 16 a call)
-_SMALL_CHUNK = 16
 #: marches at most with a step from the tolerance: each checked against a march with longer
 #: steps, and shortened where the check finds the error above the tolerance (an orbit reaching
 #: faster frequencies, or larger errors, than the pilot's first steps saw)
@@ -92,6 +90,7 @@ class _Plan:
     settled: bool = True  # whether the pilot found a step (not only its last try)
     omega: float | None = None  # the fastest linearised frequency the pilot's step bounds took
     largest: float = math.inf  # the largest stable step (``step_bounds``)
+    marches: PilotMarches | None = None  # the pilot's two marches, where they covered the interval
 
     def check_ratio(self, step: float) -> tuple[int, int]:
         """The check's step over the march's ``step``, as (a, b) (``_CHECK_RATIO``): 7/8 where
@@ -219,13 +218,23 @@ class SplittingComposition(AbstractSolver):
         for attempt in range(1, _TRIES + 1):
             ab = plan.check_ratio((T - t0) / steps)
             steps += 0 if given else -steps % ab[0]  # the check's steps land on the march's
-            every = max(1, math.ceil(steps * 8 * z0s.shape[1] / KEEP_BYTES))
-            chunk = _chunk(self.chunk, _CHUNK_BYTES, z0s.size, steps // every)
-            program = compiled_split_march(system, plan.scheme, chunk, len(z0s))
-            zs, es, kept = march(program, z0s, (T - t0) / steps, steps, every, chunk, progress)
+            coarse = None
+            if attempt == 1 and not given and _from_pilot(plan, steps, ab):
+                # the pilot's march of half steps is this march, or a finer one: taken, and checked
+                # against the pilot's other march, as a march with twice its steps would be
+                steps, (zs, es, kept), coarse = 2 * PILOT_STEPS, plan.marches.fine, plan.marches.coarse
+                plan.record["march_from_pilot"] = True
+                if progress is not None:
+                    progress(1.0)
+            else:
+                every = max(1, math.ceil(steps * 8 * z0s.shape[1] / KEEP_BYTES))
+                chunk = _chunk(self.chunk, _CHUNK_BYTES, z0s.size, steps // every)
+                program = compiled_split_march(system, plan.scheme, chunk, len(z0s))
+                zs, es, kept = march(program, z0s, (T - t0) / steps, steps, every, chunk, progress)
+                plan.record.pop("march_from_pilot", None)
             if given:
                 break
-            ratio, check_steps = self._check(system, plan, z0s, t0, T, steps, (zs, es, kept), ab)
+            ratio, check_steps = self._check(system, plan, z0s, t0, T, steps, (zs, es, kept), ab, coarse)
             plan.record.update(check=ratio, check_steps=check_steps, tries=attempt)
             if ratio <= 1.0:
                 break
@@ -273,25 +282,28 @@ class SplittingComposition(AbstractSolver):
         return plan, same
 
     def _check(self, system, plan: "_Plan", z0s: np.ndarray, t0: float, T: float, steps: int,
-               fine: tuple, ab: tuple[int, int]) -> tuple[float, int]:
+               fine: tuple, ab: tuple[int, int], coarse: tuple | None = None) -> tuple[float, int]:
         """The error of a march of ``steps`` steps (``fine``: its kept states, compensations and
         indices) over the tolerance, at the most of ``_CHECK_TIMES`` times and the members, and the steps of the
         march it was checked against: the same scheme with steps r = a/b times as long
         (``ab``, from ``_Plan.check_ratio``; Richardson: the difference over |r^p − 1|), or where that march is
         not stable, half as long (the difference times 2^p/(2^p − 1)). The times are steps of both
-        marches: the march's own states are compared, with no partial step."""
+        marches: the march's own states are compared, with no partial step. ``coarse``: the march
+        of twice the step made already (the pilot's, every state kept), compared at its steps."""
         zs, es, kept = fine
         a, b = ab
         p = 2.0 ** plan.order
-        tries = ((steps * b // a, 1.0 / abs((a / b) ** plan.order - 1.0), b), (2 * steps, p / (p - 1.0), 2))
+        if coarse is not None:
+            (other, other_e, marks), n, weight = coarse, steps // 2, 1.0 / (p - 1.0)
+        tries = () if coarse is not None else \
+            ((steps * b // a, 1.0 / abs((a / b) ** plan.order - 1.0), b), (2 * steps, p / (p - 1.0), 2))
         for n, weight, stride in tries:
-            h = (T - t0) / n
             every = stride * -(-n // (_CHECK_TIMES * stride))  # each a step of the march too
             # the pilot's program (a few calls of 16 states): no program of its own to compile
-            other, other_e, marks = march(plan.program, z0s, h, n, every, _SMALL_CHUNK, None)
+            other, other_e, marks = march(plan.program, z0s, (T - t0) / n, n, every, PILOT_CHUNK, None)
             if np.all(np.isfinite(other)) or n == 2 * steps:
                 break
-        t = t0 + marks * h
+        t = t0 + marks * ((T - t0) / n)
         worst = 0.0
         for m in range(z0s.shape[0]):
             sol = SplittingSolution(system, plan.scheme, t0, (T - t0) / steps, steps, kept, zs[:, m], es[:, m])
@@ -323,18 +335,18 @@ class SplittingComposition(AbstractSolver):
 
     def _pilot(self, system, z0s: np.ndarray, span: float, scheme: str, omega: float | None,
                from_limit: bool = False) -> "_Plan":
-        program = compiled_split_march(system, scheme, _SMALL_CHUNK, len(z0s))
+        program = compiled_split_march(system, scheme, PILOT_CHUNK, len(z0s))
         sch = splitting_scheme(scheme)
         if self.steps is not None:
             return _Plan(scheme, sch.order, program, self.steps, {})
         if self.h is not None:
             return _Plan(scheme, sch.order, program, max(1, round(span / self.h)), {})
         guess, largest = step_bounds(system, omega, span, sch)
-        h, record = pilot_step(program, z0s, span, sch.order, self.rtol, self.atol,
-                               min(largest, span / 16) if from_limit else guess, largest,
-                               tries=2 if from_limit else PILOT_TRIES)
+        h, record, marches = pilot_step(program, z0s, span, sch.order, self.rtol, self.atol,
+                                        min(largest, span / 16) if from_limit else guess, largest,
+                                        tries=2 if from_limit else PILOT_TRIES, keep=not from_limit)
         settled = record.pop("settled", True)
-        return _Plan(scheme, sch.order, program, max(1, math.ceil(span / h)), record, settled, omega, largest)
+        return _Plan(scheme, sch.order, program, max(1, math.ceil(span / h)), record, settled, omega, largest, marches)
 
     def companion(self, sol: SplittingSolution) -> SplittingSolution:
         """The same scheme over the same interval with steps half as long, keeping its states at
@@ -364,41 +376,6 @@ def _compiled_march(system: HamiltonianSystem, scheme: str, z0, t0, T, steps: in
     """The traced march compiled once per system, scheme and step count (static): ``jax.grad`` or
     ``jax.vmap`` without an outer ``jax.jit`` reuse it; inside one it is inlined."""
     return TracedSplittingSolution.march(system, scheme, z0, t0, T, steps)
-
-
-#: a march keeping more than this many bytes first checks the memory left
-_READ_MEMORY_ABOVE = 64 << 20
-
-
-def march(program, z0s: np.ndarray, h: float, steps: int, every: int, chunk: int,
-          progress: Callable[[float], None] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``steps`` steps of h from the states ``z0s`` (B, 2d) by the compiled ``program``, keeping the
-    state every ``every`` steps and at the end: the kept states (K, B, 2d), their compensations
-    (zeros but at the end: the states between are kept rounded), and their step indices (K,)."""
-    z, e = z0s, np.zeros_like(z0s)
-    zs, kept, done = [z0s[None]], [0], 0
-    need = (steps // every + 2) * z0s.nbytes * 2
-    # the memory left is read only for a large march (reading it costs ~0.2 ms, a tenth of a small solve)
-    if need > _READ_MEMORY_ABOVE and (room := available_memory()) is not None and need > room:
-        raise ConfigError(f"the splitting march would keep {steps // every} states of {z0s.nbytes} bytes, more "
-                          "than the memory available; loosen the tolerance or shorten the interval")
-    with jax.enable_x64(True):
-        while done < steps:
-            slots = min(chunk, (steps - done) // every)
-            size = every if slots else steps - done
-            slots = max(slots, 1)
-            out = program(z, e, np.float64(h), np.int64(size), np.int64(slots))
-            z, e = np.asarray(out.z), np.asarray(out.e)
-            zs.append(np.asarray(out.zs)[:slots])
-            kept.extend(done + size * np.arange(1, slots + 1))
-            done += size * slots
-            if progress is not None:
-                progress(done / steps)
-    zs = np.concatenate(zs)
-    zs[-1] = z  # the end state whole: its compensation beside it
-    es = np.zeros(zs.shape)  # not written but at the end: pages the system gives on first use
-    es[-1] = e
-    return zs, es, np.asarray(kept, np.int64)
 
 
 def _check_quadratic_kinetic(system: HamiltonianSystem, z0: np.ndarray, scheme: str) -> None:
@@ -441,6 +418,13 @@ def _chunk(most: int, budget: int, size: int, kept: int) -> int:
     while rows < kept and rows * 4 * 8 * size <= budget and rows * 4 <= most:
         rows *= 4
     return min(rows, most)
+
+
+def _from_pilot(plan: "_Plan", steps: int, ab: tuple[int, int]) -> bool:
+    """Whether the first march can be the pilot's march of half steps: the pilot covered the
+    interval, its half steps are at most the planned step, and the check compares with twice the
+    step (not a step held at the stability limit, checked with 7/8 of it)."""
+    return plan.marches is not None and steps <= 2 * PILOT_STEPS and ab == _CHECK_RATIO
 
 
 def _cheapest(plans: list["_Plan"]) -> "_Plan":
