@@ -93,7 +93,8 @@ def learned_regimes(record: dict) -> str:
         f"{record['observations']} observations a trajectory; noise σ relative to each component's rms; "
         f"{record['steps']} Adam steps (rate {record['rate']:g}) for every method, the network "
         f"{record['network']}; the solver: leapfrog, {record['leapfrog_per_interval']} steps per observation "
-        "interval" + (f" (for {', '.join(solvers)}, not separable: the Gauss solver, four stages at rtol 1e-7)"
+        "interval" + (f" (for {', '.join(solvers)}, not separable: the Gauss solver, four stages at rtol 1e-7, "
+                      "up to 64 windows a segment)"
                       if solvers else "")
         + f"; segments of {record['ahead']} observations ({record['position_ahead']} end to end from positions only, a "
         f"known form: {_known_forms(systems)}, with the masses given, at rate {record['known_rate']:g}; "

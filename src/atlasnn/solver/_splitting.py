@@ -299,7 +299,7 @@ class SplittingComposition(AbstractSolver):
             ((steps * b // a, 1.0 / abs((a / b) ** plan.order - 1.0), b), (2 * steps, p / (p - 1.0), 2))
         for n, weight, stride in tries:
             every = stride * -(-n // (_CHECK_TIMES * stride))  # each a step of the march too
-            # the pilot's program (a few calls of 16 states): no program of its own to compile
+            # the pilot's program (calls of PILOT_CHUNK states): no program of its own to compile
             other, other_e, marks = march(plan.program, z0s, (T - t0) / n, n, every, PILOT_CHUNK, None)
             if np.all(np.isfinite(other)) or n == 2 * steps:
                 break
