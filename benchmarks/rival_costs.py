@@ -26,7 +26,6 @@ One core, best of ``--repeats`` after a first call.
 from __future__ import annotations
 
 import argparse
-import time
 
 import jax
 import numpy as np
@@ -119,16 +118,6 @@ def nls_rows(repeats: int) -> dict:
             "etdrk4_sweep": etdrk4, "splitting": splitting}
 
 
-def _timed(call, repeats: int):
-    call()
-    best, out = np.inf, None
-    for _ in range(repeats):
-        tic = time.perf_counter()
-        out = call()
-        best = min(best, time.perf_counter() - tic)
-    return best, out
-
-
 def solar_rows(repeats: int) -> dict:
     system = outer_solar_system()
     z0 = centred(system)
@@ -138,7 +127,7 @@ def solar_rows(repeats: int) -> dict:
                 solver=GaussCollocation(stages=16, h=float(np.diff(default.edges).min()) / 4))(ts)
     rows = []
     for tol in SOLAR_TOLS:
-        best, (sol, z) = _timed(lambda: (lambda s: (s, s(ts)))(solve(system, z0, (0.0, SOLAR_T), rtol=tol,
+        best, (sol, z) = _best(lambda: (lambda s: (s, s(ts)))(solve(system, z0, (0.0, SOLAR_T), rtol=tol,
                                                                      atol=tol / 100)), repeats)
         evaluations = int(sol.info["iterations"]) * int(sol.info["stages"])
         rows.append(row("atlasnn", tol, best, z, ref, windows=sol.n_windows, stages=int(sol.info["stages"]),
@@ -148,7 +137,7 @@ def solar_rows(repeats: int) -> dict:
     runs += [(label, integrator, every / round(every / dt), options) for label, (integrator, options)
              in WISDOM_HOLMAN.items() for dt in WH_STEPS_DAYS]
     for label, integrator, setting, options in runs:
-        best, z = _timed(lambda: rebound_run(system, ts, integrator, setting, options), repeats)
+        best, z = _best(lambda: rebound_run(system, ts, integrator, setting, options), repeats)
         counter = [0]
         rebound_run(system, ts, integrator, setting, options, counter)
         rows.append(row(label, setting, best, z, ref, evaluations=counter[0]))
