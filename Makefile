@@ -30,7 +30,7 @@ test-long: $(BIN)/atlasnn
 test-all: $(BIN)/atlasnn
 	$(PYTEST) -m "not slow"
 
-# the tests marked slow (half a minute or more each; CI leaves them out to stay under 30 minutes)
+# the tests marked slow (half a minute or more each; CI leaves them out to stay under 20 minutes)
 test-slow: $(BIN)/atlasnn
 	$(PYTEST) -m slow
 

@@ -352,11 +352,19 @@ def run(name: str, spacing: float, sigma: float, observed: str, steps: int, rate
     return rows
 
 
-def earlier_runs(kept: dict, rerun: list, whole: list = ()) -> list[dict]:
-    """The runs that made the kept record's rows other than ``rerun``'s (labels: a system, or a
-    system at some spacings): each with its labels, command and machine (a record updated before
-    names its own earlier runs). ``whole``: systems rerun at every spacing, whose rows no earlier
-    run made any more."""
+def _cells(label: str, rows: list[dict]) -> set:
+    """The (system, spacing) pairs a run's label names: "X at Δt a and b", or "X" (every spacing of
+    X in ``rows``)."""
+    name, _, at = label.partition(" at Δt ")
+    spacings = {float(s) for s in at.split(" and ")} if at else {r["spacing"] for r in rows if r["system"] == name}
+    return {(name, s) for s in spacings}
+
+
+def earlier_runs(kept: dict, rerun: list, rows: list[dict]) -> list[dict]:
+    """The runs that made the rows of the new record (``rows``) other than ``rerun``'s (labels: a
+    system, or a system at some spacings): each with its labels, command and machine (a record
+    updated before names its own earlier runs), newest first; a label whose rows later runs have
+    all replaced is dropped, and a run left with none."""
     updated = kept.get("updated") or {}
     mine = updated.get("problems") or sorted({r["system"] for r in kept["rows"]})
     runs = [{"problems": mine, "command": kept["command"], "machine": kept.get("machine")}]
@@ -364,9 +372,14 @@ def earlier_runs(kept: dict, rerun: list, whole: list = ()) -> list[dict]:
         others = sorted({r["system"] for r in kept["rows"]} - set(mine), key=list(SYSTEMS).index)
         runs.append({"problems": others, "command": updated["earlier"], "machine": updated.get("earlier_machine")})
     runs += updated.get("earlier_runs", [])
-    gone = lambda label: label in rerun or label.split(" at Δt ")[0] in whole  # noqa: E731
-    runs = [{**run, "problems": [n for n in run["problems"] if not gone(n)]} for run in runs]
-    return [run for run in runs if run["problems"]]
+    covered = set().union(*(_cells(label, rows) for label in rerun))
+    left = []
+    for run in runs:  # newest first: what a run made is covered for every older one
+        problems = [label for label in run["problems"] if _cells(label, rows) - covered]
+        covered |= set().union(*(_cells(label, rows) for label in run["problems"]))
+        if problems:
+            left.append({**run, "problems": problems})
+    return left
 
 
 def main(argv=None) -> None:
@@ -408,12 +421,14 @@ def main(argv=None) -> None:
                                               for name in args.systems]
         rows = sorted([r for r in kept["rows"] if (r["system"], r["spacing"]) not in rerun] + rows,
                       key=lambda r: (list(SYSTEMS).index(r["system"]), r["spacing"]))  # stable: as each run made them
-        extra["updated"] = {"problems": labels, "earlier_runs": earlier_runs(kept, labels, args.systems if whole else [])}
+        extra["updated"] = {"problems": labels, "earlier_runs": earlier_runs(kept, labels, rows)}
     if args.out:
         write_result(args.out, {"command": command, "machine": machine_info(), **extra, "observations": OBSERVATIONS,
                                 "horizon_factor": HORIZON_FACTOR, "ahead": AHEAD, "held_whole": HELD_WHOLE,
                                 "leapfrog_per_interval": LEAPFROG_PER_INTERVAL, "position_ahead": POSITION_AHEAD,
                                 "known_rate": KNOWN_RATE,
+                                "gauss": {"stages": GAUSS.stages, "rtol": GAUSS.rtol, "max_windows": GAUSS.max_windows,
+                                          "positions_max_windows": GAUSS_POSITIONS.max_windows},
                                 "steps": args.steps,
                                 "rate": args.rate, "network": "T_θ(p) + V_θ(q), two MLPs d → w → w → 1, softplus "
                                 "(w = 32 for one degree of freedom, 64 for more); where H is not separable (the "

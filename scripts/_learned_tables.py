@@ -93,8 +93,7 @@ def learned_regimes(record: dict) -> str:
         f"{record['observations']} observations a trajectory; noise σ relative to each component's rms; "
         f"{record['steps']} Adam steps (rate {record['rate']:g}) for every method, the network "
         f"{record['network']}; the solver: leapfrog, {record['leapfrog_per_interval']} steps per observation "
-        "interval" + (f" (for {', '.join(solvers)}, not separable: the Gauss solver, four stages at rtol 1e-7, "
-                      "up to 64 windows a segment)"
+        "interval" + (f" (for {', '.join(solvers)}, not separable: the Gauss solver, {_gauss(record['gauss'])})"
                       if solvers else "")
         + f"; segments of {record['ahead']} observations ({record['position_ahead']} end to end from positions only, a "
         f"known form: {_known_forms(systems)}, with the masses given, at rate {record['known_rate']:g}; "
@@ -102,6 +101,13 @@ def learned_regimes(record: dict) -> str:
         "component is observed. Median time per Adam step after the first (which compiles): "
         + ", ".join(f"{label} {ms} ms" for label, ms in per_step.items()) + f" ({' / '.join(systems)})."
         + _guide(rows, record["horizon_factor"]))
+
+
+def _gauss(settings: dict) -> str:
+    """The Gauss solver's settings in the benchmark, in words."""
+    rtol = f"{settings['rtol']:g}".replace("e-0", "e-")  # 1e-7, as the pages write it
+    return (f"{settings['stages']} stages at rtol {rtol}, up to {settings['max_windows']} windows a "
+            f"segment, {settings['positions_max_windows']} for the known form from positions")
 
 
 #: each system's known form's parameters, as the table's note names them

@@ -24,8 +24,10 @@ Markers (an HTML comment on the line(s) just before the fence, invisible on the 
 * ``<!-- docs-test: file NAME -->`` — the block's text is written to NAME first, as the page
   tells the reader to save it;
 * ``<!-- docs-test: slow (reason) -->`` — the block runs only with ``-m slow`` (``make
-  test-slow``), not in CI: a command of minutes that another test covers; it must be the last
-  block of its page, or no later block may need what it writes;
+  test-slow``), not in CI: a command of minutes that another test covers. It runs without the
+  page's other blocks (those marked slow before it aside), the files the page's ``file`` blocks
+  save written first: it may need nothing else an earlier block makes, and no later block may
+  need what it writes;
 * ``<!-- docs-test: long (reason) -->`` — every block of its page runs in the long tier (``make
   test-long``, which CI runs too), not in ``make test``: a page whose blocks take half a minute or
   more (the whole page, as its blocks may use what earlier ones wrote);
@@ -261,11 +263,16 @@ def _check_atlasnn_command(words: list[str]) -> None:
         load_config(ROOT / args.config, quick=args.quick)
 
 
+def save_file(block: Block, workspace: Path) -> None:
+    """Write a block marked ``file NAME`` to NAME in the page's workspace."""
+    target = workspace / block.file
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_text(block.code, encoding="utf-8")
+
+
 def run_block(block: Block, workspace: Path) -> None:
     if block.file is not None:
-        target = workspace / block.file
-        target.parent.mkdir(parents=True, exist_ok=True)
-        target.write_text(block.code, encoding="utf-8")
+        save_file(block, workspace)
     if block.lang == "python":
         script = workspace / f"_block_{block.line}.py"
         script.write_text(block.code, encoding="utf-8")
@@ -378,6 +385,11 @@ def check_block(block: Block, workspaces, monkeypatch) -> None:
         pytest.skip(f"docs-test: needs {block.needs}, which is not installed (an optional extra)")
     workspace = workspaces(block.page)
     monkeypatch.chdir(workspace)
+    for earlier in CODE_BLOCKS:  # run without the page's earlier blocks (-m slow selects it alone): the
+        # files the page told the reader to save are saved, as a reader who skipped ahead would have them
+        if earlier.page == block.page and earlier.line < block.line and earlier.file is not None \
+                and not (workspace / earlier.file).exists():
+            save_file(earlier, workspace)
     run_block(block, workspace)
 
 

@@ -44,10 +44,13 @@ def _trajectories(b=2.0, noise=0.0, starts=([1.0, 0.0], [0.0, 1.0])):
 
 @pytest.mark.long
 def test_through_the_solver_recovers_a_known_form_and_flags_a_noise_claimed_too_small():
-    """Noisy orbits of a = 1, b = 2: the parameters within 3 %; claiming a tenth of the true noise
-    makes the loss far above the claimed noise's own, which the result says."""
+    """Noisy orbits of a = 1, b = 2: the parameters within 3 % and four standard errors; claiming a
+    tenth of the true noise makes the loss far above the claimed noise's own, which the result says."""
     result = learn_hamiltonian(_guess(), _trajectories(noise=0.01), ThroughSolver(steps=150, rate=0.05), noise=0.001)
     assert abs(float(result.model.a) - 1.0) < 0.03 and abs(float(result.model.b) - 2.0) < 0.06
+    # standard errors from the residuals' Jacobian through the Gauss core (forward mode): they cover the errors
+    assert result.std is not None and np.all(np.abs(np.array([result.model.a, result.model.b]) - [1.0, 2.0])
+                                             < 4 * result.std), result.std
     assert result.held_out_loss is not None and result.steps == 150 and result.stopped is None
     assert not result.trusted and "the noise's own" in result.notes[0]
     z = atlasnn.solve(result.system, [1.0, 0.0], (0.0, 2.0))(2.0)  # the learned H is an ordinary system
@@ -364,6 +367,31 @@ def test_the_span_check_reads_a_wrong_frequency_and_its_growth_over_time():
     assert far.drift > 1e-2 and "beyond the noise: its predictions drift" in drift_reasons(far, 0.0)[0]
     noisy = span_drift(Stiffness(jnp.array(2.01)), 1, check_trajectories(_trajectories(noise=0.05)), 0.05)
     assert noisy.drift < noisy.floor and noisy.expected_error(30.0) > 3 * miss
+
+
+def test_the_flow_check_reads_each_whole_state_s_next_observations():
+    """The flow check (no training): oscillators of b = 2 observed exactly every 0.1, one state
+    missing in each; H_θ with b = 2 misses nothing, b = 2.1 misses by the rms over every pair (a
+    whole state, one of the next five whole ones) of the exact rotation's miss, in closed form."""
+    from atlasnn.inverse._learn_checks import FLOW_AHEAD, flow_miss
+    from atlasnn.inverse._learn_data import check_trajectories
+
+    data = [(t, z.copy()) for t, z in _trajectories(b=2.0, starts=([1.0, 0.0], [0.3, -0.8], [0.0, 1.0]))]
+    for k, (_, z) in enumerate(data):
+        z[7 + 5 * k] = np.nan  # an observation lost: neither a start nor a target
+    trajectories = check_trajectories(data)
+    assert flow_miss(Stiffness(jnp.array(2.0)), 1, trajectories, 0.0) is None
+    squares = []
+    for t, z in data:
+        for i in range(t.size):
+            for j in range(i + 1, min(i + FLOW_AHEAD, t.size - 1) + 1):
+                if np.all(np.isfinite(z[i])) and np.all(np.isfinite(z[j])):
+                    w, tau = np.sqrt(2.1), t[j] - t[i]  # the rotation of H = p²/2 + 2.1 q²/2 over tau
+                    q = z[i, 0] * np.cos(w * tau) + z[i, 1] / w * np.sin(w * tau)
+                    p = -z[i, 0] * w * np.sin(w * tau) + z[i, 1] * np.cos(w * tau)
+                    squares += [(q - z[j, 0]) ** 2, (p - z[j, 1]) ** 2]
+    said = flow_miss(Stiffness(jnp.array(2.1)), 1, trajectories, 0.0)
+    assert said is not None and f"by rms {np.sqrt(np.mean(squares)):.3g}," in said, (said, np.sqrt(np.mean(squares)))
 
 
 def test_fitted_starts_are_unknowns_and_their_observed_values_targets():

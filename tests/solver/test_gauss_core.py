@@ -127,7 +127,7 @@ def test_vmap_gives_each_members_own_solve_and_gradient():
         assert np.abs(got - np.asarray(end)).max() <= 1e-13
         assert np.abs(g - np.asarray(grad)).max() <= 1e-10 * np.abs(g).max()
     # the gradient of a vmapped solve (on a CPU its members marched one after the other, inside the adjoint)
-    outer = jax.grad(lambda zs: jnp.sum(jax.vmap(lambda z: p1(z)[0])(zs)))(jnp.asarray(z0s))
+    outer = jax.jit(jax.grad(lambda zs: jnp.sum(jax.vmap(lambda z: p1(z)[0])(zs))))(jnp.asarray(z0s))
     assert np.abs(np.asarray(outer) - np.asarray(grads)).max() <= 1e-10 * np.abs(np.asarray(grads)).max()
 
 

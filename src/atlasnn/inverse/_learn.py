@@ -194,7 +194,11 @@ class ThroughSolver(AbstractLearnMethod):
 
     def residuals(self, trajectories, held_out, dof):
         train, _, missing = self._trained(trajectories, held_out)
-        return self._residual(train, train.times, train.targets, dof, missing), max(1.0, self.ahead / self.stride)
+        # their Jacobian in the few values of θ and the starts: forward mode, a pass per value (the
+        # Gauss core's reverse rule would take a pass per residual)
+        solver = self.solver if self.separable else replace(self.solver, differentiation="forward")
+        return (self._residual(train, train.times, train.targets, dof, missing, solver=solver),
+                max(1.0, self.ahead / self.stride))
 
     def refined_residuals(self, trajectories, held_out, dof):
         if not self.separable:  # the Gauss solver's tolerance sets its error: nothing fixed to refine
@@ -382,6 +386,7 @@ def _check_model(model: Any, dof: int, data: list, separable: bool = False) -> l
     z = jnp.asarray(data[0].z[0])
     nudged = jax.tree_util.tree_map(lambda x: x + 0.1 * (1 + jnp.abs(x)), params)
 
+    @jax.jit  # compiled once for both θ (primitive by primitive it cost seconds)
     def hessian(p):
         h = eqx.combine(p, static)
         return jax.hessian(lambda x: h(x[:dof], x[dof:]))(z)

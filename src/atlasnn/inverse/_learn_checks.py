@@ -20,7 +20,7 @@ from atlasnn.solver import GaussCollocation, solve
 from atlasnn.systems import HamiltonianSystem
 
 __all__ = ["flow_miss", "flow_reasons", "modified_reasons", "noise_reasons", "observed_size", "span_drift",
-           "span_drifts", "drift_reasons", "predict_flow", "SpanDrift", "FLOW_ACCURACY",
+           "span_drifts", "drift_reasons", "SpanDrift", "FLOW_ACCURACY",
            "FLOW_AHEAD", "PROPAGATION", "NOISE_FACTOR", "NOISY_DATA", "NOISY_RATES"]
 
 #: a loss this many times the noise's own (2σ² for predicted states) is "far above the noise"
@@ -43,10 +43,12 @@ NOISY_RATES = 0.3
 FLOW_BATCH = 128
 #: Gauss–Newton iterations fitting a trajectory's start to the learned flow (from the observed start)
 SPAN_ITERATIONS = 2
-#: the solve of the flow check: accurate, so that what it measures is H_θ's, not the solver's
-_FLOW_SOLVER = GaussCollocation(stages=8, rtol=1e-10, atol=1e-12, max_windows=512)
-#: the span check's solves: over a whole trajectory, accurate well below any noise or FLOW_ACCURACY
-_SPAN_SOLVER = GaussCollocation(rtol=1e-9, atol=1e-11, max_windows=512)
+#: the solves of the flow and span checks: accurate well below any noise or FLOW_ACCURACY, so that
+#: what they measure is H_θ's, not the solver's
+_CHECK_SOLVER = GaussCollocation(rtol=1e-9, atol=1e-11, max_windows=512)
+#: the flow check reads its orbits at as many times as the span check (the longest trajectory's
+#: observations), so that both run one compiled solve, where that is at most this many
+SHARED_COLUMNS = 256
 
 
 
@@ -96,12 +98,37 @@ def _orbit_batch(model: Any, dof: int, solver: GaussCollocation, starts: jax.Arr
 def predict_orbits(model: Any, dof: int, starts: np.ndarray, times: np.ndarray) -> np.ndarray:
     """H_θ's orbits from ``starts`` (N, 2d) at ``times[:, 0]`` read at ``times`` (N, M), solved
     accurately, (N, M, 2d)."""
-    return _in_batches(model, dof, _SPAN_SOLVER, starts, times)
+    return _in_batches(model, dof, _CHECK_SOLVER, starts, times)
 
 
-def predict_flow(model: Any, dof: int, starts: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
-    """H_θ's flow from each of ``starts`` (N, 2d) at ``t0`` (N,) to ``t1`` (N,), solved accurately."""
-    return _in_batches(model, dof, _FLOW_SOLVER, starts, np.stack([t0, t1], axis=1))[:, -1]
+def _padded(times: np.ndarray, values: np.ndarray, columns: int) -> tuple[np.ndarray, np.ndarray]:
+    """Times (N, M) and values (N, M, 2d) widened to ``columns`` by repeating the last time, the
+    values there not observed (NaN)."""
+    extra = columns - times.shape[1]
+    return (np.concatenate([times, np.repeat(times[:, -1:], extra, axis=1)], axis=1),
+            np.concatenate([values, np.full((values.shape[0], extra, values.shape[2]), np.nan)], axis=1))
+
+
+def _ahead(trajectories: list[Trajectory]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every state observed whole, with the next FLOW_AHEAD observations of its trajectory: (starts
+    (N, 2d), times (N, C), targets (N, C, 2d)), a target NaN where no whole state was observed (and
+    at the start, and past the trajectory's end); C the span check's columns where at most
+    SHARED_COLUMNS, else FLOW_AHEAD + 1."""
+    longest = max(traj.t.size for traj in trajectories)
+    columns = longest if FLOW_AHEAD + 1 <= longest <= SHARED_COLUMNS else FLOW_AHEAD + 1
+    steps = np.arange(FLOW_AHEAD + 1)
+    starts, times, targets = [], [], []
+    for traj in trajectories:
+        last = traj.t.size - 1
+        whole = ~np.any(np.isnan(traj.z), axis=1)
+        first = np.nonzero(whole[:-1])[0]
+        index = np.minimum(first[:, None] + steps, last)
+        seen = whole[index] & (steps > 0) & (first[:, None] + steps <= last)
+        keep = seen.any(axis=1)
+        starts.append(traj.z[first[keep]]), times.append(traj.t[index[keep]])
+        targets.append(np.where(seen[keep][..., None], traj.z[index[keep]], np.nan))
+    starts, times, targets = (np.concatenate(x) for x in (starts, times, targets))
+    return (starts,) + _padded(times, targets, columns)
 
 
 def _in_batches(model: Any, dof: int, solver: GaussCollocation, starts: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -123,21 +150,15 @@ def flow_miss(model: Any, dof: int, trajectories: list[Trajectory], noise: float
     observations, against them (a wrong frequency's miss grows along the way): None where what it
     adds to the noise's own share (σ where given) is within the scatter of that share and
     FLOW_ACCURACY of the values' size; otherwise what it misses by, in words."""
-    starts, ends, t0, t1 = [], [], [], []
-    for traj in trajectories:
-        whole = ~np.any(np.isnan(traj.z), axis=1)
-        for k in range(1, min(FLOW_AHEAD, len(traj.t) - 1) + 1):  # to each of the next FLOW_AHEAD observations
-            pair = whole[:-k] & whole[k:]
-            starts.append(traj.z[:-k][pair]), ends.append(traj.z[k:][pair])
-            t0.append(traj.t[:-k][pair]), t1.append(traj.t[k:][pair])
-    starts, ends, t0, t1 = (np.concatenate(x) for x in (starts, ends, t0, t1))
+    starts, times, targets = _ahead(trajectories)
     if not starts.size:
         return None
-    try:
-        predicted = predict_flow(model, dof, starts, t0, t1)
+    try:  # one orbit from each start, read at the next observations
+        predicted = predict_orbits(model, dof, starts, times)
     except Exception as exc:  # noqa: BLE001 (a learned H that cannot be solved is a reason itself)
         return f"could not be solved from the observed states ({type(exc).__name__})"
-    squares = (predicted - ends) ** 2
+    seen = ~np.isnan(targets)
+    squares = (predicted[seen] - targets[seen]) ** 2
     miss = float(np.sqrt(np.mean(squares)))
     # a flow from a noisy state to a noisy one misses by about √2·σ rms (the start's noise carried by
     # the flow, up to PROPAGATION·σ² more, and the end's): what is beyond that, by more than the mean's
@@ -226,10 +247,11 @@ def span_drifts(model: Any, dof: int, groups: list[list[Trajectory]],
              if not np.any(np.isnan(traj.z[0])) and traj.t.size > width + 1]
     if not whole:
         return [None] * len(groups)
-    longest = max(traj.t.size for _, traj in whole)
-    # every trajectory's times and targets padded to the longest by repeating its last time, not observed
-    times = np.stack([np.concatenate([traj.t, np.repeat(traj.t[-1:], longest - traj.t.size)]) for _, traj in whole])
-    target = np.stack([np.concatenate([traj.z, np.full((longest - traj.t.size, width), np.nan)]) for _, traj in whole])
+    # every trajectory's times and targets padded to the longest of all (the flow check's columns too)
+    # by repeating its last time, not observed
+    longest = max(traj.t.size for group in groups for traj in group)
+    padded = [_padded(traj.t[None], traj.z[None], longest) for _, traj in whole]
+    times, target = (np.concatenate(x) for x in zip(*padded))
     target[:, 0] = np.nan  # the start is fitted, not a target
     seen = ~np.isnan(target)
     z0 = np.stack([traj.z[0] for _, traj in whole])

@@ -92,11 +92,7 @@ def _linearised(residuals: tuple[Callable, float] | None, model, unknown) -> tup
         split = lambda x: (eqx.combine(unravel(x[:flat.size]), static), x[flat.size:].reshape(unknown.shape))  # noqa: E731
         function = lambda x: residual(*split(x))  # noqa: E731
         try:
-            try:  # forward mode: one pass per parameter
-                jac = np.asarray(jax.jacfwd(function)(x))
-            except TypeError:  # a solve with a custom reverse rule only (the Gauss core): one pass per residual
-                jac = np.asarray(jax.jacrev(function)(x))
-            r = np.asarray(function(x))
+            r, jac = (np.asarray(a) for a in _with_jacobian(function, x))
         except (jax.errors.JaxRuntimeError, eqx.EquinoxRuntimeError):  # a solve that fails there: the
             return None  # trained result is kept without standard errors
     if not (np.all(np.isfinite(jac)) and np.all(np.isfinite(r))):
@@ -115,3 +111,14 @@ def _linearised(residuals: tuple[Callable, float] | None, model, unknown) -> tup
     std = np.sqrt(np.clip(np.diag(inverse)[:flat.size] * variance * overlap, 0.0, np.inf))
     step = -(inverse @ (jac[used].T @ r[used]) * count)[:flat.size]
     return np.asarray(flat), std, step
+
+
+def _with_jacobian(function: Callable, x: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """(function(x), its Jacobian) from one compiled program: forward mode (a pass per parameter)
+    where the solve has a forward rule, else reverse mode (the Gauss core's custom rule is reverse
+    only: a pass per residual). One compiled program rather than primitive by primitive: through the
+    Gauss solver the dispatch of each primitive cost more than the compile."""
+    try:
+        return jax.jit(lambda x: (function(x), jax.jacfwd(function)(x)))(x)
+    except TypeError:  # no forward rule: refused while tracing, before anything is compiled
+        return jax.jit(lambda x: (function(x), jax.jacrev(function)(x)))(x)
