@@ -23,7 +23,7 @@ same initial weights) and the same Adam steps and rate for every method:
 
 The double pendulum's H is not separable (its kinetic energy depends on the angles): there the
 network is one MLP of (q, p) and both ``through`` methods go through the Gauss solver instead
-(``ThroughSolver``'s default, four stages at rtol 1e-7; for the known form from positions, a
+(``ThroughSolver``'s default, eight stages at rtol 1e-7; for the known form from positions, a
 budget of 512 windows rather than 64), labelled ``through Gauss``.
 
 From the positions alone H is fixed only up to a change of the momenta, so a network's H there has
@@ -46,6 +46,9 @@ progress calls) are recorded.
     # one system again, the record's other rows kept (or one system at some spacings, its rows at
     # the others kept):
     python -m benchmarks.learned_h_regimes --systems two-body --update --out docs/benchmarks/learned_h_regimes.json
+    # more data: 31 trajectories of the chain (the last held out), a record of its own
+    python -m benchmarks.learned_h_regimes --systems spring-chain --spacings 0.5 --sigmas 0.01 --observed all \
+        --trajectories 31 --out docs/benchmarks/learned_h_more_data.json
 """
 
 from __future__ import annotations
@@ -76,8 +79,9 @@ OBSERVATIONS, HORIZON_FACTOR, AHEAD, LEAPFROG_PER_INTERVAL = 31, 10, 5, 4
 #: the solver a model that is not separable is trained through: ThroughSolver's default
 GAUSS = ThroughSolver().solver
 #: the same through segments of POSITION_AHEAD observations with their momenta fitted: more windows
-#: (ThroughSolver's 64 were spent by the sixth step at Δt = 0.5 from the guess g = 0.6; 512 took the
-#: pendulum's g to 0.3 % of its value in 60 steps there). The budget changes no window's numbers.
+#: (at four stages ThroughSolver's 64 were spent by the sixth step at Δt = 0.5 from the guess g = 0.6;
+#: 512 took the double pendulum's g to 0.3 % of its value in 60 steps there; at eight, 64 lasted 200
+#: steps at Δt = 0.5 and 1). The budget changes no window's numbers.
 GAUSS_POSITIONS = dataclasses.replace(GAUSS, max_windows=512)
 #: positions only: segments of this many observations end to end (each segment's momentum is fitted:
 #: short overlapping segments would let the fitted momenta absorb the force)
@@ -180,6 +184,10 @@ SYSTEMS = {
     # ω_max: the faster normal mode's, √(2 + √2)
     "double-pendulum": (_double_pendulum, 2, np.sqrt(2 + np.sqrt(2)), _swing_starts(1, 5), _swing_starts(2, 3)),
 }
+#: name -> the maker of its observed starts (seed 1, as SYSTEMS'), for ``--trajectories``: the first
+#: of them are SYSTEMS' own (the pendulum's four are chosen by hand: none)
+MORE_STARTS = {"spring-chain": _chain_starts, "two-body": _kepler_starts, "three-body": _eight_starts,
+               "double-pendulum": _swing_starts}
 #: systems whose H is not T(p) + V(q): a network of (q, p) trained through the Gauss solver, not leapfrog
 NOT_SEPARABLE = ("double-pendulum",)
 
@@ -234,9 +242,11 @@ def network(dof: int, seed: int, separable: bool = True) -> SeparableH | Network
     return jax.tree_util.tree_map(lambda x: x.astype(jnp.float64) if eqx.is_inexact_array(x) else x, net)
 
 
-def observations(name: str, spacing: float, sigma: float, seed: int) -> tuple[list, float]:
-    """Noisy trajectories (times, states) and the noise's absolute size (σ × the data's rms)."""
+def observations(name: str, spacing: float, sigma: float, seed: int, count: int | None = None) -> tuple[list, float]:
+    """Noisy trajectories (times, states) and the noise's absolute size (σ × the data's rms); from
+    ``count`` starts (``MORE_STARTS``) where given, else the system's own."""
     H, dof, omega, starts, _ = SYSTEMS[name]
+    starts = starts if count is None else MORE_STARTS[name](1, count)
     truth = atlasnn.HamiltonianSystem(H, dof, name=name)
     dt = spacing / omega
     times = dt * np.arange(OBSERVATIONS)
@@ -295,7 +305,7 @@ def _expected(result, data: list, span: float) -> float | None:
 
 def methods(steps: int, rate: float, observed: str, separable: bool = True) -> dict:
     """The methods by label; through leapfrog for a separable system, through the Gauss solver
-    (``ThroughSolver``'s own, four stages at rtol 1e-7) for another."""
+    (``ThroughSolver``'s own, eight stages at rtol 1e-7) for another."""
     def solver(ahead: int):
         if separable:
             return SplittingComposition(scheme="leapfrog", steps=LEAPFROG_PER_INTERVAL * ahead)
@@ -311,9 +321,10 @@ def methods(steps: int, rate: float, observed: str, separable: bool = True) -> d
                                                     fit_starts=True, solver=solver(AHEAD))}
 
 
-def run(name: str, spacing: float, sigma: float, observed: str, steps: int, rate: float, seed: int) -> list[dict]:
+def run(name: str, spacing: float, sigma: float, observed: str, steps: int, rate: float, seed: int,
+        count: int | None = None) -> list[dict]:
     dof = SYSTEMS[name][1]
-    data, noise = observations(name, spacing, sigma, seed)
+    data, noise = observations(name, spacing, sigma, seed, count)
     span = float(data[0][0][-1])
     rows = []
     separable = name not in NOT_SEPARABLE
@@ -337,7 +348,8 @@ def run(name: str, spacing: float, sigma: float, observed: str, steps: int, rate
                      "std": None if result.std is None else np.asarray(result.std).tolist(),
                      "parameter_error": float(np.max(np.abs(np.asarray(result.model.theta) / truth - 1)))}
         row = {"system": name, "spacing": spacing, "sigma": sigma, "observed": observed, "method": label,
-               "loss": result.loss, "train_seconds": result.seconds, "seconds_per_step": per_step,
+               "trajectories": len(data), "loss": result.loss, "noise_loss": result.noise_loss,
+               "train_seconds": result.seconds, "seconds_per_step": per_step,
                "stopped": result.stopped,
                "trusted": result.trusted, "notes": list(result.notes), **extra,
                "drift": None if result.drift is None else dataclasses.asdict(result.drift),
@@ -391,9 +403,15 @@ def main(argv=None) -> None:
     ap.add_argument("--steps", type=int, default=1500)
     ap.add_argument("--rate", type=float, default=3e-3)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--trajectories", type=int,
+                    help="observed trajectories a system, the last held out whole (default: each system's own)")
     ap.add_argument("--out")
     ap.add_argument("--update", action="store_true", help="rerun only --systems, keeping the record's other rows")
     args = ap.parse_args(argv)
+    if args.trajectories is not None and args.trajectories < 2:
+        ap.error(f"--trajectories needs at least 2 (the last is held out), got {args.trajectories}")
+    if args.trajectories is not None and (fixed := [name for name in args.systems if name not in MORE_STARTS]):
+        ap.error(f"--trajectories: the starts of {', '.join(fixed)} are fixed; leave it out for them")
     started = time.perf_counter()
     # each training's row is also appended to OUT.partial.jsonl as it ends: a run that dies late (a
     # process of 45 Gauss trainings once ran out of memory for XLA's code at its 44th) keeps its rows
@@ -403,7 +421,7 @@ def main(argv=None) -> None:
         for spacing in args.spacings:
             for sigma in args.sigmas:
                 for observed in args.observed:
-                    done = run(name, spacing, sigma, observed, args.steps, args.rate, args.seed)
+                    done = run(name, spacing, sigma, observed, args.steps, args.rate, args.seed, args.trajectories)
                     rows += done
                     if partial is not None:
                         with partial.open("a", encoding="utf-8") as f:

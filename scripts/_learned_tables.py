@@ -1,7 +1,8 @@
 """The measured tables of docs/LEARNED_H_MEASURED.md (made by ``scripts/solver_doc.py``, which owns the
 blocks, the pages and the check): ``learned`` from docs/benchmarks/learned_h.json (``python -m
 benchmarks.learned_h``), ``learned_regimes`` from docs/benchmarks/learned_h_regimes.json (``python -m
-benchmarks.learned_h_regimes``)."""
+benchmarks.learned_h_regimes``), ``learned_more_data`` from the same benchmark run with ``--trajectories``
+(docs/benchmarks/learned_h_more_data.json)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,8 @@ import math
 import statistics
 
 RECORDS = {"learned": "docs/benchmarks/learned_h.json",
-           "learned_regimes": "docs/benchmarks/learned_h_regimes.json"}
+           "learned_regimes": "docs/benchmarks/learned_h_regimes.json",
+           "learned_more_data": "docs/benchmarks/learned_h_more_data.json"}
 
 
 def learned(record: dict) -> str:
@@ -68,7 +70,9 @@ def _role(row: dict) -> tuple[str, str]:
     return row["observed"], method
 
 
-def learned_regimes(record: dict) -> str:
+def learned_regimes(record: dict, more_data: bool = False) -> str:
+    """The regimes' table; ``more_data``: a run with ``--trajectories`` (its count and every result's
+    training loss over the noise's own in the note)."""
     rows = record["rows"]
     columns = [c for c, _ in _COLUMNS]
     head = [h for _, h in _COLUMNS]
@@ -90,17 +94,43 @@ def learned_regimes(record: dict) -> str:
         f"\n\nEach cell: the held-out state error, the largest over {record['horizon_factor']}× the training span "
         "relative to the state's range, the median over three held-out initial states; (u): the result was marked "
         "untrusted; (stopped): the training stopped early, its reason in the record's `stopped`. "
-        f"{record['observations']} observations a trajectory; noise σ relative to each component's rms; "
+        f"{record['observations']} observations a trajectory{_trajectories(rows) if more_data else ''}; noise σ "
+        "relative to each component's rms; "
         f"{record['steps']} Adam steps (rate {record['rate']:g}) for every method, the network "
         f"{record['network']}; the solver: leapfrog, {record['leapfrog_per_interval']} steps per observation "
         "interval" + (f" (for {', '.join(solvers)}, not separable: the Gauss solver, {_gauss(record['gauss'])})"
                       if solvers else "")
-        + f"; segments of {record['ahead']} observations ({record['position_ahead']} end to end from positions only, a "
-        f"known form: {_known_forms(systems)}, with the masses given, at rate {record['known_rate']:g}; "
-        "the largest relative error of its parameters). The last observed trajectory held out whole where every "
-        "component is observed. Median time per Adam step after the first (which compiles): "
+        + f"; segments of {record['ahead']} observations" + (
+            f" ({record['position_ahead']} end to end from positions only, a known form: {_known_forms(systems)}, "
+            f"with the masses given, at rate {record['known_rate']:g}; the largest relative error of its parameters)"
+            if 4 in present else "")
+        + ". The last observed trajectory held out whole where every component is observed. Median time per Adam "
+        "step after the first (which compiles): "
         + ", ".join(f"{label} {ms} ms" for label, ms in per_step.items()) + f" ({' / '.join(systems)})."
-        + _guide(rows, record["horizon_factor"]))
+        + (_noise_ratios(rows) if more_data else "") + _guide(rows, record["horizon_factor"]))
+
+
+def learned_more_data(record: dict) -> str:
+    return learned_regimes(record, more_data=True)
+
+
+def _trajectories(rows: list) -> str:
+    """The observed trajectories a system, where the record says (a run with ``--trajectories``)."""
+    counts = {r["system"]: r["trajectories"] for r in rows if "trajectories" in r}
+    if not counts:
+        return ""
+    if len(set(counts.values())) == 1:
+        return f", {next(iter(counts.values()))} trajectories a system"
+    return ", " + " / ".join(map(str, counts.values())) + f" trajectories ({' / '.join(counts)})"
+
+
+def _noise_ratios(rows: list) -> str:
+    """Each result's training loss over the noise's own (the trust rule's line is 3), where recorded."""
+    ratios = [(r, r["loss"] / r["noise_loss"]) for r in rows if r.get("noise_loss")]
+    if not ratios:
+        return ""
+    return (" Training loss over the noise's own (above 3: far above the noise): " + "; ".join(
+        f"{r['system']} {r['method']} {q:.2g}" for r, q in ratios) + ".")
 
 
 def _gauss(settings: dict) -> str:
@@ -170,4 +200,4 @@ def _ratio(hnn: dict | None, through: dict | None) -> str:
     return f"{hnn['state_error'] / through['state_error']:.2g}"
 
 
-MAKERS = {"learned": learned, "learned_regimes": learned_regimes}
+MAKERS = {"learned": learned, "learned_regimes": learned_regimes, "learned_more_data": learned_more_data}

@@ -93,8 +93,9 @@ def test_an_hnn_far_above_the_noise_is_not_trusted_and_no_noise_given_is_said():
     that the loss was not judged."""
     short = learn_hamiltonian(_guess(), _trajectories(noise=0.01), HNN(steps=2), noise=0.01)
     assert not short.trusted and "the noise's own" in short.notes[0]
+    assert short.noise_loss == pytest.approx(2 * 0.01 ** 2 / 0.2 ** 2) and short.loss > 3 * short.noise_loss
     quiet = learn_hamiltonian(_guess(), _trajectories(), HNN(steps=2))
-    assert any("no noise was given" in n for n in quiet.notes)
+    assert any("no noise was given" in n for n in quiet.notes) and quiet.noise_loss is None
 
 
 def test_a_held_out_part_from_other_dynamics_is_not_generalised_to():
@@ -415,6 +416,30 @@ def test_fitted_starts_are_unknowns_and_their_observed_values_targets():
         assert float(loss_fit(model, guess + 0.01)) != pytest.approx(at_observed, rel=1e-3) and held is not None
     with pytest.raises(ConfigError, match="fit_starts must be True or False"):
         ThroughSolver(fit_starts=1)
+
+
+def test_the_noise_s_own_loss_is_what_the_true_h_reaches_from_observed_and_fitted_starts():
+    """The allowance the trust rule compares a loss with (`noise_loss`) is what the true H reaches on
+    noisy data (σ = 0.01): from the observed starts about 2σ², the target's noise and the start's
+    carried forward; with every start fitted (least squares over them, θ held) about σ², for a
+    fitted start carries no noise forward — half the allowance of the observed starts'."""
+    from atlasnn.inverse._learn_data import check_trajectories
+    from atlasnn.solver import SplittingComposition
+
+    sigma, rng = 0.01, np.random.default_rng(1)
+    data = check_trajectories(_trajectories(noise=sigma, starts=rng.uniform(-1.0, 1.0, (12, 2))))
+    solver = SplittingComposition(scheme="leapfrog", steps=40)  # its error ~1e-5, far below σ
+    model = Stiffness(jnp.array(2.0))
+    for fit in (False, True):
+        method = ThroughSolver(ahead=5, stride=5, fit_starts=fit, solver=solver)
+        residual, _ = method.residuals(data, 0.2, 1)
+        _, _, guess = method.losses(data, 0.2, 1)
+        if fit:  # the residuals are affine in the starts (leapfrog on a linear field): one Gauss–Newton step
+            jac = jax.jacfwd(lambda u: residual(model, u))(guess)
+            guess = guess - jnp.linalg.lstsq(jac, residual(model, guess))[0]
+        reached, allowed = float(jnp.sum(residual(model, guess) ** 2)), method.noise_loss(sigma, data)
+        assert allowed == pytest.approx((1.0 if fit else 2.0) * sigma ** 2)
+        assert allowed / 1.5 < reached < 1.25 * allowed, (fit, reached / sigma ** 2)
 
 
 def test_a_trajectory_held_out_whole_is_never_trained_on_and_judges_the_fit():

@@ -23,7 +23,8 @@ __all__ = ["flow_miss", "flow_reasons", "modified_reasons", "noise_reasons", "ob
            "span_drifts", "drift_reasons", "SpanDrift", "FLOW_ACCURACY",
            "FLOW_AHEAD", "PROPAGATION", "NOISE_FACTOR", "NOISY_DATA", "NOISY_RATES"]
 
-#: a loss this many times the noise's own (2σ² for predicted states) is "far above the noise"
+#: a loss this many times the noise's own (`noise_loss`: 2σ² for states predicted from an observed start) is
+#: "far above the noise"
 NOISE_FACTOR = 3.0
 #: H_θ's flow may miss the observations it is checked against by this part of their rms size
 #: (beyond the noise): about a 1 % error in a frequency over a few intervals

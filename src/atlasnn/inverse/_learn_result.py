@@ -44,6 +44,9 @@ class LearnedHamiltonian:
         drift: how far H_θ's flow drifts from the data over their whole span, from starts fitted
             to them (``drift.drift``, relative to the data's size, beyond the noise), or None
             where no trajectory's start is observed whole; see `expected_error`.
+        noise_loss: the training loss the noise alone gives (the method's, for the σ given), which
+            ``loss`` is judged against: more than 3× it is "far above the noise"; None where no
+            σ was given (or σ = 0 for an HNN).
     """
 
     model: Any
@@ -60,6 +63,7 @@ class LearnedHamiltonian:
     trusted: bool
     std: np.ndarray | None = None
     drift: SpanDrift | None = None
+    noise_loss: float | None = None
 
     def expected_error(self, horizon: float) -> float | None:
         """About how far a prediction ``horizon`` time units from an exact start strays, relative
@@ -90,7 +94,7 @@ def judge(result: LearnedHamiltonian, floor: float | None, found: list[str] = ()
         reasons.append(f"training stopped early ({result.stopped}); the best H before it is kept: {remedy} before "
                        "trusting it")
     if not result.curve:
-        return dataclasses.replace(result, notes=reasons + list(result.notes), trusted=False)
+        return dataclasses.replace(result, notes=reasons + list(result.notes), trusted=False, noise_loss=floor)
     if not math.isfinite(result.loss):
         reasons.append("no step gave a finite loss: nothing was learned; check the model's scale against the data's")
     elif floor is not None and result.loss > NOISE_FACTOR * floor:
@@ -106,4 +110,4 @@ def judge(result: LearnedHamiltonian, floor: float | None, found: list[str] = ()
         ratio = result.held_out_loss / max(result.loss, floor or 0.0)
         reasons.append(f"the held-out loss {result.held_out_loss:.2g} is {ratio:.1f}× the training loss: H_θ does not "
                        "generalise to the held-out part; more or longer trajectories, a smaller network or fewer steps")
-    return dataclasses.replace(result, notes=reasons + list(result.notes), trusted=not reasons)
+    return dataclasses.replace(result, notes=reasons + list(result.notes), trusted=not reasons, noise_loss=floor)
