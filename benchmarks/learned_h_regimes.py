@@ -46,9 +46,9 @@ progress calls) are recorded.
     # one system again, the record's other rows kept (or one system at some spacings, its rows at
     # the others kept):
     python -m benchmarks.learned_h_regimes --systems two-body --update --out docs/benchmarks/learned_h_regimes.json
-    # more data: 31 trajectories of the chain (the last held out), a record of its own
-    python -m benchmarks.learned_h_regimes --systems spring-chain --spacings 0.5 --sigmas 0.01 --observed all \
-        --trajectories 31 --out docs/benchmarks/learned_h_more_data.json
+    # more data: 31 trajectories of the chain and of the three bodies (the last held out), a record of its own
+    python -m benchmarks.learned_h_regimes --systems spring-chain three-body --spacings 0.5 --sigmas 0.01 \
+        --observed all --trajectories 31 --out docs/benchmarks/learned_h_more_data.json
 """
 
 from __future__ import annotations
@@ -387,8 +387,9 @@ def earlier_runs(kept: dict, rerun: list, rows: list[dict]) -> list[dict]:
     covered = set().union(*(_cells(label, rows) for label in rerun))
     left = []
     for run in runs:  # newest first: what a run made is covered for every older one
-        problems = [label for label in run["problems"] if _cells(label, rows) - covered]
-        covered |= set().union(*(_cells(label, rows) for label in run["problems"]))
+        cells = {label: _cells(label, rows) for label in run["problems"]}
+        problems = [label for label, made in cells.items() if made - covered]
+        covered |= set().union(*cells.values())
         if problems:
             left.append({**run, "problems": problems})
     return left

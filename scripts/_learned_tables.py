@@ -115,13 +115,8 @@ def learned_more_data(record: dict) -> str:
 
 
 def _trajectories(rows: list) -> str:
-    """The observed trajectories a system, where the record says (a run with ``--trajectories``)."""
-    counts = {r["system"]: r["trajectories"] for r in rows if "trajectories" in r}
-    if not counts:
-        return ""
-    if len(set(counts.values())) == 1:
-        return f", {next(iter(counts.values()))} trajectories a system"
-    return ", " + " / ".join(map(str, counts.values())) + f" trajectories ({' / '.join(counts)})"
+    """The observed trajectories a system (a run with ``--trajectories``: one count for every system)."""
+    return f", {rows[0]['trajectories']} trajectories a system"
 
 
 def _noise_ratios(rows: list) -> str:
